@@ -1,0 +1,50 @@
+/// @file camera.h
+/// @brief Pinhole cameras: the thesis' fly-over pair (chapter V.A-B), the overview
+///        (chapter V.C) and the classic fly-through, all in world LPS millimetres.
+#pragma once
+
+#include "volume/centerline_types.h"
+#include "volume/vec3.h"
+
+#include <array>
+
+namespace flyover {
+
+/// A pinhole camera. `forward`, `up`, `right` form a right-handed orthonormal frame with
+/// right = forward x up... (image x grows along `right`, image y grows along -`up`).
+/// Rays are generated with dot(dir, forward) == 1, so t is depth along `forward` and a
+/// per-ray tnear == nearMm is exactly a near *plane* at depth nearMm.
+struct Camera {
+    Vec3d position;
+    Vec3d forward{0, 1, 0};
+    Vec3d up{0, 0, 1};
+    Vec3d right{1, 0, 0};
+    double fovDeg = 90.0;   ///< full vertical field of view (degrees)
+    double nearMm = 0.0;    ///< near clip plane depth (mm)
+};
+
+/// Builds a camera at `position` looking at `target` with approximate view-up `upHint`.
+Camera lookAt(const Vec3d& position, const Vec3d& target, const Vec3d& upHint, double fovDeg);
+
+struct FlyoverParams {
+    double fovDeg = 90.0;            ///< field of view of both cameras (degrees)
+    double rollDeg = 0.0;            ///< rotation of both cameras about the centerline (degrees)
+    bool leftToRight = true;         ///< travel direction appears left-to-right (false flips)
+    double clipOffsetFraction = 0.5; ///< near plane at d - offset, offset = fraction * D(p)
+    double clipOffsetMm = -1.0;      ///< if >= 0, the offset in mm (overrides the fraction)
+};
+
+/// The two opposite fly-over cameras at a centerline point: positions p ± h·n with
+/// h = D/tan(fov/2), both looking at p, view-up perpendicular to tangent and normal so the
+/// tangent runs horizontally (left to right unless flipped), near plane at d - offset.
+std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const FlyoverParams& params);
+
+/// A camera outside an axis-aligned box looking along `viewDir` with view-up `up`, at a
+/// distance that frames the whole box in the field of view.
+Camera overviewCamera(const Vec3d& boxMinMm, const Vec3d& boxMaxMm, const Vec3d& viewDir,
+                      const Vec3d& up, double fovDeg);
+
+/// The fly-through camera: at the centerline point, looking along +/- tangent.
+Camera flythroughCamera(const CenterlinePoint& point, bool forwardDirection, double fovDeg);
+
+} // namespace flyover

@@ -1,0 +1,72 @@
+/// @file image.h
+/// @brief A dense 3D image with its scan geometry, as read from or written to a file.
+///
+/// Geometry follows ITK and DICOM exactly: the world frame is LPS (x to the patient's
+/// Left, y to Posterior, z to Superior), in millimetres, and the centre of voxel
+/// (i,j,k) lies at  origin + direction * (spacing ⊙ (i,j,k)).  `direction` holds the
+/// direction cosines as columns (column c is the world direction of index axis c).
+#pragma once
+
+#include "volume/vec3.h"
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace flyover {
+
+/// World frame named in every JSON artifact.
+inline constexpr const char* WORLD_FRAME = "LPS";
+
+/// 3x3 matrix, row-major: m[r][c].
+using Mat3d = std::array<std::array<double, 3>, 3>;
+
+inline constexpr Mat3d identityMat3() { return {{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}}; }
+
+struct ImageGeometry {
+    std::array<int64_t, 3> size{0, 0, 0};  ///< voxels along i, j, k
+    Vec3d spacingMm{1, 1, 1};              ///< voxel pitch along i, j, k (mm, > 0)
+    Vec3d originMm{0, 0, 0};               ///< world position of voxel (0,0,0)'s centre (LPS mm)
+    Mat3d direction = identityMat3();      ///< columns: world directions of the index axes
+
+    int64_t voxelCount() const { return size[0] * size[1] * size[2]; }
+
+    /// World position (LPS mm) of a continuous index position.
+    Vec3d worldFromIndex(const Vec3d& ijk) const
+    {
+        const Vec3d s{ijk.x * spacingMm.x, ijk.y * spacingMm.y, ijk.z * spacingMm.z};
+        Vec3d w = originMm;
+        for (int r = 0; r < 3; ++r)
+            w[r] += direction[r][0] * s.x + direction[r][1] * s.y + direction[r][2] * s.z;
+        return w;
+    }
+
+    /// Continuous index position of a world position (LPS mm); inverse of worldFromIndex
+    /// (direction cosines are orthonormal, so the inverse is the transpose).
+    Vec3d indexFromWorld(const Vec3d& world) const
+    {
+        const Vec3d d = world - originMm;
+        Vec3d ijk;
+        for (int c = 0; c < 3; ++c)
+            ijk[c] = (direction[0][c] * d.x + direction[1][c] * d.y + direction[2][c] * d.z) /
+                     spacingMm[c];
+        return ijk;
+    }
+};
+
+/// A dense image: x (i) fastest, then j, then k, as in NIfTI and ITK buffers.
+template <typename T>
+struct Image3 {
+    ImageGeometry geometry;
+    std::vector<T> voxels;
+
+    std::size_t linearIndex(int64_t i, int64_t j, int64_t k) const
+    {
+        return static_cast<std::size_t>(i + geometry.size[0] * (j + geometry.size[1] * k));
+    }
+    T& at(int64_t i, int64_t j, int64_t k) { return voxels[linearIndex(i, j, k)]; }
+    const T& at(int64_t i, int64_t j, int64_t k) const { return voxels[linearIndex(i, j, k)]; }
+};
+
+} // namespace flyover
