@@ -1,1 +1,307 @@
-// Work in progress: being written in this session.
+// Voxelises the analytic anatomy of phantom_anatomy.h. Each z slice is independent
+// (tbb::parallel_for over slabs): the colon's signed distance is splatted from the
+// centerline's 2 mm chords into the voxels of their bounding boxes only, then every voxel
+// is shaded by painting the structures in order with a one-voxel partial-volume ramp,
+// and gets noise from a hash of (seed, voxel index), so the result does not depend on
+// the thread count.
+#include "data/phantom.h"
+
+#include "data/phantom_anatomy.h"
+#include "volume/error.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace flyover {
+
+PhantomSize parsePhantomSize(const std::string& name)
+{
+    if (name == "small")
+        return PhantomSize::Small;
+    if (name == "medium")
+        return PhantomSize::Medium;
+    if (name == "full")
+        return PhantomSize::Full;
+    throw ParameterError("phantom size: unknown value \"" + name +
+                         "\"; expected one of small, medium, full");
+}
+
+const char* phantomSizeName(PhantomSize size)
+{
+    switch (size) {
+    case PhantomSize::Small: return "small";
+    case PhantomSize::Medium: return "medium";
+    case PhantomSize::Full: return "full";
+    }
+    return "unknown";
+}
+
+namespace {
+
+using namespace phantom;
+
+constexpr double TWO_PI = 6.283185307179586476925;
+constexpr float FAR_MM = std::numeric_limits<float>::max();
+
+/// A piece of the true centerline used to evaluate the colon's signed distance.
+struct TubeSegment {
+    Vec3d a, d;          ///< start and (end - start), mm
+    double invLength2;   ///< 1 / |d|^2
+    double radiusA, radiusB;
+    double arcA, arcB;   ///< arc length at the ends, mm
+    double zMin, zMax;
+    double reachMm;      ///< farthest distance from the segment where the colon shows
+};
+
+/// Partial-volume painting: blend towards `hu` by the fraction of the voxel inside
+/// the region whose signed distance at the voxel centre is `sdMm` (a linear ramp one
+/// voxel wide, the box filter of a planar boundary).
+inline void paint(double& value, double hu, double sdMm, double invVoxelMm)
+{
+    const double coverage = std::clamp(0.5 - sdMm * invVoxelMm, 0.0, 1.0);
+    value += (hu - value) * coverage;
+}
+
+/// A standard normal sample that depends only on (seed, voxel index): thread-count free.
+inline double voxelNoise(uint64_t seedKey, uint64_t voxelIndex)
+{
+    const uint64_t h = splitmix64(seedKey + splitmix64(voxelIndex));
+    const double u1 = (double(h >> 32) + 0.5) * 0x1.0p-32;          // (0, 1)
+    const double u2 = double(h & 0xFFFFFFFFull) * 0x1.0p-32;        // [0, 1)
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(TWO_PI * u2);
+}
+
+class Voxeliser {
+public:
+    Voxeliser(const PhantomAnatomy& anatomy, const ImageGeometry& geometry, const PhantomParams& params)
+        : mAnatomy(anatomy), mGeometry(geometry), mNoiseHu(params.noiseHu),
+          mSeedKey(splitmix64(params.seed ^ 0x5EED0F0015Eull))
+    {
+        const Vec3d& s = geometry.spacingMm;
+        mVoxelMm = (s.x + s.y + s.z) / 3.0;
+        mInvVoxelMm = 1.0 / mVoxelMm;
+
+        // Two-millimetre chords of the 1 mm truth curve: their sagitta is far below a
+        // voxel for the colon's bend radii, and they halve the distance work.
+        const std::size_t n = anatomy.centerlineMm.size();
+        for (std::size_t i = 0; i + 1 < n; i += 2) {
+            const std::size_t j = std::min(i + 2, n - 1);
+            TubeSegment t;
+            t.a = anatomy.centerlineMm[i];
+            t.d = anatomy.centerlineMm[j] - t.a;
+            t.invLength2 = 1.0 / dot(t.d, t.d);
+            t.radiusA = anatomy.radiusMm[i];
+            t.radiusB = anatomy.radiusMm[j];
+            t.arcA = double(i) * anatomy.stepMm;
+            t.arcB = double(j) * anatomy.stepMm;
+            t.zMin = std::min(t.a.z, t.a.z + t.d.z);
+            t.zMax = std::max(t.a.z, t.a.z + t.d.z);
+            t.reachMm = std::max(t.radiusA, t.radiusB) + COLON_WALL_MM + PERICOLIC_FAT_MM + mVoxelMm;
+            mSegments.push_back(t);
+        }
+        // Nearest fold for every centerline sample.
+        mFoldAt.assign(n, -1);
+        for (std::size_t i = 0; i < n && !anatomy.folds.empty(); ++i) {
+            const double s = double(i) * anatomy.stepMm;
+            int best = 0;
+            for (int f = 1; f < int(anatomy.folds.size()); ++f)
+                if (std::abs(anatomy.folds[std::size_t(f)].arcMm - s) <
+                    std::abs(anatomy.folds[std::size_t(best)].arcMm - s))
+                    best = f;
+            mFoldAt[i] = best;
+        }
+    }
+
+    /// Fills slices [k0, k1) of `ct` and `truth`.
+    void run(int64_t k0, int64_t k1, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+    {
+        const std::size_t sliceVoxels = std::size_t(mGeometry.size[0] * mGeometry.size[1]);
+        std::vector<float> bestSd(sliceVoxels);
+        std::vector<int32_t> bestSegment(sliceVoxels);
+        std::vector<float> bestT(sliceVoxels);
+        for (int64_t k = k0; k < k1; ++k) {
+            splatColon(k, bestSd, bestSegment, bestT);
+            shadeSlice(k, bestSd, bestSegment, bestT, ct, truth);
+        }
+    }
+
+private:
+    /// For every voxel of slice k within reach of the colon: the least (distance to the
+    /// centerline - radius) over the segments, and where on the curve it is reached.
+    /// Iterates segments and touches only the voxels in their bounding boxes.
+    void splatColon(int64_t k, std::vector<float>& bestSd, std::vector<int32_t>& bestSegment,
+                    std::vector<float>& bestT) const
+    {
+        std::fill(bestSd.begin(), bestSd.end(), FAR_MM);
+        const auto& g = mGeometry;
+        const int64_t nx = g.size[0], ny = g.size[1];
+        const double z = g.originMm.z + double(k) * g.spacingMm.z;
+        for (std::size_t si = 0; si < mSegments.size(); ++si) {
+            const TubeSegment& t = mSegments[si];
+            const double dz = std::max({0.0, t.zMin - z, z - t.zMax});
+            if (dz >= t.reachMm)
+                continue;
+            const double half = std::sqrt(t.reachMm * t.reachMm - dz * dz);
+            const Vec3d b = t.a + t.d;
+            const auto lo = [](double v, double o, double s) { return int64_t(std::ceil((v - o) / s)); };
+            const auto hi = [](double v, double o, double s) { return int64_t(std::floor((v - o) / s)); };
+            const int64_t i0 = std::max<int64_t>(0, lo(std::min(t.a.x, b.x) - half, g.originMm.x, g.spacingMm.x));
+            const int64_t i1 = std::min<int64_t>(nx - 1, hi(std::max(t.a.x, b.x) + half, g.originMm.x, g.spacingMm.x));
+            const int64_t j0 = std::max<int64_t>(0, lo(std::min(t.a.y, b.y) - half, g.originMm.y, g.spacingMm.y));
+            const int64_t j1 = std::min<int64_t>(ny - 1, hi(std::max(t.a.y, b.y) + half, g.originMm.y, g.spacingMm.y));
+            const double wz = z - t.a.z;
+            for (int64_t j = j0; j <= j1; ++j) {
+                const double wy = g.originMm.y + double(j) * g.spacingMm.y - t.a.y;
+                for (int64_t i = i0; i <= i1; ++i) {
+                    const double wx = g.originMm.x + double(i) * g.spacingMm.x - t.a.x;
+                    const double along = std::clamp((wx * t.d.x + wy * t.d.y + wz * t.d.z) * t.invLength2, 0.0, 1.0);
+                    const double qx = wx - t.d.x * along, qy = wy - t.d.y * along, qz = wz - t.d.z * along;
+                    const double sd = std::sqrt(qx * qx + qy * qy + qz * qz) -
+                                      (t.radiusA + (t.radiusB - t.radiusA) * along);
+                    const std::size_t v = std::size_t(i + nx * j);
+                    if (sd < bestSd[v]) {
+                        bestSd[v] = float(sd);
+                        bestSegment[v] = int32_t(si);
+                        bestT[v] = float(along);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Signed distance to the colon lumen: the tube minus folds and polyps.
+    double lumenSignedDistanceMm(const Vec3d& p, double tubeSd, int32_t segment, float along) const
+    {
+        double sd = tubeSd;
+        const TubeSegment& t = mSegments[std::size_t(segment)];
+        const double arc = t.arcA + (t.arcB - t.arcA) * double(along);
+        const auto sample = std::size_t(std::clamp<long>(std::lround(arc / mAnatomy.stepMm), 0L,
+                                                          long(mFoldAt.size()) - 1));
+        if (const int fi = mFoldAt[sample]; fi >= 0) {
+            const HaustralFold& f = mAnatomy.folds[std::size_t(fi)];
+            const auto c = std::size_t(f.index);
+            const Vec3d& centre = mAnatomy.centerlineMm[c];
+            const double u = dot(p - centre, mAnatomy.tangent[c]);
+            if (std::abs(u) - 0.5 * f.thicknessMm < mVoxelMm) {
+                const double foldSd = f.signedDistanceMm(p, centre, mAnatomy.tangent[c],
+                                                         mAnatomy.normal[c], mAnatomy.binormal[c]);
+                sd = std::max(sd, -foldSd);
+            }
+        }
+        for (const PhantomPolyp& polyp : mAnatomy.polyps)
+            sd = std::max(sd, polyp.radiusMm - distance(p, polyp.centerMm));
+        return sd;
+    }
+
+    void shadeSlice(int64_t k, const std::vector<float>& bestSd, const std::vector<int32_t>& bestSegment,
+                    const std::vector<float>& bestT, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+    {
+        const auto& g = mGeometry;
+        const int64_t nx = g.size[0], ny = g.size[1];
+        const double z = g.originMm.z + double(k) * g.spacingMm.z;
+        const double h = mVoxelMm, invH = mInvVoxelMm;
+
+        // Structures that reach this slice.
+        std::vector<const Ellipsoid*> ellipsoids;  // lungs then gas pockets
+        std::vector<double> ellipsoidHu;
+        const auto addIfNear = [&](const Ellipsoid& e, double hu) {
+            const double reach = std::max({e.semiAxesMm.x, e.semiAxesMm.y, e.semiAxesMm.z}) + h;
+            if (std::abs(z - e.centerMm.z) < reach) {
+                ellipsoids.push_back(&e);
+                ellipsoidHu.push_back(hu);
+            }
+        };
+        for (const Ellipsoid& lung : mAnatomy.lungs)
+            addIfNear(lung, LUNG_HU);
+        for (const Ellipsoid& pocket : mAnatomy.gasPockets)
+            addIfNear(pocket, AIR_HU);
+        // Intervertebral discs: slabs centred every DISC_PERIOD_MM from z = 0.
+        const double discSlabSd = std::abs(std::remainder(z, DISC_PERIOD_MM)) - 0.5 * DISC_THICKNESS_MM;
+
+        for (int64_t j = 0; j < ny; ++j) {
+            const double y = g.originMm.y + double(j) * g.spacingMm.y;
+            for (int64_t i = 0; i < nx; ++i) {
+                const double x = g.originMm.x + double(i) * g.spacingMm.x;
+                const std::size_t v2 = std::size_t(i + nx * j);
+                const std::size_t v = ct.linearIndex(i, j, k);
+                double hu = AIR_HU;
+                uint8_t inLumen = 0;
+                const double skinSd = bodySignedDistanceMm(x, y);
+                if (skinSd < h) {  // everything but air lies inside the body
+                    const Vec3d p{x, y, z};
+                    paint(hu, SOFT_TISSUE_HU, skinSd, invH);
+                    paint(hu, FAT_HU, std::max(skinSd, -bodyInnerSignedDistanceMm(x, y)), invH);
+                    const double tubeSd = bestSd[v2];
+                    paint(hu, FAT_HU, tubeSd - (COLON_WALL_MM + PERICOLIC_FAT_MM), invH);
+
+                    const double spineSd = std::hypot(x, y - SPINE_CENTER_Y_MM) - SPINE_RADIUS_MM;
+                    if (spineSd < h) {
+                        paint(hu, CORTICAL_BONE_HU, spineSd, invH);
+                        paint(hu, CANCELLOUS_BONE_HU, spineSd + SPINE_CORTEX_MM, invH);
+                        paint(hu, DISC_HU, std::max(spineSd, discSlabSd), invH);
+                    }
+                    for (std::size_t e = 0; e < ellipsoids.size(); ++e)
+                        paint(hu, ellipsoidHu[e], ellipsoids[e]->signedDistanceMm(p), invH);
+
+                    if (tubeSd < COLON_WALL_MM + h) {
+                        paint(hu, SOFT_TISSUE_HU, tubeSd - COLON_WALL_MM, invH);
+                        if (tubeSd < h) {
+                            const double lumenSd = lumenSignedDistanceMm(p, tubeSd, bestSegment[v2], bestT[v2]);
+                            paint(hu, AIR_HU, lumenSd, invH);
+                            inLumen = lumenSd < 0 ? 1 : 0;
+                        }
+                    }
+                }
+                hu += mNoiseHu * voxelNoise(mSeedKey, uint64_t(v));
+                const double rounded = std::clamp(std::round(hu), -32768.0, 32767.0);
+                ct.voxels[v] = int16_t(rounded);
+                truth.voxels[v] = inLumen;
+            }
+        }
+    }
+
+    const PhantomAnatomy& mAnatomy;
+    const ImageGeometry& mGeometry;
+    double mNoiseHu;
+    uint64_t mSeedKey;
+    double mVoxelMm = 1, mInvVoxelMm = 1;
+    std::vector<TubeSegment> mSegments;
+    std::vector<int> mFoldAt;
+};
+
+} // namespace
+
+Phantom makePhantom(const PhantomParams& params)
+{
+    if (!(params.noiseHu >= 0.0) || !std::isfinite(params.noiseHu))
+        throw ParameterError("phantom noiseHu: expected a finite value >= 0, got " +
+                             std::to_string(params.noiseHu));
+    const PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed);
+
+    Phantom out;
+    out.ct.geometry = out.truthLumen.geometry = phantomGeometry(params.size);
+    const auto& g = out.ct.geometry;
+    out.ct.voxels.assign(std::size_t(g.voxelCount()), 0);
+    out.truthLumen.voxels.assign(std::size_t(g.voxelCount()), 0);
+
+    const Voxeliser voxeliser(anatomy, g, params);
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, g.size[2], 1),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                          voxeliser.run(r.begin(), r.end(), out.ct, out.truthLumen);
+                      });
+
+    PhantomTruth& truth = out.truth;
+    truth.centerlineMm = anatomy.centerlineMm;
+    truth.radiusMm = anatomy.radiusMm;
+    truth.segment = anatomy.segment;
+    truth.polyps = anatomy.polyps;
+    const auto lumenVoxels = std::count(out.truthLumen.voxels.begin(), out.truthLumen.voxels.end(), uint8_t(1));
+    truth.lumenVolumeMl = double(lumenVoxels) * g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
+    return out;
+}
+
+} // namespace flyover

@@ -1,0 +1,124 @@
+/// @file phantom_anatomy.h
+/// @brief The analytic anatomy behind makePhantom(): body outline, spine, lungs, the colon
+///        (true centerline, radius, rotation-minimising frame, haustral folds, polyps) and
+///        small-bowel gas pockets, all in LPS world millimetres, independent of sampling.
+///
+/// Internal to data/ and its tests; makePhantom() voxelises this description. The body,
+/// spine, lungs, colon path and folds are the same for every seed; the seed chooses the
+/// polyps and the gas pockets. Building it is serial and cheap (a few milliseconds).
+#pragma once
+
+#include "data/phantom.h"
+#include "volume/image.h"
+#include "volume/vec3.h"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace flyover::phantom {
+
+// Tissue values (HU).
+inline constexpr double AIR_HU = -1000.0;
+inline constexpr double LUNG_HU = -850.0;
+inline constexpr double FAT_HU = -100.0;
+inline constexpr double SOFT_TISSUE_HU = 40.0;
+inline constexpr double DISC_HU = 80.0;
+inline constexpr double CANCELLOUS_BONE_HU = 700.0;
+inline constexpr double CORTICAL_BONE_HU = 1200.0;
+
+// Body: an extruded (along z) cross-section made of two half-ellipses sharing the
+// left-right axis y = 0: anterior (y < 0) and posterior (y > 0) half-depths differ.
+inline constexpr double BODY_HALF_WIDTH_MM = 170.0;      ///< along x (left-right)
+inline constexpr double BODY_ANTERIOR_DEPTH_MM = 130.0;  ///< from y = 0 towards -y
+inline constexpr double BODY_POSTERIOR_DEPTH_MM = 120.0; ///< from y = 0 towards +y
+inline constexpr double SUBCUTANEOUS_FAT_MM = 17.0;
+
+// Vertebral column: a cylinder along z with a cortical shell and intervertebral discs.
+inline constexpr double SPINE_CENTER_Y_MM = 65.0;  ///< x = 0
+inline constexpr double SPINE_RADIUS_MM = 20.0;
+inline constexpr double SPINE_CORTEX_MM = 2.5;
+inline constexpr double DISC_PERIOD_MM = 32.0;
+inline constexpr double DISC_THICKNESS_MM = 6.0;
+
+// Colon wall and the pericolic fat that embeds it.
+inline constexpr double COLON_WALL_MM = 3.0;
+inline constexpr double PERICOLIC_FAT_MM = 10.0;
+
+/// Arc separation (mm) above which two centerline points belong to non-adjacent parts.
+inline constexpr double NON_ADJACENT_ARC_MM = 100.0;
+/// Least gap (mm) between the outer wall surfaces of non-adjacent parts of the colon.
+inline constexpr double MIN_WALL_GAP_MM = 15.0;
+
+struct Ellipsoid {
+    Vec3d centerMm;
+    Vec3d semiAxesMm;
+    Mat3d axes = identityMat3();  ///< columns: world directions of the semi-axes
+    double volumeMl() const;
+    /// Signed distance (mm), first-order accurate near the surface, exact in sign.
+    double signedDistanceMm(const Vec3d& p) const;
+};
+
+/// A semilunar haustral fold: a thin ridge in the plane normal to the centerline at
+/// `arcMm`, protruding from the wall into the lumen by `depthMm` at `centerAngleRad`
+/// and tapering to zero at +-`halfSectorRad` from it.
+struct HaustralFold {
+    double arcMm = 0;
+    int index = 0;               ///< centerline sample at arcMm
+    double thicknessMm = 4;
+    double depthMm = 0;          ///< greatest protrusion from the (fold-free) lumen wall
+    double tubeRadiusMm = 0;     ///< fold-free radius at arcMm
+    double centerAngleRad = 0;   ///< in the rotation-minimising frame (normal, binormal)
+    double halfSectorRad = 0;
+    /// Signed distance (mm) to the fold solid: a ridge with a rounded free edge.
+    /// Points outside the angular sector are reported far away (+1e9).
+    double signedDistanceMm(const Vec3d& p, const Vec3d& centerMm, const Vec3d& tangent,
+                            const Vec3d& normal, const Vec3d& binormal) const;
+};
+
+struct PhantomAnatomy {
+    // Colon, sampled every 1 mm of arc length from the rectum end to the cecum end.
+    std::vector<Vec3d> centerlineMm;
+    std::vector<double> radiusMm;      ///< fold-free lumen radius
+    std::vector<std::string> segment;
+    std::vector<Vec3d> tangent, normal, binormal;  ///< rotation-minimising frame
+    double stepMm = 1.0;
+    std::vector<HaustralFold> folds;   ///< sorted by arcMm
+    std::vector<PhantomPolyp> polyps;  ///< sorted by arcMm
+
+    Ellipsoid lungs[2];                ///< right (-x), left (+x)
+    std::vector<Ellipsoid> gasPockets; ///< small-bowel gas
+
+    double lengthMm() const { return stepMm * double(centerlineMm.size() - 1); }
+};
+
+/// The anatomy for a seed. Same body, colon and folds for every seed.
+/// @throw std::logic_error when a built-in invariant fails (a programming error).
+PhantomAnatomy buildPhantomAnatomy(uint64_t seed);
+
+/// Image geometry of a phantom size: FOV 400 x 400 x 375 mm centred on the world origin.
+ImageGeometry phantomGeometry(PhantomSize size);
+
+/// Signed distance (mm, negative inside) to the skin, first-order accurate near it.
+double bodySignedDistanceMm(double xMm, double yMm);
+/// Signed distance (mm) to the inner boundary of the subcutaneous fat.
+double bodyInnerSignedDistanceMm(double xMm, double yMm);
+
+/// Smallest gap (mm) between the outer wall surfaces (lumen + COLON_WALL_MM) of two
+/// centerline points more than NON_ADJACENT_ARC_MM apart in arc length; reports where.
+struct ColonClearance {
+    double gapMm = 1e9;
+    std::size_t i = 0, j = 0;
+};
+ColonClearance colonSelfClearance(const PhantomAnatomy& anatomy);
+
+/// splitmix64 finaliser: a counter-based hash used for all per-voxel randomness.
+inline uint64_t splitmix64(uint64_t x)
+{
+    x += 0x9E3779B97F4A7C15ull;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+    return x ^ (x >> 31);
+}
+
+} // namespace flyover::phantom
