@@ -18,6 +18,9 @@ struct RenderOptions {
     bool ost = true;          ///< discard back faces (one-sided transparency)
     int supersample = 1;      ///< n x n rays per pixel
     bool depthCue = false;    ///< darken with depth
+    /// Depth beyond the near plane at which depthCue halves the brightness (mm); 0 = half the
+    /// diagonal of the scene's bounding box.
+    double depthCueRangeMm = 0.0;
 };
 
 struct RgbImage {

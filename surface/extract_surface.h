@@ -25,9 +25,11 @@ struct MeshStats {
     int64_t components = 0;         ///< edge-connected face components
     int64_t boundaryEdges = 0;      ///< 0 for a closed surface
     int64_t droppedFaces = 0;       ///< faces OpenMesh refused (would be non-manifold)
+    int64_t degenerateFaces = 0;    ///< zero-area faces kept in the mesh (no normal, never hit)
     double areaMm2 = 0;
     double enclosedVolumeMm3 = 0;   ///< signed volume; POSITIVE for an inward-oriented closed lumen
-    double inwardFraction = 0;      ///< fraction of faces whose normal points to decreasing SDF
+    double inwardFraction = 0;      ///< fraction of non-degenerate faces whose normal points to
+                                    ///< decreasing SDF
 };
 
 /// @param sdf  signed distance grid (world mm), negative inside the lumen
@@ -36,7 +38,9 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params,
                        MeshStats* stats = nullptr, Progress* progress = nullptr);
 
 /// Fraction of faces whose normal agrees with -grad(sdf) at the face centroid (points into
-/// the region where the SDF is negative).
+/// the region where the SDF is negative). Zero-area faces have no normal and are left out of
+/// the count; faces where the gradient vanishes (outside the narrow band) count as not inward.
+/// @return 0 for a mesh without non-degenerate faces
 double inwardFaceFraction(const TriMesh& mesh, const openvdb::FloatGrid& sdf);
 
 /// Signed enclosed volume (mm^3) by the divergence theorem with the face normals as given.
