@@ -9,7 +9,7 @@ PACKAGES=(
   libopenmesh-dev libembree-dev libtbb-dev
   libinsighttoolkit5-dev libgdcm-tools   # gdcm-tools: GDCM's CMake config names its binaries
   libgtest-dev libgmock-dev libbenchmark-dev
-  libcli11-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev libpng-dev
+  libcli11-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev libpng-dev libtoml11-dev
   ffmpeg time
 )
 

@@ -1,0 +1,274 @@
+#include "pipeline/artifact_io.h"
+
+#include "volume/error.h"
+#include "volume/image.h"
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <png.h>
+#include <xxhash.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace flyover {
+
+namespace {
+
+std::string hex128(XXH128_hash_t h)
+{
+    char buf[33];
+    std::snprintf(buf, sizeof buf, "%016llx%016llx", static_cast<unsigned long long>(h.high64),
+                  static_cast<unsigned long long>(h.low64));
+    return buf;
+}
+
+} // namespace
+
+void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write)
+{
+    const fs::path target(path);
+    const fs::path tmp = target.parent_path() /
+                         (".tmp-" + std::to_string(::getpid()) + "-" + target.filename().string());
+    try {
+        write(tmp.string());
+        // Flush the data to disk before the rename makes it visible: a crash must never leave
+        // a renamed but empty file.
+        if (FILE* f = std::fopen(tmp.c_str(), "rb")) {
+            ::fsync(fileno(f));
+            std::fclose(f);
+        }
+        fs::rename(tmp, target);
+    } catch (...) {
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        throw;
+    }
+}
+
+std::string fileDigest(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path + ": cannot open for reading");
+    std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(), XXH3_freeState);
+    XXH3_128bits_reset(state.get());
+    std::vector<char> buf(1 << 20);
+    while (in) {
+        in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+        XXH3_128bits_update(state.get(), buf.data(), static_cast<std::size_t>(in.gcount()));
+    }
+    return hex128(XXH3_128bits_digest(state.get()));
+}
+
+std::string stringDigest(const std::string& text)
+{
+    return hex128(XXH3_128bits(text.data(), text.size()));
+}
+
+void writeJson(const std::string& path, const nlohmann::json& j)
+{
+    writeAtomically(path, [&](const std::string& tmp) {
+        std::ofstream out(tmp, std::ios::binary);
+        out << j.dump(2) << "\n";
+        if (!out.flush()) throw InputError(path + ": cannot write");
+    });
+}
+
+nlohmann::json readJson(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path + ": cannot open for reading");
+    nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+    if (j.is_discarded()) throw InputError(path + ": not valid JSON");
+    return j;
+}
+
+namespace {
+
+/// OpenVDB stamps every file with a random UUID (36 characters at byte 21 of the header), so
+/// two writes of the same grids differ. We replace it by a UUID derived from the rest of the
+/// file, which makes .vdb artifacts byte-identical for identical content: their digests then
+/// identify content, as the cache and the reproducibility checks need.
+void makeVdbUuidDeterministic(const std::string& path)
+{
+    constexpr std::size_t UUID_OFFSET = 21, UUID_LENGTH = 36;
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    std::vector<char> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const bool isVdb = bytes.size() > UUID_OFFSET + UUID_LENGTH && bytes[0] == 0x20 && bytes[1] == 0x42 &&
+                       bytes[2] == 0x44 && bytes[3] == 0x56 && bytes[UUID_OFFSET + 8] == '-';
+    if (!isVdb) throw InputError(path + ": unexpected OpenVDB file header");
+    const XXH128_hash_t h = XXH3_128bits(bytes.data() + UUID_OFFSET + UUID_LENGTH,
+                                         bytes.size() - UUID_OFFSET - UUID_LENGTH);
+    char hex[33];
+    std::snprintf(hex, sizeof hex, "%016llx%016llx", static_cast<unsigned long long>(h.high64),
+                  static_cast<unsigned long long>(h.low64));
+    const std::string s(hex);
+    const std::string uuid = s.substr(0, 8) + "-" + s.substr(8, 4) + "-" + s.substr(12, 4) + "-" +
+                             s.substr(16, 4) + "-" + s.substr(20, 12);
+    f.clear();
+    f.seekp(static_cast<std::streamoff>(UUID_OFFSET));
+    f.write(uuid.data(), static_cast<std::streamsize>(uuid.size()));
+    if (!f.flush()) throw InputError(path + ": cannot write");
+}
+
+} // namespace
+
+void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids)
+{
+    writeAtomically(path, [&](const std::string& tmp) {
+        openvdb::io::File file(tmp);
+        uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
+        compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
+                                                                   : openvdb::io::COMPRESS_ZIP;
+        file.setCompression(compression);
+        file.write(grids);
+        file.close();
+        makeVdbUuidDeterministic(tmp);
+    });
+}
+
+openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& gridName)
+{
+    try {
+        openvdb::io::File file(path);
+        file.open(/*delayLoad=*/false);
+        if (!file.hasGrid(gridName)) {
+            file.close();
+            throw InputError(path + ": has no grid named '" + gridName + "'");
+        }
+        openvdb::GridBase::Ptr grid = file.readGrid(gridName);
+        file.close();
+        return grid;
+    } catch (const openvdb::Exception& e) {
+        throw InputError(path + ": cannot read VDB: " + e.what());
+    }
+}
+
+void writeMesh(const std::string& path, const TriMesh& mesh)
+{
+    writeAtomically(path, [&](const std::string& tmp) {
+        OpenMesh::IO::Options opt = OpenMesh::IO::Options::Binary;
+        if (!OpenMesh::IO::write_mesh(mesh, tmp, opt))
+            throw InputError(path + ": OpenMesh could not write the mesh");
+    });
+}
+
+TriMesh readMesh(const std::string& path)
+{
+    if (!fs::exists(path)) throw InputError(path + ": no such file");
+    TriMesh mesh;
+    OpenMesh::IO::Options opt = OpenMesh::IO::Options::Binary;
+    if (!OpenMesh::IO::read_mesh(mesh, path, opt))
+        throw InputError(path + ": OpenMesh could not read the mesh");
+    return mesh;
+}
+
+void writePng(const std::string& path, const RgbImage& image)
+{
+    if (image.width <= 0 || image.height <= 0 ||
+        image.rgb.size() != static_cast<std::size_t>(image.width) * image.height * 3)
+        throw InputError(path + ": image buffer does not match its size");
+    writeAtomically(path, [&](const std::string& tmp) {
+        std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(tmp.c_str(), "wb"), std::fclose);
+        if (!f) throw InputError(path + ": cannot open for writing");
+        png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+        png_infop info = png ? png_create_info_struct(png) : nullptr;
+        if (!png || !info) {
+            png_destroy_write_struct(&png, &info);
+            throw InputError(path + ": libpng initialisation failed");
+        }
+        if (setjmp(png_jmpbuf(png))) {
+            png_destroy_write_struct(&png, &info);
+            throw InputError(path + ": libpng failed to write");
+        }
+        png_init_io(png, f.get());
+        png_set_compression_level(png, 3);  // frames are many: favour speed over size
+        png_set_IHDR(png, info, image.width, image.height, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+                     PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+        png_write_info(png, info);
+        for (int y = 0; y < image.height; ++y)
+            png_write_row(png, image.rgb.data() + static_cast<std::size_t>(y) * image.width * 3);
+        png_write_end(png, nullptr);
+        png_destroy_write_struct(&png, &info);
+    });
+}
+
+RgbImage readPng(const std::string& path)
+{
+    png_image img{};
+    img.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&img, path.c_str()))
+        throw InputError(path + ": cannot read PNG: " + img.message);
+    img.format = PNG_FORMAT_RGB;
+    RgbImage out;
+    out.width = static_cast<int>(img.width);
+    out.height = static_cast<int>(img.height);
+    out.rgb.resize(PNG_IMAGE_SIZE(img));
+    if (!png_image_finish_read(&img, nullptr, out.rgb.data(), 0, nullptr))
+        throw InputError(path + ": cannot read PNG: " + img.message);
+    return out;
+}
+
+nlohmann::json centerlineToJson(const Centerline& c)
+{
+    using nlohmann::json;
+    json pos = json::array(), tan = json::array(), nor = json::array(), rad = json::array(),
+         bridged = json::array();
+    auto v3 = [](const Vec3d& v) { return json::array({v.x, v.y, v.z}); };
+    for (const auto& p : c.points) {
+        pos.push_back(v3(p.positionMm));
+        tan.push_back(v3(p.tangent));
+        nor.push_back(v3(p.normal));
+        rad.push_back(p.radiusMm);
+        bridged.push_back(p.bridged);
+    }
+    return json{{"schema", "flyover.centerline/1"},
+                {"world_frame", WORLD_FRAME},
+                {"units", "mm"},
+                {"order", "rectum to cecum"},
+                {"step_mm", c.stepMm},
+                {"length_mm", c.lengthMm()},
+                {"point_count", c.points.size()},
+                {"position_mm", pos},
+                {"tangent", tan},
+                {"normal", nor},
+                {"radius_mm", rad},
+                {"bridged", bridged}};
+}
+
+Centerline centerlineFromJson(const nlohmann::json& j, const std::string& source)
+{
+    auto fail = [&](const std::string& what) -> void { throw InputError(source + ": " + what); };
+    if (!j.is_object() || j.value("schema", "") != "flyover.centerline/1")
+        fail("not a flyover centerline (schema flyover.centerline/1)");
+    if (j.value("world_frame", "") != WORLD_FRAME) fail("centerline world frame is not LPS");
+    Centerline c;
+    c.stepMm = j.value("step_mm", 1.0);
+    const auto& pos = j.at("position_mm");
+    const auto& tan = j.at("tangent");
+    const auto& nor = j.at("normal");
+    const auto& rad = j.at("radius_mm");
+    const auto& br = j.at("bridged");
+    const std::size_t n = pos.size();
+    if (tan.size() != n || nor.size() != n || rad.size() != n || br.size() != n)
+        fail("centerline arrays differ in length");
+    auto v3 = [&](const nlohmann::json& a) {
+        if (!a.is_array() || a.size() != 3) fail("expected [x,y,z]");
+        return Vec3d{a[0].get<double>(), a[1].get<double>(), a[2].get<double>()};
+    };
+    c.points.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        c.points[i].positionMm = v3(pos[i]);
+        c.points[i].tangent = v3(tan[i]);
+        c.points[i].normal = v3(nor[i]);
+        c.points[i].radiusMm = rad[i].get<double>();
+        c.points[i].bridged = br[i].get<bool>();
+    }
+    return c;
+}
+
+} // namespace flyover

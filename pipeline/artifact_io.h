@@ -1,0 +1,49 @@
+/// @file artifact_io.h
+/// @brief On-disk artifacts of a study: atomic writes (temporary name, then rename),
+///        content digests, and the readers/writers of each artifact type.
+#pragma once
+
+#include "render/render_view.h"
+#include "surface/mesh_types.h"
+#include "volume/centerline_types.h"
+
+#include <openvdb/openvdb.h>
+#include <nlohmann/json.hpp>
+
+#include <functional>
+#include <string>
+
+namespace flyover {
+
+/// Writes a file atomically: `write` receives a temporary path in the same folder (with the
+/// same extension, for writers that pick the format by extension), which is then renamed
+/// onto `path`. On any exception the temporary file is removed and the exception rethrown.
+void writeAtomically(const std::string& path, const std::function<void(const std::string& tmpPath)>& write);
+
+/// xxHash3-128 of a file's content as 32 hex digits. @throw InputError if unreadable.
+std::string fileDigest(const std::string& path);
+/// xxHash3-128 of a string, 32 hex digits.
+std::string stringDigest(const std::string& text);
+
+void writeJson(const std::string& path, const nlohmann::json& j);
+/// @throw InputError naming the file when it is missing or not valid JSON.
+nlohmann::json readJson(const std::string& path);
+
+/// Writes grids to a compressed .vdb file (readable by vdb_print).
+void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids);
+/// Reads one named grid. @throw InputError naming the file and grid.
+openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& gridName);
+
+/// Binary PLY through OpenMesh's writer. @throw InputError.
+void writeMesh(const std::string& path, const TriMesh& mesh);
+TriMesh readMesh(const std::string& path);
+
+void writePng(const std::string& path, const RgbImage& image);
+/// Reads an 8-bit RGB or RGBA PNG (alpha dropped). @throw InputError.
+RgbImage readPng(const std::string& path);
+
+/// centerline.json: documented schema "flyover.centerline/1", LPS mm, columnar arrays.
+nlohmann::json centerlineToJson(const Centerline& centerline);
+Centerline centerlineFromJson(const nlohmann::json& j, const std::string& source);
+
+} // namespace flyover

@@ -1,0 +1,554 @@
+#include "pipeline/study.h"
+
+#include "pipeline/artifact_io.h"
+#include "pipeline/artifact_store.h"
+#include "render/camera.h"
+#include "render/ray_scene.h"
+#include "render/render_view.h"
+#include "surface/extract_surface.h"
+#include "volume/centerline.h"
+#include "volume/error.h"
+#include "volume/image_io.h"
+#include "volume/ingest.h"
+#include "volume/segment.h"
+
+#include <tbb/flow_graph.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <set>
+#include <optional>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace flyover {
+
+namespace {
+
+json vec3Json(const Vec3d& v) { return json::array({v.x, v.y, v.z}); }
+
+json cameraJson(const Camera& c)
+{
+    return json{{"position_mm", vec3Json(c.position)}, {"forward", vec3Json(c.forward)},
+                {"up", vec3Json(c.up)},                {"right", vec3Json(c.right)},
+                {"fov_deg", c.fovDeg},                 {"near_mm", c.nearMm}};
+}
+
+/// Objects handed from stage to stage in memory within one run.
+struct StudyState {
+    openvdb::FloatGrid::Ptr hu;
+    openvdb::FloatGrid::Ptr sdf;
+    std::optional<Centerline> centerline;
+    std::optional<TriMesh> mesh;
+};
+
+class StudyRun {
+public:
+    StudyRun(const RunOptions& o, const ArtifactStore& s) : opt(o), dir(o.studyDir), store(s) {}
+
+    std::string path(const std::string& name) const { return (dir / name).string(); }
+
+    openvdb::FloatGrid::Ptr sdf()
+    {
+        std::lock_guard<std::mutex> lock(mLoadMutex);
+        if (!state.sdf)
+            state.sdf = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path("lumen.vdb"), "lumen_sdf"));
+        return state.sdf;
+    }
+
+    const RunOptions& opt;
+    fs::path dir;
+    const ArtifactStore& store;
+    StudyState state;
+    Progress* progress = nullptr;  // set per stage call (stages run concurrently: see runStage)
+
+private:
+    std::mutex mLoadMutex;
+};
+
+json runIngest(StudyRun& run, Progress* progress)
+{
+    IngestReport rep;
+    Image3<float> image = readImage(run.opt.ctPath);
+    auto grid = ingestImage(image, run.opt.params.ingest, &rep, progress);
+    image = {};
+    writeGrids(run.path("ct.vdb"), {grid});
+    run.state.hu = grid;
+    return json{{"voxel_mm", rep.voxelMm},
+                {"active_voxels", rep.activeVoxels},
+                {"memory_bytes", rep.memoryBytes},
+                {"file_bytes", static_cast<int64_t>(fs::file_size(run.path("ct.vdb")))},
+                {"input_size", rep.inputSize},
+                {"input_spacing_mm", vec3Json(rep.inputSpacingMm)}};
+}
+
+json runSegment(StudyRun& run, Progress* progress)
+{
+    if (!run.state.hu)
+        run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
+    LumenSegmentation seg = segmentLumen(*run.state.hu, run.opt.params.segment, progress);
+    writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
+    run.state.sdf = seg.sdf;
+    json comps = json::array();
+    for (const auto& c : seg.components)
+        comps.push_back(json{{"volume_ml", c.volumeMl},    {"mean_hu", c.meanHu},
+                             {"centroid_mm", vec3Json(c.centroidMm)},
+                             {"min_mm", vec3Json(c.minMm)}, {"max_mm", vec3Json(c.maxMm)},
+                             {"kept", c.kept},             {"reason", c.reason}});
+    return json{{"lumen_volume_ml", seg.lumenVolumeMl}, {"components", comps}};
+}
+
+json runCenterline(StudyRun& run, Progress* progress)
+{
+    auto sdf = run.sdf();
+    Centerline c = extractCenterline(*sdf, run.opt.params.centerline, progress);
+    writeJson(run.path("centerline.json"), centerlineToJson(c));
+    run.state.centerline = std::move(c);
+    const auto& pts = run.state.centerline->points;
+    return json{{"points", pts.size()},
+                {"length_mm", run.state.centerline->lengthMm()},
+                {"rectum_mm", pts.empty() ? json() : vec3Json(pts.front().positionMm)},
+                {"cecum_mm", pts.empty() ? json() : vec3Json(pts.back().positionMm)}};
+}
+
+json runMesh(StudyRun& run, Progress* progress)
+{
+    auto sdf = run.sdf();
+    MeshStats st;
+    TriMesh mesh = extractSurface(*sdf, run.opt.params.mesh, &st, progress);
+    writeMesh(run.path("surface.ply"), mesh);
+    run.state.mesh = std::move(mesh);
+    return json{{"vertices", st.vertices},          {"faces", st.faces},
+                {"components", st.components},      {"boundary_edges", st.boundaryEdges},
+                {"dropped_faces", st.droppedFaces}, {"area_mm2", st.areaMm2},
+                {"enclosed_volume_mm3", st.enclosedVolumeMm3},
+                {"inward_fraction", st.inwardFraction}};
+}
+
+json runRender(StudyRun& run, Progress* progress)
+{
+    if (!run.state.mesh) run.state.mesh = readMesh(run.path("surface.ply"));
+    if (!run.state.centerline)
+        run.state.centerline =
+            centerlineFromJson(readJson(run.path("centerline.json")), run.path("centerline.json"));
+    const RenderParams& rp = run.opt.params.render;
+    const Centerline& cl = *run.state.centerline;
+    if (cl.points.empty()) throw InputError(run.path("centerline.json") + ": the centerline is empty");
+
+    RayScene scene(*run.state.mesh);
+
+    // Overview (thesis V.C): the whole colon from the front (anterior, looking towards +y in
+    // LPS), head up, so the patient's right is on the image's left as in radiology.
+    RenderOptions ov;
+    ov.widthPx = ov.heightPx = rp.overviewPx;
+    ov.ost = rp.ost;
+    ov.supersample = std::max(rp.supersample, 2);
+    const Camera overview = overviewCamera(scene.boundsMin(), scene.boundsMax(), {0, 1, 0}, {0, 0, 1}, 30.0);
+    writePng(run.path("overview.png"), renderView(scene, overview, ov));
+
+    // Fly-over frame pairs every frameStepMm along the centerline.
+    FlyoverParams fp;
+    fp.fovDeg = rp.fovDeg;
+    fp.rollDeg = rp.rollDeg;
+    fp.leftToRight = rp.direction == "right";
+    fp.clipOffsetFraction = rp.clipOffsetFraction;
+    fp.clipOffsetMm = rp.clipOffsetMm;
+    RenderOptions ro;
+    ro.widthPx = rp.widthPx;
+    ro.heightPx = rp.heightPx;
+    ro.ost = rp.ost;
+    ro.supersample = rp.supersample;
+
+    const double step = cl.stepMm > 0 ? cl.stepMm : 1.0;
+    std::vector<std::size_t> indices;
+    for (double s = 0; ; s += rp.frameStepMm) {
+        const auto i = static_cast<std::size_t>(std::llround(s / step));
+        if (i >= cl.points.size()) break;
+        indices.push_back(i);
+    }
+
+    // Frames go to a fresh folder that replaces frames/ only when complete.
+    const fs::path tmpDir = run.dir / (".tmp-" + std::to_string(::getpid()) + "-frames");
+    fs::remove_all(tmpDir);
+    fs::create_directories(tmpDir);
+    std::vector<json> poses(indices.size());
+    const auto t0 = std::chrono::steady_clock::now();
+    std::atomic<std::size_t> done{0};
+    tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
+        const CenterlinePoint& p = cl.points[indices[f]];
+        const auto cams = flyoverCameras(p, fp);
+        const RgbImage a = renderView(scene, cams[0], ro);
+        const RgbImage b = renderView(scene, cams[1], ro);
+        char name[32];
+        std::snprintf(name, sizeof name, "pair_%04zu.png", f);
+        writePng((tmpDir / name).string(), sideBySide(a, b));
+        poses[f] = json{{"frame", f},
+                        {"file", name},
+                        {"centerline_index", indices[f]},
+                        {"arc_mm", indices[f] * step},
+                        {"centerline_point_mm", vec3Json(p.positionMm)},
+                        {"radius_mm", p.radiusMm},
+                        {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
+        reportProgress(progress, double(++done) / indices.size(), "fly-over frame pairs");
+    });
+    const double renderSeconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    writeJson((tmpDir / "poses.json").string(),
+              json{{"schema", "flyover.poses/1"},
+                   {"world_frame", WORLD_FRAME},
+                   {"image_size_px", {rp.widthPx, rp.heightPx}},
+                   {"layout", "pair images: camera 0 left, camera 1 right"},
+                   {"ost", rp.ost},
+                   {"frames", poses}});
+    const fs::path frames = run.dir / "frames";
+    const fs::path old = run.dir / (".tmp-" + std::to_string(::getpid()) + "-frames-old");
+    fs::remove_all(old);
+    if (fs::exists(frames)) fs::rename(frames, old);
+    fs::rename(tmpDir, frames);
+    fs::remove_all(old);
+
+    return json{{"frame_pairs", indices.size()},
+                {"triangles", scene.triangleCount()},
+                {"frame_pairs_seconds", renderSeconds},
+                {"overview_camera", cameraJson(overview)}};
+}
+
+
+// ------------------------------------------------------------------------- the stage table
+
+struct StageSpec {
+    std::string name;
+    std::vector<std::string> upstream;  ///< stages whose outputs this stage reads
+    std::vector<std::string> inputs;    ///< artifact names read ("input" = the scan)
+    std::vector<std::string> outputs;   ///< artifact names written
+    json (*body)(StudyRun&, Progress*);
+};
+
+const std::vector<StageSpec>& stageSpecs()
+{
+    static const std::vector<StageSpec> specs{
+        {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest},
+        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegment},
+        {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline},
+        {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh},
+        {"render", {"centerline", "mesh"}, {"surface.ply", "centerline.json"}, {"overview.png", "frames"}, runRender},
+    };
+    return specs;
+}
+
+const StageSpec& specOf(const std::string& name)
+{
+    for (const auto& s : stageSpecs())
+        if (s.name == name) return s;
+    std::string known;
+    for (const auto& s : stageSpecs()) known += (known.empty() ? "" : ", ") + s.name;
+    throw ParameterError("unknown stage '" + name + "' (stages: " + known + ")");
+}
+
+/// Digest of the scan: its content (a DICOM folder: the names and contents of its files),
+/// never its modification time.
+std::string inputDigest(const std::string& ctPath) { return artifactDigest(ctPath); }
+
+json readManifest(const fs::path& dir)
+{
+    const fs::path p = dir / "manifest.json";
+    if (!fs::exists(p)) return json();
+    try {
+        return readJson(p.string());
+    } catch (const InputError&) {
+        return json();
+    }
+}
+
+json manifestEntry(const json& manifest, const std::string& stage)
+{
+    if (manifest.is_object() && manifest.contains("stages"))
+        for (const auto& e : manifest["stages"])
+            if (e.value("stage", "") == stage) return e;
+    return json();
+}
+
+} // namespace
+
+std::vector<std::string> stagesNeededFor(const std::string& stage)
+{
+    std::set<std::string> needed{stage};
+    for (auto it = stageSpecs().rbegin(); it != stageSpecs().rend(); ++it)
+        if (needed.count(it->name))
+            for (const auto& u : it->upstream) needed.insert(u);
+    std::vector<std::string> out;
+    for (const auto& s : stageSpecs())
+        if (needed.count(s.name)) out.push_back(s.name);
+    return out;
+}
+
+std::vector<std::string> stagesAffectedBy(const std::string& stage)
+{
+    specOf(stage);
+    std::set<std::string> affected{stage};
+    for (const auto& s : stageSpecs())
+        for (const auto& u : s.upstream)
+            if (affected.count(u)) affected.insert(s.name);
+    std::vector<std::string> out;
+    for (const auto& s : stageSpecs())
+        if (affected.count(s.name)) out.push_back(s.name);
+    return out;
+}
+
+nlohmann::json runPipeline(const RunOptions& options)
+{
+    validateParams(options.params);
+    std::set<std::string> wanted, forced;
+    if (options.untilStage.empty())
+        for (const auto& s : stageSpecs()) wanted.insert(s.name);
+    else
+        for (const auto& s : stagesNeededFor(specOf(options.untilStage).name)) wanted.insert(s);
+    if (!options.forceStage.empty())
+        for (const auto& s : stagesAffectedBy(options.forceStage)) forced.insert(s);
+    if (!(options.cacheMaxGb > 0)) throw ParameterError("--cache-max-gb: must be > 0");
+
+    std::error_code ec;
+    if (!fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
+    fs::create_directories(options.studyDir, ec);
+    if (ec) throw InputError(options.studyDir + ": cannot create the study folder: " + ec.message());
+
+    StudyLock lock(options.studyDir, options.waitForLock);
+    ArtifactStore store(options.studyDir);
+    store.removeStaleTemporaries();
+    StudyRun run(options, store);
+    RunLog* log = options.log;
+
+    std::mutex mutex;  // guards digests and entries
+    std::map<std::string, std::string> digests{{"input", inputDigest(options.ctPath)}};
+    std::map<std::string, json> entries;
+    std::set<std::string> usedRecords;
+
+    auto execute = [&](const StageSpec& spec) {
+        if (!wanted.count(spec.name)) return;
+        std::map<std::string, std::string> inputs;
+        {
+            std::lock_guard<std::mutex> g(mutex);
+            for (const auto& a : spec.inputs) inputs[a] = digests.at(a);
+        }
+        const json params = stageParamsToJson(options.params, spec.name);
+        const int version = stageVersion(spec.name);
+        const std::string key = stageKey(spec.name, version, params, inputs);
+        json entry{{"stage", spec.name}, {"version", version}, {"key", key},
+                   {"parameters", params}, {"inputs", inputs}};
+
+        std::optional<json> record;
+        if (!forced.count(spec.name)) record = store.findRecord(spec.name, key);
+        if (record) {
+            const auto t0 = std::chrono::steady_clock::now();
+            const std::string problem = store.verifyRecord(*record);
+            if (problem.empty()) {
+                store.materialize(*record);
+                store.touch(spec.name, key);
+                const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+                entry["outputs"] = record->at("outputs");
+                entry["wall_seconds"] = record->value("wall_seconds", 0.0);
+                entry["reuse_seconds"] = secs;
+                entry["computed"] = false;
+                entry["report"] = record->value("report", json::object());
+                std::lock_guard<std::mutex> g(mutex);
+                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
+                    digests[it.key()] = it.value().get<std::string>();
+                entries[spec.name] = entry;
+                usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+                if (log) log->stageFinished(spec.name, false, secs, "");
+                return;
+            }
+            if (log) log->message(spec.name + ": cached result unusable (" + problem + "); recomputing");
+            store.dropRecord(spec.name, key);
+        }
+
+        if (log) log->stageStarted(spec.name);
+        StageProgress progress(log, spec.name);
+        const auto t0 = std::chrono::steady_clock::now();
+        json report;
+        try {
+            report = spec.body(run, &progress);
+        } catch (const std::exception& e) {
+            throw StageError(spec.name, e.what());
+        }
+        const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        json outputs = json::object();
+        for (const auto& a : spec.outputs) outputs[a] = artifactDigest(run.path(a));
+        entry["outputs"] = outputs;
+        entry["wall_seconds"] = secs;
+        entry["computed"] = true;
+        entry["report"] = report;
+        json record2 = entry;
+        record2.erase("computed");
+        store.commit(record2);
+        std::lock_guard<std::mutex> g(mutex);
+        for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
+        entries[spec.name] = entry;
+        usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+        if (log) log->stageFinished(spec.name, true, secs, "");
+    };
+
+    // The stage graph: ingest -> segment -> {centerline, mesh} -> render. The flow graph runs
+    // centerline and mesh side by side; parallel loops run inside each stage. An exception in a
+    // node cancels the graph and is rethrown by wait_for_all().
+    using namespace tbb::flow;
+    graph g;
+    std::map<std::string, std::unique_ptr<continue_node<continue_msg>>> nodes;
+    for (const auto& spec : stageSpecs())
+        nodes[spec.name] = std::make_unique<continue_node<continue_msg>>(
+            g, [&execute, &spec](const continue_msg&) { execute(spec); });
+    for (const auto& spec : stageSpecs())
+        for (const auto& u : spec.upstream) make_edge(*nodes[u], *nodes[spec.name]);
+
+    std::exception_ptr failure;
+    nodes["ingest"]->try_put(continue_msg());
+    try {
+        g.wait_for_all();
+    } catch (...) {
+        failure = std::current_exception();
+    }
+
+    // The manifest: this run's entries, plus earlier entries of stages this run did not touch.
+    const json previous = readManifest(run.dir);
+    json stages = json::array();
+    for (const auto& spec : stageSpecs()) {
+        if (entries.count(spec.name)) stages.push_back(entries[spec.name]);
+        else if (!failure && !wanted.count(spec.name)) {
+            json e = manifestEntry(previous, spec.name);
+            if (!e.is_null()) stages.push_back(e);
+        }
+    }
+    const json manifest{{"schema", "flyover.manifest/1"},
+                        {"world_frame", WORLD_FRAME},
+                        {"input", fs::absolute(options.ctPath).string()},
+                        {"input_digest", digests["input"]},
+                        {"stages", stages}};
+    writeJson(run.path("manifest.json"), manifest);
+    if (failure) std::rethrow_exception(failure);
+
+    const uint64_t freed = store.evict(static_cast<uint64_t>(options.cacheMaxGb * 1e9), usedRecords);
+    if (freed > 0 && log)
+        log->message("cache: evicted " + std::to_string(freed / 1000000) + " MB of least recently used results");
+    return manifest;
+}
+
+std::vector<StageStatus> studyStatus(const StatusOptions& options)
+{
+    const fs::path dir(options.studyDir);
+    const json manifest = readManifest(dir);
+    if (!fs::exists(dir / ".flyover") || manifest.is_null())
+        throw InputError(options.studyDir + ": not a flyover study (no manifest.json; run 'flyover run' first)");
+    PipelineParams params = options.params;
+    if (!options.paramsGiven)
+        for (const auto& spec : stageSpecs()) {
+            const json e = manifestEntry(manifest, spec.name);
+            if (!e.is_null() && e.contains("parameters")) {
+                try {
+                    applyParamsJson(params, json{{spec.name, e["parameters"]}}, "manifest.json");
+                } catch (const ParameterError&) {
+                    // parameters of an older stage version: the stage will show as stale
+                }
+            }
+        }
+    const std::string ctPath = options.ctPath.empty() ? manifest.value("input", "") : options.ctPath;
+    ArtifactStore store(options.studyDir);
+
+    std::map<std::string, std::string> digests;
+    std::vector<StageStatus> out;
+    if (fs::exists(ctPath)) digests["input"] = inputDigest(ctPath);
+    for (const auto& spec : stageSpecs()) {
+        StageStatus st{spec.name, "", ""};
+        const json last = manifestEntry(manifest, spec.name);
+        std::map<std::string, std::string> inputs;
+        std::string missingInput;
+        for (const auto& a : spec.inputs) {
+            if (digests.count(a)) inputs[a] = digests[a];
+            else if (missingInput.empty()) missingInput = a;
+        }
+        if (!missingInput.empty()) {
+            st.state = last.is_null() ? "missing" : "stale";
+            st.reason = missingInput == "input" ? "the scan " + ctPath + " is missing"
+                                                : "its input " + missingInput + " will be recomputed";
+            out.push_back(st);
+            continue;
+        }
+        const json params2 = stageParamsToJson(params, spec.name);
+        const std::string key = stageKey(spec.name, stageVersion(spec.name), params2, inputs);
+        const auto record = store.findRecord(spec.name, key);
+        if (record) {
+            std::string problem = store.verifyRecord(*record);
+            if (problem.empty())
+                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it) {
+                    const fs::path p = dir / it.key();
+                    if (!fs::exists(p)) { problem = it.key() + " is missing from the study (run restores it from the cache)"; break; }
+                    if (artifactDigest(p.string()) != it.value().get<std::string>()) {
+                        problem = it.key() + " in the study is corrupt or modified (digest mismatch)";
+                        break;
+                    }
+                }
+            if (problem.empty()) {
+                st.state = "fresh";
+                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
+                    digests[it.key()] = it.value().get<std::string>();
+            } else {
+                st.state = "stale";
+                st.reason = problem;
+                if (problem.find("run restores it") != std::string::npos)
+                    for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
+                        digests[it.key()] = it.value().get<std::string>();
+            }
+            out.push_back(st);
+            continue;
+        }
+        if (last.is_null()) {
+            st.state = "missing";
+            st.reason = "never run";
+        } else {
+            st.state = "stale";
+            if (last.value("version", -1) != stageVersion(spec.name)) st.reason = "stage version changed";
+            else if (last["parameters"] != params2) {
+                std::string changed;
+                for (auto it = params2.begin(); it != params2.end(); ++it)
+                    if (!last["parameters"].contains(it.key()) || last["parameters"][it.key()] != it.value())
+                        changed += (changed.empty() ? "" : ", ") + spec.name + "." + it.key();
+                st.reason = "parameters changed (" + changed + ")";
+            } else if (last["inputs"] != json(inputs)) {
+                std::string changed;
+                for (const auto& [name, d] : inputs)
+                    if (!last["inputs"].contains(name) || last["inputs"][name] != d)
+                        changed += (changed.empty() ? "" : ", ") + name;
+                st.reason = "input changed (" + changed + ")";
+            } else {
+                st.reason = "its cached result is gone (evicted or removed)";
+            }
+        }
+        out.push_back(st);
+    }
+    return out;
+}
+
+void cleanStudy(const std::string& studyDir)
+{
+    const fs::path dir(studyDir);
+    if (!fs::exists(dir / ".flyover") && !fs::exists(dir / "manifest.json"))
+        throw InputError(studyDir + ": not a flyover study (no manifest.json or .flyover/)");
+    StudyLock lock(studyDir, false);
+    std::error_code ec;
+    for (const auto& spec : stageSpecs())
+        for (const auto& a : spec.outputs) fs::remove_all(dir / a, ec);
+    fs::remove(dir / "manifest.json", ec);
+    for (const auto& e : fs::directory_iterator(dir / ".flyover", ec))
+        if (e.path().filename() != "lock") fs::remove_all(e.path(), ec);
+    for (const auto& e : fs::directory_iterator(dir, ec))
+        if (e.path().filename().string().rfind(".tmp-", 0) == 0) fs::remove_all(e.path(), ec);
+}
+
+} // namespace flyover

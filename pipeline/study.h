@@ -1,0 +1,74 @@
+/// @file study.h
+/// @brief A study folder and the stages that fill it: ingest -> segment -> {centerline,
+///        mesh} -> render, run as a TBB flow graph (centerline and mesh side by side), each
+///        stage cached by a key over (stage, version, parameters, input digests).
+///
+/// Artifacts (all written atomically, all kept content-addressed under DIR/.flyover/):
+///   ct.vdb           FloatGrid "ct_hu" (HU, LPS mm transform, outside air inactive)
+///   lumen.vdb        BoolGrid "lumen_mask" and FloatGrid "lumen_sdf" (mm, negative inside)
+///   centerline.json  schema flyover.centerline/1
+///   surface.ply      binary PLY, faces wound so that normals point into the lumen
+///   overview.png     OST of the whole colon from outside (anterior view)
+///   frames/          pair_NNNN.png (camera 0 | camera 1) and poses.json
+///   manifest.json    per stage: key, version, parameters, input/output digests, wall time,
+///                    computed or reused, report
+#pragma once
+
+#include "pipeline/params.h"
+#include "pipeline/run_log.h"
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+namespace flyover {
+
+/// A stage failed; what() names the stage and the cause.
+struct StageError : std::runtime_error {
+    StageError(const std::string& stage, const std::string& cause)
+        : std::runtime_error(stage + ": " + cause), stageName(stage) {}
+    std::string stageName;
+};
+
+struct RunOptions {
+    std::string ctPath;           ///< the input scan (file or DICOM directory)
+    std::string studyDir;         ///< output folder (created if missing)
+    PipelineParams params;
+    std::string untilStage;       ///< run only this stage and what it needs ("" = all)
+    std::string forceStage;       ///< recompute this stage and everything downstream
+    bool waitForLock = false;     ///< wait for a concurrent run instead of refusing
+    double cacheMaxGb = 20.0;     ///< cap on the study's cache; least recently used evicted
+    RunLog* log = nullptr;        ///< progress and messages (null: silent)
+};
+
+/// Runs what is stale; returns the manifest written to DIR/manifest.json.
+/// @throw StageError naming the failing stage; InputError/ParameterError/StudyBusy before any stage.
+nlohmann::json runPipeline(const RunOptions& options);
+
+struct StageStatus {
+    std::string stage;
+    std::string state;   ///< "fresh", "stale" or "missing"
+    std::string reason;  ///< why, for stale and missing
+};
+
+struct StatusOptions {
+    std::string studyDir;
+    std::string ctPath;           ///< "" = the input recorded in the manifest
+    PipelineParams params;
+    bool paramsGiven = false;     ///< false: compare with the parameters of the last run
+};
+
+/// What `run` would do with these options, stage by stage, and why.
+/// @throw InputError when DIR is not a study.
+std::vector<StageStatus> studyStatus(const StatusOptions& options);
+
+/// Removes every artifact, the manifest and the cache of a study (takes the lock).
+void cleanStudy(const std::string& studyDir);
+
+/// Stage names upstream of `stage`, inclusive, in pipeline order.
+std::vector<std::string> stagesNeededFor(const std::string& stage);
+/// Stage names downstream of `stage`, inclusive, in pipeline order.
+std::vector<std::string> stagesAffectedBy(const std::string& stage);
+
+} // namespace flyover

@@ -1,0 +1,110 @@
+// The command line as a user meets it: help texts, and one clear line plus a non-zero exit for
+// every bad command line or missing input.
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <sys/wait.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Result {
+    int exitCode = -1;
+    std::string out;  // stdout
+    std::string err;  // stderr
+};
+
+Result runFlyover(const std::string& args)
+{
+    const fs::path errFile = fs::temp_directory_path() / ("flyover-cli-" + std::to_string(::getpid()) + ".err");
+    const std::string cmd = std::string(FLYOVER_BIN) + " " + args + " 2>" + errFile.string();
+    Result r;
+    FILE* p = ::popen(cmd.c_str(), "r");
+    if (!p) return r;
+    std::array<char, 4096> buf;
+    std::size_t n;
+    while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
+    const int status = ::pclose(p);
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    std::ifstream in(errFile);
+    r.err.assign(std::istreambuf_iterator<char>(in), {});
+    fs::remove(errFile);
+    return r;
+}
+
+int lineCount(const std::string& s)
+{
+    int n = 0;
+    for (char c : s) n += c == '\n';
+    return n;
+}
+
+} // namespace
+
+TEST(Cli, HelpDescribesEverySubcommand)
+{
+    const Result top = runFlyover("--help");
+    EXPECT_EQ(top.exitCode, 0) << top.err;
+    for (const char* sub : {"phantom", "run", "params"})
+        EXPECT_NE(top.out.find(sub), std::string::npos) << "top-level help lacks " << sub;
+
+    const Result phantom = runFlyover("phantom --help");
+    EXPECT_EQ(phantom.exitCode, 0);
+    for (const char* opt : {"--truth", "--truth-mask", "--size", "--seed", "small"})
+        EXPECT_NE(phantom.out.find(opt), std::string::npos) << "phantom help lacks " << opt;
+
+    const Result run = runFlyover("run --help");
+    EXPECT_EQ(run.exitCode, 0);
+    for (const char* opt : {"--study", "--set", "--config", "--until"})
+        EXPECT_NE(run.out.find(opt), std::string::npos) << "run help lacks " << opt;
+
+    const Result params = runFlyover("params");
+    EXPECT_EQ(params.exitCode, 0);
+    EXPECT_NE(params.out.find("segment.air_threshold_hu = -800"), std::string::npos) << params.out;
+}
+
+TEST(Cli, MissingInputFileGivesOneLineAndNonZeroExit)
+{
+    const fs::path study = fs::temp_directory_path() / ("flyover-cli-study-" + std::to_string(::getpid()));
+    const Result r = runFlyover("run /nonexistent/scan.nii.gz --study " + study.string());
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find("/nonexistent/scan.nii.gz"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(study / "manifest.json"));
+    fs::remove_all(study);
+}
+
+TEST(Cli, BadCommandLinesGiveOneLineAndNonZeroExit)
+{
+    for (const char* args : {"", "frobnicate", "run", "run a.nii.gz", "phantom out.nii.gz",
+                             "phantom out.nii.gz --truth t.json --size huge",
+                             "run a.nii.gz --study s --set segment.nope=1",
+                             "run a.nii.gz --study s --set render.fov_deg=abc", "--threads -2 params"}) {
+        const Result r = runFlyover(args);
+        EXPECT_NE(r.exitCode, 0) << "flyover " << args;
+        EXPECT_EQ(lineCount(r.err), 1) << "flyover " << args << "\nstderr: " << r.err;
+        EXPECT_NE(r.err.find("error"), std::string::npos) << "flyover " << args << "\nstderr: " << r.err;
+    }
+    const Result r = runFlyover("run a.nii.gz --study s --set segment.nope=1");
+    EXPECT_NE(r.err.find("segment.nope"), std::string::npos) << r.err;
+}
+
+TEST(Cli, CorruptInputNamesTheFile)
+{
+    const fs::path dir = fs::temp_directory_path() / ("flyover-cli-corrupt-" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    std::ofstream(dir / "broken.nii.gz") << "this is not a NIfTI file";
+    const Result r = runFlyover("--quiet run " + (dir / "broken.nii.gz").string() + " --study " + (dir / "study").string());
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find("broken.nii.gz"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("ingest"), std::string::npos) << "the failing stage is named\n" << r.err;
+    EXPECT_FALSE(fs::exists(dir / "study" / "ct.vdb"));
+    fs::remove_all(dir);
+}

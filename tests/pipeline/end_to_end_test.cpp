@@ -1,0 +1,139 @@
+// The foundation's end-to-end check: the small phantom through every stage, measured against
+// its ground truth (lumen Dice, centerline distance, inward faces) and the OST property.
+
+#include "data/phantom.h"
+#include "pipeline/artifact_io.h"
+#include "pipeline/phantom_io.h"
+#include "pipeline/study.h"
+#include "render/ray_scene.h"
+#include "surface/extract_surface.h"
+
+#include <gtest/gtest.h>
+#include <openvdb/tools/Interpolation.h>
+
+#include <filesystem>
+#include <limits>
+
+namespace fs = std::filesystem;
+using namespace flyover;
+
+namespace {
+
+double distanceToPolyline(const Vec3d& p, const std::vector<Vec3d>& line)
+{
+    double best = std::numeric_limits<double>::max();
+    for (std::size_t i = 1; i < line.size(); ++i) {
+        const Vec3d a = line[i - 1], ab = line[i] - a;
+        const double len2 = dot(ab, ab);
+        const double t = len2 > 0 ? std::clamp(dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
+        best = std::min(best, distance(p, a + ab * t));
+    }
+    return best;
+}
+
+} // namespace
+
+TEST(EndToEnd, SmallPhantomMeetsFoundationTargets)
+{
+    openvdb::initialize();
+    const uint64_t seed = 7;
+    const fs::path dir = fs::temp_directory_path() / ("flyover-e2e-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+
+    PhantomParams pp;
+    pp.size = PhantomSize::Small;
+    pp.seed = seed;
+    const Phantom phantom = makePhantom(pp);
+    writePhantom(phantom, pp, (dir / "ct.nii.gz").string(), (dir / "truth.json").string(), "");
+
+    RunOptions run;
+    run.ctPath = (dir / "ct.nii.gz").string();
+    run.studyDir = (dir / "study").string();
+    run.params.render.widthPx = run.params.render.heightPx = 128;
+    run.params.render.frameStepMm = 100;
+    run.params.render.overviewPx = 256;
+    const nlohmann::json manifest = runPipeline(run);
+    SCOPED_TRACE("small phantom, seed " + std::to_string(seed) + ", study " + run.studyDir);
+
+    // Every artifact of the design is there.
+    for (const char* a : {"ct.vdb", "lumen.vdb", "centerline.json", "surface.ply", "overview.png",
+                          "frames/pair_0000.png", "frames/poses.json", "manifest.json"})
+        EXPECT_TRUE(fs::exists(dir / "study" / a)) << a << " missing";
+    ASSERT_EQ(manifest["stages"].size(), 5u);
+    for (const auto& s : manifest["stages"]) {
+        EXPECT_TRUE(s.contains("parameters")) << s["stage"];
+        EXPECT_GE(s["wall_seconds"].get<double>(), 0.0) << s["stage"];
+    }
+
+    // Lumen Dice against the truth mask, sampling the level set at the truth voxel centres.
+    auto sdf = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid((dir / "study/lumen.vdb").string(), "lumen_sdf"));
+    ASSERT_TRUE(sdf);
+    const openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(*sdf);
+    const auto& g = phantom.truthLumen.geometry;
+    int64_t truthCount = 0, segCount = 0, both = 0;
+    for (int64_t k = 0; k < g.size[2]; ++k)
+        for (int64_t j = 0; j < g.size[1]; ++j)
+            for (int64_t i = 0; i < g.size[0]; ++i) {
+                const bool t = phantom.truthLumen.at(i, j, k) != 0;
+                const Vec3d w = g.worldFromIndex({double(i), double(j), double(k)});
+                const bool s = sampler.wsSample(openvdb::Vec3d(w.x, w.y, w.z)) < 0.f;
+                truthCount += t;
+                segCount += s;
+                both += t && s;
+            }
+    const double dice = 2.0 * both / double(truthCount + segCount);
+    EXPECT_GE(dice, 0.90) << "lumen Dice: truth " << truthCount << " voxels, segmented " << segCount;
+    std::cout << "[ measure  ] lumen Dice " << dice << "\n";
+
+    // Centerline: mean distance to the true centerline.
+    const Centerline cl = centerlineFromJson(readJson((dir / "study/centerline.json").string()), "centerline.json");
+    ASSERT_GT(cl.points.size(), 100u);
+    double sum = 0;
+    for (const auto& p : cl.points) sum += distanceToPolyline(p.positionMm, phantom.truth.centerlineMm);
+    const double meanDistance = sum / cl.points.size();
+    EXPECT_LE(meanDistance, 2.0) << "mean distance to the true centerline (mm)";
+    EXPECT_LT(cl.points.front().positionMm.z, cl.points.back().positionMm.z - 0.0)
+        << "rectum end should be inferior to the cecum end in this phantom";
+    std::cout << "[ measure  ] centerline mean distance " << meanDistance << " mm, length " << cl.lengthMm()
+              << " mm\n";
+
+    // Surface: normals into the lumen.
+    const TriMesh mesh = readMesh((dir / "study/surface.ply").string());
+    ASSERT_GT(mesh.n_faces(), 1000u);
+    const double inward = inwardFaceFraction(mesh, *sdf);
+    EXPECT_GE(inward, 0.99) << "fraction of faces whose normal points into the lumen";
+
+    // OST matters: from a camera outside the colon looking at a centerline point, the plain
+    // render's first hit is the near (outer) wall; the OST render's is the far (inner) wall.
+    RayScene scene(mesh);
+    int checked = 0;
+    for (std::size_t i = cl.points.size() / 4; i < cl.points.size() * 3 / 4 && checked < 5; i += 37) {
+        const CenterlinePoint& p = cl.points[i];
+        const Vec3d dir3 = p.normal;
+        const double back = p.radiusMm + 15.0;
+        const Vec3d cam = p.positionMm + dir3 * back;
+        // Pick geometry by the level set alone: the segment camera -> p enters the lumen once.
+        int crossings = 0;
+        double tEnter = -1;
+        float prev = sampler.wsSample(openvdb::Vec3d(cam.x, cam.y, cam.z));
+        if (prev < 1.0f) continue;
+        for (double t = 0.25; t <= back; t += 0.25) {
+            const Vec3d q = cam - dir3 * t;
+            const float v = sampler.wsSample(openvdb::Vec3d(q.x, q.y, q.z));
+            if ((v < 0) != (prev < 0)) { ++crossings; tEnter = t; }
+            prev = v;
+        }
+        if (crossings != 1) continue;
+        ++checked;
+        const RayHit plain = scene.intersect(cam, -dir3, 0.0, 1e9, /*ost=*/false);
+        const RayHit ost = scene.intersect(cam, -dir3, 0.0, 1e9, /*ost=*/true);
+        ASSERT_TRUE(plain.hit && ost.hit) << "centerline point " << i;
+        EXPECT_NEAR(plain.t, tEnter, 2.0) << "plain render should hit the near wall, point " << i;
+        EXPECT_GT(dot(plain.normal, -dir3), 0.0) << "the near wall's normal points away from the camera";
+        EXPECT_GT(ost.t, back) << "OST should skip the near wall and hit beyond the centerline, point " << i;
+        EXPECT_LT(dot(ost.normal, -dir3), 0.0) << "the far wall's normal faces the camera";
+    }
+    EXPECT_GE(checked, 3) << "too few centerline points with a clean outside view";
+    fs::remove_all(dir);
+}

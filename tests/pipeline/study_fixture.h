@@ -1,0 +1,75 @@
+// A small-phantom study shared by the pipeline tests: the phantom is generated once per test
+// process into a temporary folder, and each test gets its own study folder.
+#pragma once
+
+#include "data/phantom.h"
+#include "pipeline/phantom_io.h"
+#include "pipeline/study.h"
+
+#include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
+
+#include <filesystem>
+#include <string>
+
+namespace flyover::test {
+
+inline constexpr uint64_t STUDY_SEED = 3;
+
+class StudyTest : public ::testing::Test {
+protected:
+    static void SetUpTestSuite()
+    {
+        openvdb::initialize();
+        sRoot = std::filesystem::temp_directory_path() / ("flyover-study-" + std::to_string(::getpid()));
+        std::filesystem::remove_all(sRoot);
+        std::filesystem::create_directories(sRoot);
+        PhantomParams pp;
+        pp.size = PhantomSize::Small;
+        pp.seed = STUDY_SEED;
+        sPhantom = new Phantom(makePhantom(pp));
+        writePhantom(*sPhantom, pp, ctPath(), (sRoot / "truth.json").string(), "");
+    }
+    static void TearDownTestSuite()
+    {
+        delete sPhantom;
+        sPhantom = nullptr;
+        std::filesystem::remove_all(sRoot);
+    }
+
+    static std::string ctPath() { return (sRoot / "ct.nii.gz").string(); }
+    std::string studyDir(const std::string& name) const { return (sRoot / name).string(); }
+
+    /// Options for a quick run: small frames, few of them.
+    RunOptions options(const std::string& study) const
+    {
+        RunOptions o;
+        o.ctPath = ctPath();
+        o.studyDir = studyDir(study);
+        o.params.render.widthPx = o.params.render.heightPx = 96;
+        o.params.render.frameStepMm = 150;
+        o.params.render.overviewPx = 128;
+        return o;
+    }
+
+    static inline std::filesystem::path sRoot;
+    static inline Phantom* sPhantom = nullptr;
+};
+
+/// Stage name -> computed (true) or reused (false), from a manifest.
+inline std::map<std::string, bool> computedStages(const nlohmann::json& manifest)
+{
+    std::map<std::string, bool> m;
+    for (const auto& s : manifest["stages"]) m[s["stage"].get<std::string>()] = s["computed"].get<bool>();
+    return m;
+}
+
+/// Stage name -> output digests, from a manifest.
+inline std::map<std::string, nlohmann::json> outputDigests(const nlohmann::json& manifest)
+{
+    std::map<std::string, nlohmann::json> m;
+    for (const auto& s : manifest["stages"]) m[s["stage"].get<std::string>()] = s["outputs"];
+    return m;
+}
+
+} // namespace flyover::test
