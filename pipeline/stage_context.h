@@ -1,0 +1,58 @@
+/// @file stage_context.h
+/// @brief What a stage body sees of a run (internal to pipeline/): the options, the study
+///        folder, and the objects earlier stages of the same run left in memory. Each stage
+///        body lives in its own stage_<name>.cpp and returns its report for the manifest.
+#pragma once
+
+#include "pipeline/study.h"
+#include "surface/mesh_types.h"
+#include "volume/centerline_types.h"
+#include "volume/progress.h"
+#include "volume/vec3.h"
+
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+
+#include <filesystem>
+#include <mutex>
+#include <optional>
+#include <string>
+
+namespace flyover {
+
+/// Objects handed from stage to stage in memory within one run.
+struct StudyState {
+    openvdb::FloatGrid::Ptr hu;
+    openvdb::FloatGrid::Ptr sdf;
+    std::optional<Centerline> centerline;
+    std::optional<TriMesh> mesh;
+};
+
+class StudyRun {
+public:
+    explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir) {}
+
+    std::string path(const std::string& name) const { return (dir / name).string(); }
+
+    /// The lumen level set: from memory when segment ran in this run, else from lumen.vdb.
+    /// Thread-safe (centerline and mesh ask for it at the same time).
+    openvdb::FloatGrid::Ptr sdf();
+
+    const RunOptions& opt;
+    std::filesystem::path dir;
+    StudyState state;
+
+private:
+    std::mutex mLoadMutex;
+};
+
+inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
+
+// Stage bodies: each writes its artifacts (atomically) and returns its report.
+nlohmann::json runIngest(StudyRun& run, Progress* progress);
+nlohmann::json runSegment(StudyRun& run, Progress* progress);
+nlohmann::json runCenterline(StudyRun& run, Progress* progress);
+nlohmann::json runMesh(StudyRun& run, Progress* progress);
+nlohmann::json runRender(StudyRun& run, Progress* progress);
+
+} // namespace flyover
