@@ -4,6 +4,7 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"
 #include "pipeline/config_file.h"
+#include "pipeline/export.h"
 #include "pipeline/phantom_io.h"
 #include "pipeline/params.h"
 #include "pipeline/study.h"
@@ -87,6 +88,12 @@ int main(int argc, char** argv)
     std::string cleanDir;
     cleanCmd->add_option("--study", cleanDir, "study folder")->required();
 
+    // flyover export
+    auto* exportCmd = app.add_subcommand("export", "write a study's results in formats other tools load");
+    std::string exportStudy, exportMeshPath;
+    exportCmd->add_option("--study", exportStudy, "study folder")->required();
+    exportCmd->add_option("--mesh", exportMeshPath, "lumen surface as .ply, .obj, .stl or .off (inward normals)");
+
     // flyover params
     auto* paramsCmd = app.add_subcommand("params", "list every stage parameter with its default");
 
@@ -152,6 +159,16 @@ int main(int argc, char** argv)
             for (const auto& st : studyStatus(status))
                 std::cout << st.stage << std::string(12 - std::min<std::size_t>(11, st.stage.size()), ' ') << st.state
                           << (st.reason.empty() ? "" : "  (" + st.reason + ")") << "\n";
+            return 0;
+        }
+        if (*exportCmd) {
+            bool any = false;
+            if (!exportMeshPath.empty()) {
+                exportMesh(exportStudy, exportMeshPath);
+                log("surface written to " + exportMeshPath);
+                any = true;
+            }
+            if (!any) throw ParameterError("export: name at least one output (--mesh)");
             return 0;
         }
         if (*cleanCmd) {
