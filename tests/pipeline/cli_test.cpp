@@ -108,3 +108,44 @@ TEST(Cli, CorruptInputNamesTheFile)
     EXPECT_FALSE(fs::exists(dir / "study" / "ct.vdb"));
     fs::remove_all(dir);
 }
+
+TEST(Cli, TomlConfigIsReadAndUnknownKeysAreRejectedByName)
+{
+    const fs::path dir = fs::temp_directory_path() / ("flyover-cli-toml-" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    std::ofstream(dir / "bad.toml") << "[render]\nfov_deg = 60\nroll_degrees = 10\n";
+    std::ofstream(dir / "scan.nii.gz") << "x";
+    Result r = runFlyover("-q run " + (dir / "scan.nii.gz").string() + " --study " + (dir / "s").string() +
+                          " --config " + (dir / "bad.toml").string());
+    EXPECT_EQ(r.exitCode, 2) << r.err;
+    EXPECT_NE(r.err.find("render.roll_degrees"), std::string::npos) << r.err;
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+
+    std::ofstream(dir / "broken.toml") << "[render\nfov_deg = ";
+    r = runFlyover("-q run " + (dir / "scan.nii.gz").string() + " --study " + (dir / "s").string() +
+                   " --config " + (dir / "broken.toml").string());
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("broken.toml"), std::string::npos) << r.err;
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+
+    std::ofstream(dir / "bad.json") << "{\"segment\": {\"air_threshold\": -700}}";
+    r = runFlyover("-q run " + (dir / "scan.nii.gz").string() + " --study " + (dir / "s").string() +
+                   " --config " + (dir / "bad.json").string());
+    EXPECT_EQ(r.exitCode, 2) << r.err;
+    EXPECT_NE(r.err.find("segment.air_threshold"), std::string::npos) << r.err;
+    fs::remove_all(dir);
+}
+
+TEST(Cli, StatusAndCleanOnAStudy)
+{
+    const fs::path dir = fs::temp_directory_path() / ("flyover-cli-status-" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    Result r = runFlyover("status --study " + (dir / "none").string());
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("not a flyover study"), std::string::npos) << r.err;
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+    r = runFlyover("clean --study " + (dir / "none").string());
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+    fs::remove_all(dir);
+}

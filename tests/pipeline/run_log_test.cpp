@@ -1,0 +1,80 @@
+#include "pipeline/run_log.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <sstream>
+
+using namespace flyover;
+
+TEST(RunLog, PlainModeWritesOneLinePerEvent)
+{
+    std::ostringstream out;
+    {
+        RunLog log(RunLog::Mode::Plain, out);
+        log.stageStarted("segment");
+        log.stageProgress("segment", 0.5, "components");  // plain mode: no progress lines
+        log.stageFinished("segment", true, 1.25, "");
+        log.stageFinished("ingest", false, 0.01, "");
+    }
+    EXPECT_EQ(out.str(), "flyover: segment: running\n"
+                         "flyover: segment: computed in 1.25 s\n"
+                         "flyover: ingest: reused from the cache\n");
+}
+
+TEST(RunLog, JsonModeWritesParseableLines)
+{
+    std::ostringstream out;
+    {
+        RunLog log(RunLog::Mode::Json, out);
+        log.stageStarted("mesh");
+        log.stageProgress("mesh", 0.25, "extracting");
+        log.stageFinished("mesh", true, 2.0, "");
+        log.message("done");
+    }
+    std::istringstream in(out.str());
+    std::string line;
+    std::vector<nlohmann::json> events;
+    while (std::getline(in, line)) events.push_back(nlohmann::json::parse(line));
+    ASSERT_EQ(events.size(), 4u) << out.str();
+    EXPECT_EQ(events[0]["event"], "stage_started");
+    EXPECT_EQ(events[1]["event"], "progress");
+    EXPECT_DOUBLE_EQ(events[1]["fraction"].get<double>(), 0.25);
+    EXPECT_EQ(events[2]["event"], "stage_finished");
+    EXPECT_EQ(events[2]["computed"], true);
+    EXPECT_EQ(events[3]["text"], "done");
+    for (const auto& e : events) EXPECT_TRUE(e.contains("time"));
+}
+
+TEST(RunLog, BarsModeDrawsOneBarPerRunningStageWithEta)
+{
+    std::ostringstream out;
+    {
+        RunLog log(RunLog::Mode::Bars, out);
+        log.stageStarted("centerline");
+        log.stageStarted("mesh");
+        log.stageProgress("mesh", 0.5, "smoothing");
+        const std::string s = out.str();
+        EXPECT_NE(s.find("centerline"), std::string::npos);
+        EXPECT_NE(s.find("mesh"), std::string::npos);
+        EXPECT_NE(s.find('['), std::string::npos) << "a bar is drawn";
+        EXPECT_NE(s.find("ETA"), std::string::npos);
+        EXPECT_NE(s.find("\x1b[1A"), std::string::npos) << "bars are redrawn in place";
+        log.stageFinished("mesh", true, 1.0, "");
+        log.stageFinished("centerline", true, 1.0, "");
+    }
+    EXPECT_NE(out.str().find("mesh: computed in"), std::string::npos);
+}
+
+TEST(RunLog, QuietModeWritesNothing)
+{
+    std::ostringstream out;
+    {
+        RunLog log(RunLog::Mode::Quiet, out);
+        log.stageStarted("render");
+        log.stageProgress("render", 0.5, "frames");
+        log.stageFinished("render", true, 1.0, "");
+        log.message("hello");
+    }
+    EXPECT_TRUE(out.str().empty());
+}
