@@ -1,0 +1,318 @@
+// Centerline extraction against tubes with a known axis (style.md §12): distance to the true
+// curve, length, endpoints, uniform step, frames.
+#include "volume/centerline.h"
+
+#include "test_shapes.h"
+#include "volume/error.h"
+#include "volume/segment.h"
+
+#include <gtest/gtest.h>
+
+#include <tbb/task_arena.h>
+
+#include <openvdb/tools/Composite.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <random>
+#include <sstream>
+#include <string>
+
+namespace flyover {
+namespace {
+
+using test::Axis;
+using test::Frame;
+
+constexpr double PI = 3.14159265358979323846;
+
+struct TubeCase {
+    std::string name;
+    Frame frame;
+    Axis axis;
+    double radiusMm;
+
+    std::string describe() const
+    {
+        std::ostringstream s;
+        s << name << ": " << axis.describe() << ", tube radius " << radiusMm << " mm, "
+          << frame.describe();
+        return s.str();
+    }
+};
+
+// Tubes of radius 8 voxels (6 mm at 0.75 mm), in a rotated, translated frame.
+TubeCase straightCase()
+{
+    return {"straight", test::makeFrame(0.75, true), Axis::straight({15, 20, 15}, {60, 45, 110}), 6.0};
+}
+TubeCase helixCase()
+{
+    // Curvature radius (R^2 + c^2) / R = 23.2 mm; turns 50 mm apart.
+    return {"helix", test::makeFrame(0.75, true), Axis::helix({40, 40, 15}, 20, 8, 1.5), 6.0};
+}
+TubeCase uBendCase()
+{
+    return {"uBend", test::makeFrame(0.75, true), Axis::uBend({20, 30, 20}, 40, 55, 15), 6.0};
+}
+
+struct Summary {
+    double firstArcMm, lastArcMm;
+};
+
+/// The checks every tube shares. Returns the arc-length positions of the two ends.
+Summary checkAgainstAxis(const Centerline& cl, const TubeCase& tc, const CenterlineParams& params)
+{
+    const double h = tc.frame.voxelMm;
+    const double axisLength = tc.axis.lengthMm();
+    EXPECT_GE(cl.points.size(), 10u);
+    if (cl.points.size() < 2) return {0, 0};
+    EXPECT_DOUBLE_EQ(cl.stepMm, params.stepMm);
+
+    // Every point within one voxel of the true axis. The axis is continued straight beyond its
+    // ends: the path legitimately runs a little way into the hemispherical end caps, whose
+    // medial direction is that continuation.
+    double worst = 0;
+    for (std::size_t i = 0; i < cl.points.size(); ++i) {
+        const auto proj = tc.axis.project(tc.frame.localFromWorld(cl.points[i].positionMm));
+        worst = std::max(worst, proj.distanceMm);
+        EXPECT_LE(proj.distanceMm, h) << "point " << i << " of " << cl.points.size();
+    }
+
+    // Ends: one path whose two ends lie in opposite end caps (within a radius of the axis ends).
+    const auto first = tc.axis.project(tc.frame.localFromWorld(cl.points.front().positionMm));
+    const auto last = tc.axis.project(tc.frame.localFromWorld(cl.points.back().positionMm));
+    const double lo = std::min(first.arcMm, last.arcMm), hi = std::max(first.arcMm, last.arcMm);
+    EXPECT_NEAR(lo, 0.0, tc.radiusMm);
+    EXPECT_NEAR(hi, axisLength, tc.radiusMm);
+
+    // Length against the true axis between the projections of the two ends.
+    const double trueLength = hi - lo;
+    EXPECT_NEAR(cl.lengthMm(), trueLength, 0.02 * trueLength);
+
+    // Uniform step.
+    for (std::size_t i = 1; i < cl.points.size(); ++i)
+        EXPECT_NEAR(distance(cl.points[i].positionMm, cl.points[i - 1].positionMm), params.stepMm,
+                    0.01 * params.stepMm)
+            << "step " << i;
+
+    // Frames.
+    for (std::size_t i = 0; i < cl.points.size(); ++i) {
+        const CenterlinePoint& p = cl.points[i];
+        EXPECT_NEAR(length(p.tangent), 1.0, 1e-9) << i;
+        EXPECT_NEAR(length(p.normal), 1.0, 1e-9) << i;
+        EXPECT_NEAR(dot(p.tangent, p.normal), 0.0, 1e-9) << i;
+        EXPECT_FALSE(p.bridged);
+    }
+
+    // Radius = distance to the wall: the tube radius away from the end caps.
+    double worstRadius = 0;
+    for (const CenterlinePoint& p : cl.points) {
+        const auto proj = tc.axis.project(tc.frame.localFromWorld(p.positionMm));
+        if (proj.arcMm < tc.radiusMm || proj.arcMm > axisLength - tc.radiusMm) continue;
+        worstRadius = std::max(worstRadius, std::abs(p.radiusMm - tc.radiusMm));
+        EXPECT_NEAR(p.radiusMm, tc.radiusMm, h) << "radius at arc " << proj.arcMm;
+    }
+    std::cout << "[ " << tc.name << " ] " << cl.points.size() << " points, length "
+              << cl.lengthMm() << " mm vs " << trueLength << " mm; max distance to axis " << worst
+              << " mm, max radius error " << worstRadius << " mm (voxel " << h << " mm)\n";
+    return {first.arcMm, last.arcMm};
+}
+
+/// The rectum is the end of lower world z (checked when the axis ends differ in z by more
+/// than a radius; closer than that the order is a matter of the end caps).
+void checkRectumIsLowerEnd(const Summary& s, const TubeCase& tc)
+{
+    const double zStart = tc.frame.worldFromLocal(tc.axis.start()).z;
+    const double zEnd = tc.frame.worldFromLocal(tc.axis.end()).z;
+    if (std::abs(zStart - zEnd) < tc.radiusMm) return;
+    const bool startIsLower = zStart < zEnd;
+    if (startIsLower) EXPECT_LT(s.firstArcMm, s.lastArcMm);
+    else EXPECT_GT(s.firstArcMm, s.lastArcMm);
+}
+
+TEST(Centerline, StraightTubeFollowsAxis)
+{
+    const TubeCase tc = straightCase();
+    SCOPED_TRACE(tc.describe());
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    const CenterlineParams params;
+    const Centerline cl = extractCenterline(*sdf, params);
+    const Summary s = checkAgainstAxis(cl, tc, params);
+    checkRectumIsLowerEnd(s, tc);
+}
+
+TEST(Centerline, HelicalTubeFollowsAxisWithoutSpinning)
+{
+    const TubeCase tc = helixCase();
+    SCOPED_TRACE(tc.describe());
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    const CenterlineParams params;  // 1 mm step
+    const Centerline cl = extractCenterline(*sdf, params);
+    const Summary s = checkAgainstAxis(cl, tc, params);
+    checkRectumIsLowerEnd(s, tc);
+
+    double worstDeg = 0;
+    for (std::size_t i = 1; i < cl.points.size(); ++i) {
+        const double c = std::clamp(dot(cl.points[i].normal, cl.points[i - 1].normal), -1.0, 1.0);
+        const double deg = std::acos(c) * 180.0 / PI;
+        worstDeg = std::max(worstDeg, deg);
+        EXPECT_LT(deg, 10.0 * params.stepMm) << "normal turn at " << i;
+    }
+    std::cout << "[ helix ] max normal turn " << worstDeg << " deg per step\n";
+}
+
+TEST(Centerline, UBendFollowsAxis)
+{
+    const TubeCase tc = uBendCase();
+    SCOPED_TRACE(tc.describe());
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    CenterlineParams params;
+    params.stepMm = 0.5;
+    const Centerline cl = extractCenterline(*sdf, params);
+    const Summary s = checkAgainstAxis(cl, tc, params);
+    checkRectumIsLowerEnd(s, tc);
+}
+
+TEST(Centerline, SeededRandomTubesFollowAxis)
+{
+    // Property test over seeded random instances: straight tubes in any direction and U-bends,
+    // radius 5..9 voxels, voxel 0.6..1.0 mm.
+    for (std::uint32_t seed = 1; seed <= 12; ++seed) {
+        std::mt19937 rng(seed);
+        std::uniform_real_distribution<double> u(0.0, 1.0);
+        const double voxel = 0.6 + 0.4 * u(rng);
+        const double radius = voxel * (5.0 + 4.0 * u(rng));
+        const double z = 2 * u(rng) - 1, phi = 2 * PI * u(rng);
+        const Vec3d dir{std::sqrt(1 - z * z) * std::cos(phi), std::sqrt(1 - z * z) * std::sin(phi), z};
+        const double len = 60 + 60 * u(rng);
+        const Vec3d start{20 + 10 * u(rng), 30 + 10 * u(rng), 25 + 10 * u(rng)};
+        const TubeCase tc = seed % 2
+            ? TubeCase{"randomStraight", test::makeFrame(voxel, true),
+                       Axis::straight(start, start + dir * len), radius}
+            : TubeCase{"randomUBend", test::makeFrame(voxel, true),
+                       Axis::uBend(start, 30 + 30 * u(rng), 30 + 30 * u(rng), radius * (1.6 + u(rng))),
+                       radius};
+        SCOPED_TRACE("seed " + std::to_string(seed) + ": " + tc.describe());
+        const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+        const CenterlineParams params;
+        const Centerline cl = extractCenterline(*sdf, params);
+        checkRectumIsLowerEnd(checkAgainstAxis(cl, tc, params), tc);
+    }
+}
+
+TEST(Centerline, RectumOverridePicksNearestEnd)
+{
+    const TubeCase tc = straightCase();
+    SCOPED_TRACE(tc.describe());
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    // Both ends in turn, each given as a point outside the lumen a few mm beyond the pole of
+    // its end cap (as a click on the anus would be), slightly off the axis line.
+    const Vec3d dir = normalize(tc.axis.end() - tc.axis.start());
+    for (const Vec3d& end : {tc.axis.start(), tc.axis.end()}) {
+        const Vec3d outward = end == tc.axis.start() ? -dir : dir;
+        const Vec3d side = normalize(cross(outward, Vec3d{0, 0, 1}));
+        CenterlineParams params;
+        params.rectumMm = tc.frame.worldFromLocal(end + outward * (tc.radiusMm + 4) + side * 1.0);
+        const Centerline cl = extractCenterline(*sdf, params);
+        ASSERT_GE(cl.points.size(), 2u);
+        const Vec3d first = tc.frame.localFromWorld(cl.points.front().positionMm);
+        const Vec3d last = tc.frame.localFromWorld(cl.points.back().positionMm);
+        EXPECT_LT(distance(first, end), tc.radiusMm);
+        EXPECT_GT(distance(last, end), tc.axis.lengthMm() - tc.radiusMm);
+        checkAgainstAxis(cl, tc, params);
+    }
+}
+
+TEST(Centerline, UsesLargestLumenComponent)
+{
+    const TubeCase tc = straightCase();
+    SCOPED_TRACE(tc.describe());
+    auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    // A second, shorter and lower tube apart from the first.
+    const auto other =
+        test::makeTubeSdf(tc.frame, Axis::straight({80, 10, -40}, {80, 10, -10}), tc.radiusMm);
+    openvdb::tools::csgUnion(*sdf, *other->deepCopy());
+    const Centerline cl = extractCenterline(*sdf, CenterlineParams{});
+    checkAgainstAxis(cl, tc, CenterlineParams{});
+}
+
+TEST(Centerline, EmptyLumenThrowsAndBadParametersRejected)
+{
+    const TubeCase tc = straightCase();
+    auto empty = openvdb::FloatGrid::create(3.0f);
+    empty->setTransform(tc.frame.xf->copy());
+    empty->tree().setValueOn(openvdb::Coord(1, 2, 3), 1.0f);  // outside only
+    EXPECT_THROW(extractCenterline(*empty, CenterlineParams{}), InputError);
+
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    CenterlineParams bad;
+    bad.stepMm = 0;
+    EXPECT_THROW(extractCenterline(*sdf, bad), ParameterError);
+    bad = CenterlineParams{};
+    bad.smoothingMm = -1;
+    EXPECT_THROW(extractCenterline(*sdf, bad), ParameterError);
+    bad = CenterlineParams{};
+    bad.wallPenalty = std::nan("");
+    EXPECT_THROW(extractCenterline(*sdf, bad), ParameterError);
+}
+
+TEST(Centerline, SameResultWithOneThread)
+{
+    const TubeCase tc = uBendCase();
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    const Centerline a = extractCenterline(*sdf, CenterlineParams{});
+    Centerline b;
+    tbb::task_arena single(1);
+    single.execute([&] { b = extractCenterline(*sdf, CenterlineParams{}); });
+    ASSERT_EQ(a.points.size(), b.points.size());
+    for (std::size_t i = 0; i < a.points.size(); ++i) {
+        EXPECT_EQ(a.points[i].positionMm, b.points[i].positionMm) << i;
+        EXPECT_EQ(a.points[i].radiusMm, b.points[i].radiusMm) << i;
+    }
+}
+
+TEST(Centerline, FromSegmentedNoisyTube)
+{
+    // End to end on a noisy HU phantom: U-bend air tube of radius 8 voxels.
+    test::HuPhantom ph;
+    ph.frame = test::makeFrame(1.0, true);
+    ph.bodyIndex = openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(99, 79, 139));
+    ph.seed = 17;
+    const Axis axis = Axis::uBend({25, 40, 20}, 80, 60, 20);
+    ph.features = {{"colon", axis, 8.0, -1000}};
+    const TubeCase tc{"segmentedUBend", ph.frame, axis, 8.0};
+    SCOPED_TRACE(ph.describe());
+    SegmentParams sp;
+    sp.surfaceIsoHu = -480;
+    const LumenSegmentation seg = segmentLumen(*test::makeHuGrid(ph), sp);
+    const Centerline cl = extractCenterline(*seg.sdf, CenterlineParams{});
+    const Summary s = checkAgainstAxis(cl, tc, CenterlineParams{});
+    checkRectumIsLowerEnd(s, tc);
+}
+
+// Timing at full colon scale: ~5M lumen voxels at 0.78 mm (run with
+// --gtest_also_run_disabled_tests).
+TEST(Centerline, DISABLED_LargeHelixTiming)
+{
+    const TubeCase tc{"largeHelix", test::makeFrame(0.78, true),
+                      Axis::helix({200, 200, 30}, 150, 40, 3.2, 2.0), 15.6};
+    SCOPED_TRACE(tc.describe());
+    auto t0 = std::chrono::steady_clock::now();
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    auto t1 = std::chrono::steady_clock::now();
+    std::size_t inside = 0;
+    for (auto it = sdf->cbeginValueOn(); it; ++it) inside += *it < 0;
+    test::TimingProgress timing;
+    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, &timing);
+    auto t2 = std::chrono::steady_clock::now();
+    std::cout << "[ timing ] sdf with " << inside << " lumen voxels built in "
+              << std::chrono::duration<double>(t1 - t0).count() << " s; extractCenterline "
+              << std::chrono::duration<double>(t2 - t1).count() << " s\n";
+    checkAgainstAxis(cl, tc, CenterlineParams{});
+}
+
+} // namespace
+} // namespace flyover
