@@ -75,18 +75,6 @@ int main(int argc, char** argv)
     runCmd->add_flag("--wait", run.waitForLock, "wait for another run on the same study instead of refusing");
     runCmd->add_option("--cache-max-gb", run.cacheMaxGb, "cap on the study's cache; least recently used results are evicted")
         ->capture_default_str();
-    // Ingest shortcuts (same as --set ingest.*; they win over --config and --set).
-    std::string seriesUid;
-    double voxelMm = -1;
-    bool allowGaps = false;
-    auto* seriesOpt = runCmd->add_option("--series", seriesUid, "DICOM folder: read the series with this Series Instance UID "
-                                                                "(default: the one with the most slices)");
-    auto* voxelOpt = runCmd->add_option("--voxel-mm", voxelMm, "isotropic voxel size of the HU grid in mm "
-                                                               "(default: the smallest input spacing)")
-                         ->check(CLI::PositiveNumber);
-    runCmd->add_flag("--allow-gaps", allowGaps, "DICOM: accept missing slices or uneven slice steps (with a warning), "
-                                                "interpolating at the true slice positions");
-
     // flyover status / clean
     auto* statusCmd = app.add_subcommand("status", "list each stage of a study as fresh, stale or missing, and why");
     StatusOptions status;
@@ -157,9 +145,6 @@ int main(int argc, char** argv)
         if (*runCmd) {
             if (!configPath.empty()) applyParamsJson(run.params, readConfigFile(configPath), configPath);
             for (const auto& a : assignments) applyParamAssignment(run.params, a);
-            if (*seriesOpt) run.params.ingest.dicomSeries = seriesUid;
-            if (*voxelOpt) run.params.ingest.voxelMm = voxelMm;
-            if (allowGaps) run.params.ingest.allowGaps = true;
             run.log = &runLog;
             const auto t0 = std::chrono::steady_clock::now();
             const auto manifest = runPipeline(run);
