@@ -7,7 +7,10 @@
 #include <png.h>
 #include <xxhash.h>
 
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -29,6 +32,12 @@ std::string hex128(XXH128_hash_t h)
 
 } // namespace
 
+void crashPoint(const char* point)
+{
+    static const char* target = std::getenv("FLYOVER_CRASH_AT");
+    if (target && std::strcmp(target, point) == 0) ::raise(SIGKILL);
+}
+
 void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write)
 {
     const fs::path target(path);
@@ -42,6 +51,7 @@ void writeAtomically(const std::string& path, const std::function<void(const std
             ::fsync(fileno(f));
             std::fclose(f);
         }
+        crashPoint("atomic-write:before-rename");
         fs::rename(tmp, target);
     } catch (...) {
         std::error_code ec;

@@ -15,6 +15,12 @@
 
 namespace flyover {
 
+/// Crash-test hook: when the environment variable FLYOVER_CRASH_AT equals `point`, the
+/// process kills itself with SIGKILL right there (as `kill -9` would). Used by the tests to
+/// crash at exact moments (mid-write, between a cache object and its record); a no-op
+/// otherwise.
+void crashPoint(const char* point);
+
 /// Writes a file atomically: `write` receives a temporary path in the same folder (with the
 /// same extension, for writers that pick the format by extension), which is then renamed
 /// onto `path`. On any exception the temporary file is removed and the exception rethrown.

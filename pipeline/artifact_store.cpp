@@ -223,6 +223,7 @@ void ArtifactStore::commit(const json& record) const
         }
         linkInto(produced, obj);
     }
+    crashPoint("store:objects-linked");
     const std::string stage = record.at("stage").get<std::string>();
     const std::string key = record.at("key").get<std::string>();
     writeJson((fs::path(mDir) / ".flyover" / "records" / recordFileName(stage, key)).string(), record);

@@ -196,6 +196,7 @@ nlohmann::json runPipeline(const RunOptions& options)
         json record2 = entry;
         record2.erase("computed");
         store.commit(record2);
+        crashPoint(("stage:" + spec.name + ":committed").c_str());
         std::lock_guard<std::mutex> g(mutex);
         for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
         entries[spec.name] = entry;

@@ -324,6 +324,19 @@ TEST_F(StudyTest, KilledRunsLeaveNothingThatLies)
     }
     ASSERT_EQ(std::system((flyover + " -q run " + ctPath() + " --study " + study + common).c_str()), 0);
     EXPECT_TRUE(temporaries(study).empty()) << temporaries(study).front();
+
+    // Exact kill points: mid-write (temporary file complete, not yet renamed), between a
+    // cache object and its record, and right after a stage's record, each on a fresh study.
+    for (const char* point : {"atomic-write:before-rename", "store:objects-linked", "stage:segment:committed",
+                              "stage:render:committed"}) {
+        const std::string s = studyDir(std::string("crash-") + point);
+        const int killed = std::system(("FLYOVER_CRASH_AT=" + std::string(point) + " " + flyover + " -q run " +
+                                        ctPath() + " --study " + s + common + " 2>/dev/null").c_str());
+        EXPECT_NE(killed, 0) << "the run did not reach crash point " << point;
+        ASSERT_EQ(std::system((flyover + " -q run " + ctPath() + " --study " + s + common).c_str()), 0) << point;
+        EXPECT_TRUE(temporaries(s).empty()) << point << ": " << temporaries(s).front();
+        EXPECT_EQ(outputDigests(readJson(s + "/manifest.json")), refDigests) << "after a crash at " << point;
+    }
     const auto digests = outputDigests(readJson(study + "/manifest.json"));
     EXPECT_EQ(digests, refDigests) << "a run after kill -9 must give the uninterrupted run's artifacts";
     for (const auto& [stage, outputs] : digests)
