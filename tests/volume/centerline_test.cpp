@@ -293,26 +293,5 @@ TEST(Centerline, FromSegmentedNoisyTube)
     checkRectumIsLowerEnd(s, tc);
 }
 
-// Timing at full colon scale: ~5M lumen voxels at 0.78 mm (run with
-// --gtest_also_run_disabled_tests).
-TEST(Centerline, DISABLED_LargeHelixTiming)
-{
-    const TubeCase tc{"largeHelix", test::makeFrame(0.78, true),
-                      Axis::helix({200, 200, 30}, 150, 40, 3.2, 2.0), 15.6};
-    SCOPED_TRACE(tc.describe());
-    auto t0 = std::chrono::steady_clock::now();
-    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
-    auto t1 = std::chrono::steady_clock::now();
-    std::size_t inside = 0;
-    for (auto it = sdf->cbeginValueOn(); it; ++it) inside += *it < 0;
-    test::TimingProgress timing;
-    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, &timing);
-    auto t2 = std::chrono::steady_clock::now();
-    std::cout << "[ timing ] sdf with " << inside << " lumen voxels built in "
-              << std::chrono::duration<double>(t1 - t0).count() << " s; extractCenterline "
-              << std::chrono::duration<double>(t2 - t1).count() << " s\n";
-    checkAgainstAxis(cl, tc, CenterlineParams{});
-}
-
 } // namespace
 } // namespace flyover

@@ -396,43 +396,5 @@ TEST(SegmentLumen, SameResultWithOneThread)
     EXPECT_EQ(differ, 0u);
 }
 
-// Timing on a larger phantom (run with --gtest_also_run_disabled_tests).
-TEST(SegmentLumen, DISABLED_LargePhantomTiming)
-{
-    // About 1.5 L of colon (3M voxels) in a 250 x 250 x 390 mm body (51M active voxels).
-    HuPhantom ph;
-    ph.frame = test::makeFrame(0.78, true);
-    ph.bodyIndex = openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(319, 319, 499));
-    ph.seed = 21;
-    const double c = 0.78 * 160;
-    ph.features = {{"colon", Axis::helix({c, c, 20}, 90, 25, 2.0, 1.0), 20.0, -1000},
-                   {"lung", Axis::sphere({c, c, 200}), 40.0, -850}};
-    auto t0 = std::chrono::steady_clock::now();
-    const auto hu = test::makeHuGrid(ph);
-    auto t1 = std::chrono::steady_clock::now();
-    test::TimingProgress timing;
-    const LumenSegmentation seg = segmentLumen(*hu, SegmentParams{}, &timing);
-    auto t2 = std::chrono::steady_clock::now();
-    std::cout << "[ timing ] phantom " << hu->activeVoxelCount() << " active voxels built in "
-              << std::chrono::duration<double>(t1 - t0).count() << " s; segmentLumen "
-              << std::chrono::duration<double>(t2 - t1).count() << " s; lumen "
-              << seg.mask->activeVoxelCount() << " voxels, " << seg.lumenVolumeMl << " mL\n";
-    const double trueMl = PI * 20.0 * 20.0 * ph.features[0].axis.lengthMm() / 1000.0 +
-                          4.0 / 3.0 * PI * 8.0;
-    EXPECT_NEAR(seg.lumenVolumeMl, trueMl, 0.02 * trueMl);
-
-    // And the centerline on it, end to end.
-    test::TimingProgress clTiming;
-    const Centerline cl = extractCenterline(*seg.sdf, CenterlineParams{}, &clTiming);
-    auto t3 = std::chrono::steady_clock::now();
-    double worst = 0;
-    for (const CenterlinePoint& p : cl.points)
-        worst = std::max(worst, ph.features[0].axis.project(ph.frame.localFromWorld(p.positionMm)).distanceMm);
-    std::cout << "[ timing ] extractCenterline " << std::chrono::duration<double>(t3 - t2).count()
-              << " s; " << cl.points.size() << " points, length " << cl.lengthMm() << " mm (axis "
-              << ph.features[0].axis.lengthMm() << " mm), max distance to axis " << worst << " mm\n";
-    EXPECT_LT(worst, ph.frame.voxelMm);
-}
-
 } // namespace
 } // namespace flyover
