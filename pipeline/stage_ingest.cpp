@@ -4,6 +4,8 @@
 #include "volume/image_io.h"
 #include "volume/ingest.h"
 
+#include <sys/resource.h>
+
 #include <filesystem>
 
 namespace fs = std::filesystem;
@@ -11,20 +13,60 @@ using nlohmann::json;
 
 namespace flyover {
 
+namespace {
+
+json matrixJson(const Mat3d& m)
+{
+    json rows = json::array();
+    for (const auto& r : m) rows.push_back(json::array({r[0], r[1], r[2]}));
+    return rows;
+}
+
+/// Peak resident memory of this process so far (bytes). Ingest is the first stage of a run,
+/// so right after it this bounds ingest's own peak.
+int64_t peakRssBytes()
+{
+    rusage usage{};
+    if (::getrusage(RUSAGE_SELF, &usage) != 0) return 0;
+    return static_cast<int64_t>(usage.ru_maxrss) * 1024;  // Linux: kilobytes
+}
+
+} // namespace
+
 json runIngest(StudyRun& run, Progress* progress)
 {
+    const IngestParams& params = run.opt.params.ingest;
+    ImageReadOptions options;
+    options.dicomSeriesUid = params.dicomSeries;
+    options.allowGaps = params.allowGaps;
+
     IngestReport rep;
-    Image3<float> image = readImage(run.opt.ctPath);
-    auto grid = ingestImage(image, run.opt.params.ingest, &rep, progress);
-    image = {};
+    openvdb::FloatGrid::Ptr grid;
+    {
+        auto source = openImage(run.opt.ctPath, options);
+        for (const auto& w : source->warnings())
+            if (run.opt.log) run.opt.log->message("ingest: warning: " + w);
+        grid = ingestImage(*source, params, &rep, progress);
+    }  // the source (and any temporary copy it made) is released before writing
     writeGrids(run.path("ct.vdb"), {grid});
     run.state.hu = grid;
-    return json{{"voxel_mm", rep.voxelMm},
+    return json{{"world_frame", WORLD_FRAME},
+                {"voxel_mm", rep.voxelMm},
+                {"interpolation", rep.interpolation},
                 {"active_voxels", rep.activeVoxels},
                 {"memory_bytes", rep.memoryBytes},
                 {"file_bytes", static_cast<int64_t>(fs::file_size(run.path("ct.vdb")))},
+                {"grid_size", rep.gridSize},
+                {"grid_origin_mm", vec3Json(rep.gridOriginMm)},
                 {"input_size", rep.inputSize},
-                {"input_spacing_mm", vec3Json(rep.inputSpacingMm)}};
+                {"input_spacing_mm", vec3Json(rep.inputSpacingMm)},
+                {"input_origin_mm", vec3Json(rep.inputOriginMm)},
+                {"input_direction", matrixJson(rep.inputDirection)},
+                {"reader", rep.source},
+                {"reader_held_bytes", rep.sourceHeldBytes},
+                {"working_bytes", rep.workingBytes},
+                {"process_peak_rss_bytes", peakRssBytes()},
+                {"warnings", rep.warnings}};
 }
 
 } // namespace flyover

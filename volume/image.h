@@ -12,6 +12,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace flyover {
@@ -67,6 +68,55 @@ struct Image3 {
     }
     T& at(int64_t i, int64_t j, int64_t k) { return voxels[linearIndex(i, j, k)]; }
     const T& at(int64_t i, int64_t j, int64_t k) const { return voxels[linearIndex(i, j, k)]; }
+};
+
+/// A 3D scan opened for reading a few slices at a time (k is the slowest index), so that a
+/// converter never holds the whole volume as float. Header, geometry and slice order are
+/// read and checked when the source is opened (volume/image_io.h: openImage); voxels are
+/// read on demand by readSlices().
+///
+/// Slice positions: `geometry()` is the nominal lattice (for a DICOM series: the median
+/// slice step). When isRegular() is false (a DICOM series with accepted gaps or uneven
+/// steps, or with gantry tilt), slice k's voxel (0,0) truly lies at sliceOriginsMm()[k],
+/// and a consumer must sample at those positions rather than on the nominal lattice.
+class ImageSource {
+public:
+    virtual ~ImageSource() = default;
+
+    /// The file or folder, as named in messages.
+    const std::string& name() const { return mName; }
+    /// Size and nominal geometry: index -> LPS world millimetres.
+    const ImageGeometry& geometry() const { return mGeometry; }
+    /// True when slice k lies exactly at geometry().worldFromIndex({0,0,k}).
+    bool isRegular() const { return mRegular; }
+    /// World position (LPS mm) of voxel (0,0,k)'s centre, one per slice, strictly increasing
+    /// along the slice normal (direction column 2).
+    const std::vector<Vec3d>& sliceOriginsMm() const { return mSliceOriginsMm; }
+    /// What the reader accepted or corrected that the user should hear about (one line each).
+    const std::vector<std::string>& warnings() const { return mWarnings; }
+    /// Format, library and read mode, e.g. "NIfTI via ITK NiftiImageIO, streamed by slab".
+    const std::string& description() const { return mDescription; }
+    /// Bytes the source holds for the whole scan while open (0 when it streams).
+    int64_t heldBytes() const { return mHeldBytes; }
+
+    /// Reads slices [k0, k1) as float (HU after any rescale slope/intercept), x fastest, then
+    /// y, then k, into `out` (size[0] * size[1] * (k1 - k0) values). Slices are best read in
+    /// increasing k.
+    /// @throw InputError naming the file: truncated or undecodable data, NaN or Inf voxels.
+    virtual void readSlices(int64_t k0, int64_t k1, float* out) = 0;
+
+protected:
+    ImageSource() = default;
+    ImageSource(const ImageSource&) = delete;
+    ImageSource& operator=(const ImageSource&) = delete;
+
+    std::string mName;
+    ImageGeometry mGeometry;
+    bool mRegular = true;
+    std::vector<Vec3d> mSliceOriginsMm;
+    std::vector<std::string> mWarnings;
+    std::string mDescription;
+    int64_t mHeldBytes = 0;
 };
 
 } // namespace flyover

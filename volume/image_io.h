@@ -1,20 +1,51 @@
 /// @file image_io.h
-/// @brief Reading and writing dense images in standard formats through ITK's IO
-///        (NIfTI .nii/.nii.gz, NRRD, MetaImage; DICOM series directories for reading).
-///        World geometry is LPS, as ITK reports it; NIfTI's RAS affine is converted by ITK.
+/// @brief Reading scans (NIfTI-1 (NIfTI-2 is refused with a message: ITK 5.2 reads NIfTI-1 only) .nii/.nii.gz/.hdr+.img, NRRD .nrrd/.nhdr, MetaImage
+///        .mha/.mhd, DICOM series folders and single DICOM files) and writing dense images,
+///        all through ITK's IO (DICOM through ITK's GDCMImageIO, i.e. GDCM with OpenJPEG
+///        and CharLS: uncompressed, JPEG lossless/lossy, JPEG 2000, JPEG-LS, RLE).
+///
+/// World geometry is LPS millimetres, as ITK reports it (NIfTI's RAS qform/sform is
+/// converted by ITK). Nothing here resamples: see volume/ingest.h.
+///
+/// How voxels are read (memory while a source is open):
+/// - streamed by slab: uncompressed NIfTI (.nii, .hdr+.img) and MetaImage (.mha/.mhd) are
+///   read by region (ITK's IORegion), a few slices at a time; gzipped NIfTI (.nii.gz,
+///   .img.gz) is first decompressed with zlib to a temporary file (in $TMPDIR; disk = the
+///   uncompressed size), then read by region. A DICOM series is read file by file.
+/// - buffered: NRRD (ITK's NrrdImageIO cannot read a region), compressed MetaImage and
+///   multi-frame DICOM files are read once, whole, in their native pixel type (int16: 2
+///   bytes per voxel), never as float; heldBytes() says how much.
 #pragma once
 
 #include "volume/image.h"
 
 #include <cstdint>
+#include <memory>
 #include <string>
 
 namespace flyover {
 
-/// Reads a scalar 3D image, converting its voxels to float.
-/// @throw InputError naming the file when it is missing, unreadable, not 3D, not scalar,
-///        has non-positive spacing, or holds NaN/Inf voxels.
-Image3<float> readImage(const std::string& path);
+struct ImageReadOptions {
+    /// DICOM folder: the Series Instance UID to read; "" = the series with the most slices.
+    std::string dicomSeriesUid;
+    /// DICOM series: accept missing slices or uneven slice steps (a warning says where);
+    /// the volume is then sampled at the true slice positions. Without it they are refused.
+    bool allowGaps = false;
+};
+
+/// Opens a scan and checks everything that can be checked before reading voxels: format,
+/// dimension (3D, one time point), scalar pixel type, spacing (> 0, finite), origin,
+/// orthonormal direction cosines, header/data size, and for a DICOM series the slice
+/// order (by position along the slice normal, never by file name or Instance Number),
+/// uniform slice steps and gantry tilt (detected from the slice positions; corrected by
+/// sampling at the true positions, with a warning).
+/// @throw InputError naming the file (or folder) and the problem, in one line.
+std::unique_ptr<ImageSource> openImage(const std::string& path, const ImageReadOptions& options = {});
+
+/// Reads a whole scan as float (for small images and tests: openImage() + readSlices()).
+/// @throw InputError as openImage(); also when the slices are not on a regular lattice
+///        (gantry tilt, accepted gaps), which only ingestImage() can resample.
+Image3<float> readImage(const std::string& path, const ImageReadOptions& options = {});
 
 /// Writes an image; the format follows the extension (.nii.gz, .nii, .nrrd, .mha, ...).
 /// The file is written to a temporary name and renamed into place.

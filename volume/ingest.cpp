@@ -7,7 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <deque>
+#include <cstring>
 #include <sstream>
 #include <vector>
 
@@ -18,66 +18,141 @@ namespace {
 using LeafT = openvdb::FloatTree::LeafNodeType;
 constexpr int LEAF_DIM = static_cast<int>(LeafT::DIM);  // 8
 
-/// Trilinear sampling of a dense image at a continuous index position, clamped to the image
-/// (the output grid never extends past the input's last voxel centre, so clamping only
-/// guards rounding).
-struct TrilinearSampler {
-    const Image3<float>& img;
+/// Positions closer than this (in voxels) to a lattice point are taken as on it, so that
+/// resampling to the input's own lattice copies values exactly despite rounding.
+constexpr double SNAP = 1e-6;
 
-    float operator()(double x, double y, double z) const
+/// Wraps a dense image as a source.
+class MemorySource final : public ImageSource {
+public:
+    explicit MemorySource(const Image3<float>& image) : mImage(image)
     {
-        const auto& s = img.geometry.size;
-        auto split = [](double v, int64_t n, int64_t& i0, double& f) {
-            v = std::clamp(v, 0.0, static_cast<double>(n - 1));
-            i0 = std::min<int64_t>(static_cast<int64_t>(std::floor(v)), n - 1);
-            f = v - static_cast<double>(i0);
-            if (i0 == n - 1) f = 0.0;
-        };
-        int64_t i, j, k;
-        double fx, fy, fz;
-        split(x, s[0], i, fx);
-        split(y, s[1], j, fy);
-        split(z, s[2], k, fz);
-        const int64_t i1 = std::min(i + 1, s[0] - 1), j1 = std::min(j + 1, s[1] - 1),
-                      k1 = std::min(k + 1, s[2] - 1);
-        auto v = [&](int64_t a, int64_t b, int64_t c) { return double(img.at(a, b, c)); };
-        const double c00 = v(i, j, k) * (1 - fx) + v(i1, j, k) * fx;
-        const double c10 = v(i, j1, k) * (1 - fx) + v(i1, j1, k) * fx;
-        const double c01 = v(i, j, k1) * (1 - fx) + v(i1, j, k1) * fx;
-        const double c11 = v(i, j1, k1) * (1 - fx) + v(i1, j1, k1) * fx;
-        const double c0 = c00 * (1 - fy) + c10 * fy;
-        const double c1 = c01 * (1 - fy) + c11 * fy;
-        return static_cast<float>(c0 * (1 - fz) + c1 * fz);
+        mName = "image";
+        mGeometry = image.geometry;
+        mDescription = "dense float image in memory";
+        mHeldBytes = static_cast<int64_t>(image.voxels.size() * sizeof(float));
+    }
+    void readSlices(int64_t k0, int64_t k1, float* out) override
+    {
+        const auto& s = mGeometry.size;
+        const std::size_t perSlice = static_cast<std::size_t>(s[0] * s[1]);
+        std::memcpy(out, mImage.voxels.data() + perSlice * static_cast<std::size_t>(k0),
+                    perSlice * static_cast<std::size_t>(k1 - k0) * sizeof(float));
+    }
+
+private:
+    const Image3<float>& mImage;
+};
+
+/// Where an output row or column falls in one input slice: lower index, fraction, and
+/// whether it lies inside the slice at all.
+struct AxisSample {
+    int64_t i0 = 0, i1 = 0;
+    float f = 0;
+    bool inside = false;
+};
+
+/// Output positions x * voxelMm + startMm (mm along an in-plane axis, from the slice's
+/// voxel 0) -> input sample positions on an axis of `n` voxels of `spacingMm`.
+std::vector<AxisSample> axisSamples(int64_t count, double voxelMm, double startMm, int64_t n, double spacingMm)
+{
+    std::vector<AxisSample> s(static_cast<std::size_t>(count));
+    for (int64_t x = 0; x < count; ++x) {
+        double p = (startMm + double(x) * voxelMm) / spacingMm;
+        const double r = std::round(p);
+        if (std::fabs(p - r) < SNAP) p = r;
+        AxisSample& a = s[static_cast<std::size_t>(x)];
+        a.inside = p >= -SNAP && p <= double(n - 1) + SNAP;
+        p = std::clamp(p, 0.0, double(n - 1));
+        a.i0 = std::min<int64_t>(static_cast<int64_t>(std::floor(p)), n - 1);
+        a.i1 = std::min<int64_t>(a.i0 + 1, n - 1);
+        a.f = a.i0 == n - 1 ? 0.0f : static_cast<float>(p - double(a.i0));
+    }
+    return s;
+}
+
+/// Input slices [first, first + count) as float, kept across slabs so that each slice is
+/// read once.
+struct SliceWindow {
+    int64_t first = 0, count = 0;
+    std::vector<float> data;
+
+    void cover(ImageSource& source, int64_t kLo, int64_t kHi, std::size_t perSlice)
+    {
+        if (kLo >= first && kLo < first + count) {
+            const int64_t keep = first + count - kLo;
+            std::memmove(data.data(), data.data() + perSlice * static_cast<std::size_t>(kLo - first),
+                         perSlice * static_cast<std::size_t>(keep) * sizeof(float));
+            count = keep;
+        } else {
+            count = 0;
+        }
+        first = kLo;
+        const int64_t need = kHi - kLo + 1;
+        if (data.size() < perSlice * static_cast<std::size_t>(need)) data.resize(perSlice * static_cast<std::size_t>(need));
+        if (count < need)
+            source.readSlices(first + count, first + need, data.data() + perSlice * static_cast<std::size_t>(count));
+        count = need;
+    }
+    const float* slice(int64_t k, std::size_t perSlice) const
+    {
+        return data.data() + perSlice * static_cast<std::size_t>(k - first);
     }
 };
 
-/// Marks the air outside the body in one axial slice: pixels below `airHu` connected
-/// (4-connectivity) to the slice border. Per slice, so that it streams slab by slab; a body
-/// cross-section always separates its inner air (colon, lungs) from the outside in-plane.
-void markOutsideAir(const float* slice, int nx, int ny, float airHu, std::vector<uint8_t>& outside,
-                    std::vector<int>& stack)
+/// Marks the air outside the body in one slice: pixels flagged already (no data) and pixels
+/// below `airHu` connected (4-connectivity) to the slice border or to a flagged pixel. Per
+/// slice, so that it streams slab by slab; a body cross-section always separates its inner
+/// air (colon, lungs) from the outside in-plane. Scanline fill: whole runs of a row at a
+/// time, so each pixel is visited a few times in memory order.
+void markOutsideAir(const float* slice, int nx, int ny, float airHu, bool anyFlagged, uint8_t* outside,
+                    std::vector<std::pair<int, int>>& seeds)
 {
-    outside.assign(static_cast<std::size_t>(nx) * ny, 0);
-    stack.clear();
-    auto push = [&](int x, int y) {
-        const std::size_t n = static_cast<std::size_t>(y) * nx + x;
-        if (!outside[n] && slice[n] < airHu) {
-            outside[n] = 1;
-            stack.push_back(static_cast<int>(n));
-        }
+    seeds.clear();
+    auto open = [&](int x, int y) {
+        const std::size_t i = static_cast<std::size_t>(y) * nx + x;
+        return !outside[i] && slice[i] < airHu;
     };
-    for (int x = 0; x < nx; ++x) { push(x, 0); push(x, ny - 1); }
-    for (int y = 0; y < ny; ++y) { push(0, y); push(nx - 1, y); }
-    while (!stack.empty()) {
-        const int n = stack.back();
-        stack.pop_back();
-        const int x = n % nx, y = n / nx;
-        if (x > 0) push(x - 1, y);
-        if (x + 1 < nx) push(x + 1, y);
-        if (y > 0) push(x, y - 1);
-        if (y + 1 < ny) push(x, y + 1);
+    for (int x = 0; x < nx; ++x) {
+        seeds.emplace_back(x, 0);
+        seeds.emplace_back(x, ny - 1);
+    }
+    for (int y = 0; y < ny; ++y) {
+        seeds.emplace_back(0, y);
+        seeds.emplace_back(nx - 1, y);
+    }
+    if (anyFlagged)  // grow from the neighbours of no-data pixels too
+        for (int y = 0; y < ny; ++y)
+            for (int x = 0; x < nx; ++x)
+                if (outside[static_cast<std::size_t>(y) * nx + x]) {
+                    if (x > 0) seeds.emplace_back(x - 1, y);
+                    if (x + 1 < nx) seeds.emplace_back(x + 1, y);
+                    if (y > 0) seeds.emplace_back(x, y - 1);
+                    if (y + 1 < ny) seeds.emplace_back(x, y + 1);
+                }
+    while (!seeds.empty()) {
+        const auto [sx, y] = seeds.back();
+        seeds.pop_back();
+        if (!open(sx, y)) continue;
+        int x0 = sx, x1 = sx;
+        while (x0 > 0 && open(x0 - 1, y)) --x0;
+        while (x1 + 1 < nx && open(x1 + 1, y)) ++x1;
+        uint8_t* row = outside + static_cast<std::size_t>(y) * nx;
+        std::fill(row + x0, row + x1 + 1, uint8_t(1));
+        // One seed per run of open pixels in the rows above and below the span.
+        for (int ny2 : {y - 1, y + 1}) {
+            if (ny2 < 0 || ny2 >= ny) continue;
+            bool inRun = false;
+            for (int x = x0; x <= x1; ++x) {
+                const bool o = open(x, ny2);
+                if (o && !inRun) seeds.emplace_back(x, ny2);
+                inRun = o;
+            }
+        }
     }
 }
+
+Vec3d column(const Mat3d& m, int c) { return {m[0][c], m[1][c], m[2][c]}; }
 
 } // namespace
 
@@ -98,75 +173,218 @@ openvdb::math::Transform::Ptr makeGridTransform(const Vec3d& originMm, const Mat
 openvdb::FloatGrid::Ptr ingestImage(const Image3<float>& image, const IngestParams& params,
                                     IngestReport* report, Progress* progress)
 {
-    const ImageGeometry& in = image.geometry;
-    if (in.voxelCount() <= 0 || static_cast<int64_t>(image.voxels.size()) != in.voxelCount())
+    if (image.geometry.voxelCount() <= 0 || static_cast<int64_t>(image.voxels.size()) != image.geometry.voxelCount())
         throw InputError("ingest: the image is empty or its buffer does not match its size");
-    const double minSpacing = std::min({in.spacingMm.x, in.spacingMm.y, in.spacingMm.z});
-    if (!(minSpacing > 0)) throw InputError("ingest: the image spacing is not positive");
-    if (!(params.voxelMm >= 0) || !std::isfinite(params.voxelMm))
-        throw ParameterError("ingest.voxelMm: must be >= 0 (0 = smallest input spacing)");
-    const double voxelMm = params.voxelMm > 0 ? params.voxelMm : minSpacing;
+    MemorySource source(image);
+    return ingestImage(source, params, report, progress);
+}
 
-    // Output lattice: same origin (voxel (0,0,0) centre) and direction, cubic voxels, as many
-    // as fit inside the input's extent of voxel centres.
-    int dims[3];
-    double step[3];  // input index units per output voxel, per axis
-    for (int c = 0; c < 3; ++c) {
-        const double extent = static_cast<double>(in.size[c] - 1) * in.spacingMm[c];
-        dims[c] = static_cast<int>(std::floor(extent / voxelMm + 1e-6)) + 1;
-        step[c] = voxelMm / in.spacingMm[c];
+openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& params,
+                                    IngestReport* report, Progress* progress)
+{
+    const ImageGeometry& in = source.geometry();
+    const std::string& name = source.name();
+    if (in.voxelCount() <= 0) throw InputError(name + ": the image is empty");
+    const double sx = in.spacingMm.x, sy = in.spacingMm.y, sz = in.spacingMm.z;
+    if (!(std::min({sx, sy, sz}) > 0) || !std::isfinite(sx + sy + sz))
+        throw InputError(name + ": the image spacing is not positive and finite");
+    if (!(params.voxelMm >= 0) || !std::isfinite(params.voxelMm))
+        throw ParameterError("ingest.voxel_mm: must be >= 0 (0 = smallest input spacing)");
+    if (!std::isfinite(params.outsideAirHu) || !std::isfinite(params.backgroundHu))
+        throw ParameterError("ingest.outside_air_hu and ingest.background_hu: must be finite");
+    const double voxelMm = params.voxelMm > 0 ? params.voxelMm : std::min({sx, sy, sz});
+
+    // Slice k's voxel (0,0), relative to slice 0, in the frame of the index axes:
+    // t along the slice normal, (a, b) in-plane. Regular: (0, 0, k * sz).
+    const int64_t inX = in.size[0], inY = in.size[1], inK = in.size[2];
+    const Vec3d u = column(in.direction, 0), v = column(in.direction, 1), w = column(in.direction, 2);
+    std::vector<double> t(static_cast<std::size_t>(inK)), a(t.size(), 0.0), b(t.size(), 0.0);
+    if (source.isRegular()) {
+        for (int64_t k = 0; k < inK; ++k) t[static_cast<std::size_t>(k)] = double(k) * sz;
+    } else {
+        const auto& origins = source.sliceOriginsMm();
+        if (static_cast<int64_t>(origins.size()) != inK)
+            throw InputError(name + ": slice positions do not match the slice count");
+        for (std::size_t k = 0; k < t.size(); ++k) {
+            const Vec3d d = origins[k] - origins[0];
+            t[k] = dot(d, w);
+            a[k] = dot(d, u);
+            b[k] = dot(d, v);
+            if (k > 0 && !(t[k] > t[k - 1]))
+                throw InputError(name + ": slice positions are not increasing along the slice normal");
+        }
     }
+    const double aMin = *std::min_element(a.begin(), a.end());
+    const double bMin = *std::min_element(b.begin(), b.end());
+    const double aMax = *std::max_element(a.begin(), a.end()) + double(inX - 1) * sx;
+    const double bMax = *std::max_element(b.begin(), b.end()) + double(inY - 1) * sy;
+
+    // Output lattice: as many cubic voxels as fit inside the extent of input voxel centres.
+    const double extent[3] = {aMax - aMin, bMax - bMin, t.back()};
+    int64_t dims[3];
+    for (int c = 0; c < 3; ++c) {
+        const double n = std::floor(extent[c] / voxelMm + 1e-6) + 1;
+        if (!(n <= double(1 << 28))) {
+            std::ostringstream os;
+            os << "ingest.voxel_mm: " << voxelMm << " mm gives " << n << " voxels along an axis; too small";
+            throw ParameterError(os.str());
+        }
+        dims[c] = static_cast<int64_t>(n);
+    }
+    if (dims[0] * dims[1] > (int64_t(1) << 28)) {
+        std::ostringstream os;
+        os << "ingest.voxel_mm: " << voxelMm << " mm gives slices of " << dims[0] << " x " << dims[1]
+           << " voxels; too small";
+        throw ParameterError(os.str());
+    }
+    const Vec3d gridOrigin = in.originMm + aMin * u + bMin * v;
+
     const float background = static_cast<float>(params.backgroundHu);
     auto grid = openvdb::FloatGrid::create(background);
-    grid->setTransform(makeGridTransform(in.originMm, in.direction, voxelMm));
+    grid->setTransform(makeGridTransform(gridOrigin, in.direction, voxelMm));
     grid->setName("ct_hu");
     grid->setGridClass(openvdb::GRID_UNKNOWN);
     grid->insertMeta("units", openvdb::StringMetadata("HU"));
-    grid->insertMeta("world_frame", openvdb::StringMetadata("LPS"));
+    grid->insertMeta("world_frame", openvdb::StringMetadata(WORLD_FRAME));
 
-    TrilinearSampler sample{image};
-    const int nx = dims[0], ny = dims[1], nz = dims[2];
-    const bool identityResample = step[0] == 1.0 && step[1] == 1.0 && step[2] == 1.0;
+    const int nx = static_cast<int>(dims[0]), ny = static_cast<int>(dims[1]), nz = static_cast<int>(dims[2]);
+    const std::size_t inPerSlice = static_cast<std::size_t>(inX * inY);
+    const std::size_t sliceSize = static_cast<std::size_t>(nx) * ny;
+
+    // In-plane sample tables, one per distinct in-plane offset (one for a regular stack).
+    const bool sameOffsets = std::all_of(a.begin(), a.end(), [&](double x) { return x == a[0]; }) &&
+                             std::all_of(b.begin(), b.end(), [&](double y) { return y == b[0]; });
+    struct PlaneTables {
+        std::vector<AxisSample> xs, ys;
+        bool identity = false;  // output (x, y) is input (x, y): no in-plane interpolation
+    };
+    std::vector<PlaneTables> planes(sameOffsets ? 1 : t.size());
+    for (std::size_t q = 0; q < planes.size(); ++q) {
+        planes[q].xs = axisSamples(nx, voxelMm, aMin - a[q], inX, sx);
+        planes[q].ys = axisSamples(ny, voxelMm, bMin - b[q], inY, sy);
+        auto straight = [](const std::vector<AxisSample>& s, int64_t n) {
+            if (static_cast<int64_t>(s.size()) != n) return false;
+            for (std::size_t i = 0; i < s.size(); ++i)
+                if (!s[i].inside || s[i].f != 0.0f || s[i].i0 != static_cast<int64_t>(i)) return false;
+            return true;
+        };
+        planes[q].identity = straight(planes[q].xs, inX) && straight(planes[q].ys, inY);
+    }
+    const bool copyOnly = source.isRegular() && planes[0].identity && voxelMm == sz;
+
+    // The two input slices around output slice z, and the weight of the upper one.
+    auto bracket = [&](int z, int64_t& k, float& weight) {
+        const double tz = double(z) * voxelMm;
+        if (inK == 1) { k = 0; weight = 0; return; }
+        k = static_cast<int64_t>(std::upper_bound(t.begin(), t.end(), tz) - t.begin()) - 1;
+        k = std::clamp<int64_t>(k, 0, inK - 2);
+        const std::size_t kk = static_cast<std::size_t>(k);
+        double wgt = (tz - t[kk]) / (t[kk + 1] - t[kk]);
+        wgt = std::clamp(wgt, 0.0, 1.0);
+        if (wgt < SNAP) wgt = 0;
+        if (wgt > 1 - SNAP) { wgt = 0; ++k; }  // exactly on slice k + 1
+        weight = static_cast<float>(wgt);
+    };
+
     auto& tree = grid->tree();
-
-    // Slab by slab (one leaf layer of 8 slices): resample, mark outside air per slice, and
-    // build the leaves that hold any in-body voxel. Memory: one slab of floats plus the grid.
     const int slabs = (nz + LEAF_DIM - 1) / LEAF_DIM;
     std::vector<float> slab;
     std::vector<uint8_t> outsideSlab;
+    SliceWindow window;
+    std::size_t windowPeak = 0;
+    const float airHu = static_cast<float>(params.outsideAirHu);
+
+    // Slab by slab (one leaf layer of 8 slices): read the input slices it needs, resample,
+    // mark outside air per slice, and build the leaves that hold any in-body voxel.
     for (int s = 0; s < slabs; ++s) {
         const int z0 = s * LEAF_DIM, z1 = std::min(nz, z0 + LEAF_DIM);
-        const std::size_t sliceSize = static_cast<std::size_t>(nx) * ny;
-        slab.assign(sliceSize * (z1 - z0), background);
-        outsideSlab.assign(sliceSize * (z1 - z0), 1);
+        int64_t kLo, kHi;
+        float unused;
+        bracket(z0, kLo, unused);
+        bracket(z1 - 1, kHi, unused);
+        kHi = std::min(kHi + 1, inK - 1);
+        window.cover(source, kLo, kHi, inPerSlice);
+        windowPeak = std::max(windowPeak, window.data.size() * sizeof(float));
+
+        slab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), background);
+        outsideSlab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), 0);
         tbb::parallel_for(z0, z1, [&](int z) {
-            float* dst = slab.data() + sliceSize * (z - z0);
-            for (int y = 0; y < ny; ++y)
-                for (int x = 0; x < nx; ++x)
-                    dst[static_cast<std::size_t>(y) * nx + x] =
-                        identityResample ? image.at(x, y, z)
-                                         : sample(x * step[0], y * step[1], z * step[2]);
-            std::vector<uint8_t> outside;
-            std::vector<int> stack;
-            markOutsideAir(dst, nx, ny, static_cast<float>(params.outsideAirHu), outside, stack);
-            std::copy(outside.begin(), outside.end(), outsideSlab.begin() + sliceSize * (z - z0));
+            float* dst = slab.data() + sliceSize * static_cast<std::size_t>(z - z0);
+            uint8_t* noData = outsideSlab.data() + sliceSize * static_cast<std::size_t>(z - z0);
+            int64_t k;
+            float wz;
+            bracket(z, k, wz);
+            bool anyNoData = false;
+            const bool inPlaneCopy = sameOffsets && planes[0].identity;  // only k is resampled
+            if (inPlaneCopy && wz == 0.0f) {
+                std::memcpy(dst, window.slice(k, inPerSlice), sliceSize * sizeof(float));
+            } else if (inPlaneCopy) {
+                const float* s0 = window.slice(k, inPerSlice);
+                const float* s1 = window.slice(std::min(k + 1, inK - 1), inPerSlice);
+                for (std::size_t n = 0; n < sliceSize; ++n) dst[n] = s0[n] + (s1[n] - s0[n]) * wz;
+            } else {
+                const int64_t k1 = std::min(k + 1, inK - 1);
+                const PlaneTables& p0 = planes[sameOffsets ? 0 : static_cast<std::size_t>(k)];
+                const PlaneTables& p1 = planes[sameOffsets ? 0 : static_cast<std::size_t>(k1)];
+                const float* s0 = window.slice(k, inPerSlice);
+                const float* s1 = window.slice(k1, inPerSlice);
+                // Bilinear sample of one slice; false outside its footprint.
+                auto sample = [inX](const float* src, const PlaneTables& p, int x, int y, float& out) {
+                    const AxisSample& ax = p.xs[static_cast<std::size_t>(x)];
+                    const AxisSample& ay = p.ys[static_cast<std::size_t>(y)];
+                    if (!ax.inside || !ay.inside) return false;
+                    const float* r0 = src + ay.i0 * inX;
+                    float lo = r0[ax.i0];
+                    if (ax.f != 0.0f) lo += (r0[ax.i1] - lo) * ax.f;
+                    if (ay.f != 0.0f) {
+                        const float* r1 = src + ay.i1 * inX;
+                        float hi = r1[ax.i0];
+                        if (ax.f != 0.0f) hi += (r1[ax.i1] - hi) * ax.f;
+                        lo += (hi - lo) * ay.f;
+                    }
+                    out = lo;
+                    return true;
+                };
+                for (int y = 0; y < ny; ++y)
+                    for (int x = 0; x < nx; ++x) {
+                        const std::size_t n = static_cast<std::size_t>(y) * nx + x;
+                        float v0, v1 = 0;
+                        if (!sample(s0, p0, x, y, v0) || (wz != 0.0f && !sample(s1, p1, x, y, v1))) {
+                            noData[n] = 1;  // outside the scanned stack: background, outside the body
+                            anyNoData = true;
+                            continue;
+                        }
+                        dst[n] = wz == 0.0f ? v0 : v0 + (v1 - v0) * wz;
+                    }
+            }
+            std::vector<std::pair<int, int>> seeds;
+            markOutsideAir(dst, nx, ny, airHu, anyNoData, noData, seeds);
         });
 
         const int bx = (nx + LEAF_DIM - 1) / LEAF_DIM, by = (ny + LEAF_DIM - 1) / LEAF_DIM;
         std::vector<LeafT*> leaves(static_cast<std::size_t>(bx) * by, nullptr);
         tbb::parallel_for(tbb::blocked_range<int>(0, bx * by), [&](const tbb::blocked_range<int>& r) {
-            for (int b = r.begin(); b < r.end(); ++b) {
-                const int x0 = (b % bx) * LEAF_DIM, y0 = (b / bx) * LEAF_DIM;
+            for (int blk = r.begin(); blk < r.end(); ++blk) {
+                const int x0 = (blk % bx) * LEAF_DIM, y0 = (blk / bx) * LEAF_DIM;
                 LeafT* leaf = nullptr;
+                float* values = nullptr;
                 for (int z = z0; z < z1; ++z)
-                    for (int y = y0; y < std::min(ny, y0 + LEAF_DIM); ++y)
+                    for (int y = y0; y < std::min(ny, y0 + LEAF_DIM); ++y) {
+                        const std::size_t row = sliceSize * static_cast<std::size_t>(z - z0) +
+                                                static_cast<std::size_t>(y) * nx;
                         for (int x = x0; x < std::min(nx, x0 + LEAF_DIM); ++x) {
-                            const std::size_t n = sliceSize * (z - z0) + static_cast<std::size_t>(y) * nx + x;
-                            if (outsideSlab[n]) continue;
-                            if (!leaf) leaf = new LeafT(openvdb::Coord(x0, y0, z0), background, false);
-                            leaf->setValueOn(openvdb::Coord(x, y, z), slab[n]);
+                            if (outsideSlab[row + x]) continue;
+                            if (!leaf) {
+                                leaf = new LeafT(openvdb::Coord(x0, y0, z0), background, false);
+                                values = leaf->buffer().data();
+                            }
+                            // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
+                            const openvdb::Index offset = ((x & 7) << 6) | ((y & 7) << 3) | (z & 7);
+                            values[offset] = slab[row + x];
+                            leaf->getValueMask().setOn(offset);
                         }
-                leaves[b] = leaf;
+                    }
+                leaves[static_cast<std::size_t>(blk)] = leaf;
             }
         });
         for (LeafT* leaf : leaves)
@@ -174,17 +392,30 @@ openvdb::FloatGrid::Ptr ingestImage(const Image3<float>& image, const IngestPara
         reportProgress(progress, double(s + 1) / slabs, "ingest: building the sparse grid");
     }
 
+    const int64_t active = static_cast<int64_t>(grid->activeVoxelCount());
     if (report) {
         report->voxelMm = voxelMm;
-        report->activeVoxels = static_cast<int64_t>(grid->activeVoxelCount());
+        report->activeVoxels = active;
         report->memoryBytes = static_cast<int64_t>(grid->memUsage());
         report->inputSize = in.size;
         report->inputSpacingMm = in.spacingMm;
+        report->inputOriginMm = in.originMm;
+        report->inputDirection = in.direction;
+        report->gridSize = {dims[0], dims[1], dims[2]};
+        report->gridOriginMm = gridOrigin;
+        report->interpolation =
+            copyOnly ? "none: the input voxels are cubic of voxel_mm, values copied"
+                     : std::string("trilinear: bilinear within each input slice, linear between the two slices "
+                                   "bracketing the output voxel at their true positions");
+        report->source = source.description();
+        report->sourceHeldBytes = source.heldBytes();
+        report->workingBytes = static_cast<int64_t>(windowPeak + slab.capacity() * sizeof(float) +
+                                                    outsideSlab.capacity());
+        report->warnings = source.warnings();
     }
-    if (grid->activeVoxelCount() == 0)
-        throw InputError("ingest: every voxel is outside-body air (below " +
-                         std::to_string(params.outsideAirHu) + " HU and connected to the border); "
-                         "is this a CT in Hounsfield units?");
+    if (active == 0)
+        throw InputError(name + ": every voxel is outside-body air (below " + std::to_string(params.outsideAirHu) +
+                         " HU and connected to the border); is this a CT in Hounsfield units?");
     return grid;
 }
 
