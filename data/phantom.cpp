@@ -86,8 +86,9 @@ public:
         mInvVoxelMm = 1.0 / mVoxelMm;
 
         // Two-millimetre chords of the 1 mm truth curve: their sagitta is far below a
-        // voxel for the colon's bend radii, and they halve the distance work.
-        const std::size_t n = anatomy.centerlineMm.size();
+        // voxel for the colon's bend radii, and they halve the distance work. Without a
+        // colon there are none, and nothing of it is painted.
+        const std::size_t n = params.colon ? anatomy.centerlineMm.size() : 0;
         for (std::size_t i = 0; i + 1 < n; i += 2) {
             const std::size_t j = std::min(i + 2, n - 1);
             TubeSegment t;
@@ -116,8 +117,10 @@ public:
         }
     }
 
-    /// Fills slices [k0, k1) of `ct` and `truth`.
-    void run(int64_t k0, int64_t k1, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+    /// Fills slices [k0, k1) of `ct` and `truth`; fluidPerSlice[k] gets the number of
+    /// voxel centres of slice k in lumen fluid.
+    void run(int64_t k0, int64_t k1, Image3<int16_t>& ct, Image3<uint8_t>& truth,
+             int64_t* fluidPerSlice) const
     {
         const std::size_t sliceVoxels = std::size_t(mGeometry.size[0] * mGeometry.size[1]);
         std::vector<float> bestSd(sliceVoxels);
@@ -125,7 +128,7 @@ public:
         std::vector<float> bestT(sliceVoxels);
         for (int64_t k = k0; k < k1; ++k) {
             splatColon(k, bestSd, bestSegment, bestT);
-            shadeSlice(k, bestSd, bestSegment, bestT, ct, truth);
+            fluidPerSlice[k] = shadeSlice(k, bestSd, bestSegment, bestT, ct, truth);
         }
     }
 
@@ -173,12 +176,15 @@ private:
         }
     }
 
-    /// Signed distance to the colon lumen: the tube minus folds and polyps.
-    double lumenSignedDistanceMm(const Vec3d& p, double tubeSd, int32_t segment, float along) const
+    /// Signed distance to the colon lumen: the tube minus folds, polyps and collapsed
+    /// stretches. `arcMm` receives the arc length of the nearest centerline point.
+    double lumenSignedDistanceMm(const Vec3d& p, double tubeSd, int32_t segment, float along,
+                                 double& arcMm) const
     {
         double sd = tubeSd;
         const TubeSegment& t = mSegments[std::size_t(segment)];
         const double arc = t.arcA + (t.arcB - t.arcA) * double(along);
+        arcMm = arc;
         const auto sample = std::size_t(std::clamp<long>(std::lround(arc / mAnatomy.stepMm), 0L,
                                                           long(mFoldAt.size()) - 1));
         if (const int fi = mFoldAt[sample]; fi >= 0) {
@@ -194,12 +200,33 @@ private:
         }
         for (const PhantomPolyp& polyp : mAnatomy.polyps)
             sd = std::max(sd, polyp.radiusMm - distance(p, polyp.centerMm));
+        // A collapsed stretch is a slab in arc length (flat ends across the tube).
+        for (const PhantomCollapse& c : mAnatomy.collapsed)
+            sd = std::max(sd, std::min(arc - c.arcStartMm, c.arcEndMm - arc));
         return sd;
     }
 
-    void shadeSlice(int64_t k, const std::vector<float>& bestSd, const std::vector<int32_t>& bestSegment,
-                    const std::vector<float>& bestT, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+    /// What fills the lumen at p: air, or tagged fluid posterior of its pool's level, with a
+    /// one-voxel partial-volume ramp across the level. `inFluid`: the point is in fluid.
+    double lumenContentHu(const Vec3d& p, double arcMm, bool& inFluid) const
     {
+        inFluid = false;
+        for (const PhantomFluidPool& pool : mAnatomy.fluidPools) {
+            if (arcMm < pool.arcStartMm || arcMm > pool.arcEndMm)
+                continue;
+            const double levelSd = pool.levelYMm - p.y;  // negative in the fluid (posterior)
+            inFluid = levelSd < 0;
+            const double coverage = std::clamp(0.5 - levelSd * mInvVoxelMm, 0.0, 1.0);
+            return AIR_HU + (pool.hu - AIR_HU) * coverage;
+        }
+        return AIR_HU;
+    }
+
+    /// Shades slice k; returns how many of its voxel centres lie in lumen fluid.
+    int64_t shadeSlice(int64_t k, const std::vector<float>& bestSd, const std::vector<int32_t>& bestSegment,
+                       const std::vector<float>& bestT, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+    {
+        int64_t fluidVoxels = 0;
         const auto& g = mGeometry;
         const int64_t nx = g.size[0], ny = g.size[1];
         const double z = g.originMm.z + double(k) * g.spacingMm.z;
@@ -250,9 +277,12 @@ private:
                     if (tubeSd < COLON_WALL_MM + h) {
                         paint(hu, SOFT_TISSUE_HU, tubeSd - COLON_WALL_MM, invH);
                         if (tubeSd < h) {
-                            const double lumenSd = lumenSignedDistanceMm(p, tubeSd, bestSegment[v2], bestT[v2]);
-                            paint(hu, AIR_HU, lumenSd, invH);
+                            double arc = 0;
+                            const double lumenSd = lumenSignedDistanceMm(p, tubeSd, bestSegment[v2], bestT[v2], arc);
+                            bool inFluid = false;
+                            paint(hu, lumenContentHu(p, arc, inFluid), lumenSd, invH);
                             inLumen = lumenSd < 0 ? 1 : 0;
+                            fluidVoxels += inLumen && inFluid ? 1 : 0;
                         }
                     }
                 }
@@ -262,6 +292,7 @@ private:
                 truth.voxels[v] = inLumen;
             }
         }
+        return fluidVoxels;
     }
 
     const PhantomAnatomy& mAnatomy;
@@ -280,7 +311,11 @@ Phantom makePhantom(const PhantomParams& params)
     if (!(params.noiseHu >= 0.0) || !std::isfinite(params.noiseHu))
         throw ParameterError("phantom noiseHu: expected a finite value >= 0, got " +
                              std::to_string(params.noiseHu));
-    const PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed);
+    PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed);
+    if (params.collapse)
+        addCollapses(anatomy, params.seed);
+    if (params.fluid)
+        addFluidPools(anatomy, params.seed);
 
     Phantom out;
     out.ct.geometry = out.truthLumen.geometry = phantomGeometry(params.size);
@@ -289,18 +324,29 @@ Phantom makePhantom(const PhantomParams& params)
     out.truthLumen.voxels.assign(std::size_t(g.voxelCount()), 0);
 
     const Voxeliser voxeliser(anatomy, g, params);
+    // Fluid voxel counts per slice, summed in slice order afterwards (thread-count free).
+    std::vector<int64_t> fluidPerSlice(std::size_t(g.size[2]), 0);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, g.size[2], 1),
                       [&](const tbb::blocked_range<int64_t>& r) {
-                          voxeliser.run(r.begin(), r.end(), out.ct, out.truthLumen);
+                          voxeliser.run(r.begin(), r.end(), out.ct, out.truthLumen, fluidPerSlice.data());
                       });
 
     PhantomTruth& truth = out.truth;
-    truth.centerlineMm = anatomy.centerlineMm;
-    truth.radiusMm = anatomy.radiusMm;
-    truth.segment = anatomy.segment;
-    truth.polyps = anatomy.polyps;
+    if (params.colon) {
+        truth.centerlineMm = anatomy.centerlineMm;
+        truth.radiusMm = anatomy.radiusMm;
+        truth.segment = anatomy.segment;
+        truth.polyps = anatomy.polyps;
+        truth.collapsed = anatomy.collapsed;
+        truth.fluidPools = anatomy.fluidPools;
+    }
+    const double voxelMl = g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
     const auto lumenVoxels = std::count(out.truthLumen.voxels.begin(), out.truthLumen.voxels.end(), uint8_t(1));
-    truth.lumenVolumeMl = double(lumenVoxels) * g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
+    truth.lumenVolumeMl = double(lumenVoxels) * voxelMl;
+    int64_t fluidVoxels = 0;
+    for (int64_t n : fluidPerSlice)
+        fluidVoxels += n;
+    truth.fluidVolumeMl = double(fluidVoxels) * voxelMl;
     return out;
 }
 

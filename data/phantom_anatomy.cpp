@@ -6,6 +6,7 @@
 #include <random>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 
 namespace flyover::phantom {
 
@@ -480,7 +481,84 @@ void checkAnatomy(const PhantomAnatomy& a)
         throw std::logic_error("phantom anatomy: " + problems);
 }
 
+/// Nearest centerline sample of an arc length, clamped to the curve.
+std::size_t sampleAt(const PhantomAnatomy& a, double arcMm)
+{
+    const long last = long(a.centerlineMm.size()) - 1;
+    return std::size_t(std::clamp(std::lround(arcMm / a.stepMm), 0L, last));
+}
+
 } // namespace
+
+void addCollapses(PhantomAnatomy& a, uint64_t seed)
+{
+    std::mt19937_64 rng(splitmix64(seed ^ 0xC011A95EDull));
+    const int count = 1 + int(rng() % 2);
+    const double sigmoidStart = double(firstIndexOf(a, "sigmoid")) * a.stepMm;
+    const double descendingStart = double(firstIndexOf(a, "descending")) * a.stepMm;
+    const auto clearOfPolyps = [&](double s0, double s1) {
+        for (const PhantomPolyp& p : a.polyps)
+            if (p.arcMm > s0 - p.radiusMm - 10.0 && p.arcMm < s1 + p.radiusMm + 10.0)
+                return false;
+        return true;
+    };
+    for (int attempt = 0; attempt < 20000; ++attempt) {
+        std::vector<PhantomCollapse> stretches;
+        PhantomCollapse first;
+        first.arcStartMm = std::round(uniform(rng, sigmoidStart + 90.0, sigmoidStart + 230.0));
+        first.arcEndMm = first.arcStartMm + std::round(uniform(rng, 20.0, 40.0));
+        stretches.push_back(first);
+        if (count == 2) {
+            PhantomCollapse second;
+            second.arcStartMm = first.arcEndMm + std::round(uniform(rng, 100.0, 140.0));
+            second.arcEndMm = second.arcStartMm + std::round(uniform(rng, 20.0, 40.0));
+            stretches.push_back(second);
+        }
+        bool ok = stretches.back().arcEndMm < descendingStart - 40.0;
+        for (const PhantomCollapse& c : stretches)
+            ok = ok && clearOfPolyps(c.arcStartMm, c.arcEndMm);
+        if (ok) {
+            a.collapsed = stretches;
+            return;
+        }
+    }
+    throw std::logic_error("phantom anatomy: could not place a collapsed stretch clear of the polyps");
+}
+
+void addFluidPools(PhantomAnatomy& a, uint64_t seed)
+{
+    std::mt19937_64 rng(splitmix64(seed ^ 0xF1D0F1D0ull));
+    const double end = a.lengthMm();
+    // Arc ranges of the dependent (posterior-lying) stretches of a supine patient's colon.
+    const double ranges[3][2] = {
+        {0.0, double(firstIndexOf(a, "sigmoid")) * a.stepMm},
+        {double(firstIndexOf(a, "descending")) * a.stepMm - 60.0,
+         double(firstIndexOf(a, "transverse")) * a.stepMm},
+        {double(firstIndexOf(a, "ascending")) * a.stepMm - 20.0, end},
+    };
+    for (const auto& r : ranges) {
+        PhantomFluidPool pool;
+        pool.arcStartMm = r[0];
+        pool.arcEndMm = r[1];
+        // The deepest point of the stretch: the most posterior lumen wall.
+        std::size_t deepest = sampleAt(a, r[0]);
+        for (std::size_t i = sampleAt(a, r[0]); i <= sampleAt(a, r[1]); ++i)
+            if (a.centerlineMm[i].y + a.radiusMm[i] > a.centerlineMm[deepest].y + a.radiusMm[deepest])
+                deepest = i;
+        const double depthMm = uniform(rng, 0.25, 0.45) * 2.0 * a.radiusMm[deepest];
+        pool.levelYMm = a.centerlineMm[deepest].y + a.radiusMm[deepest] - depthMm;
+        pool.hu = std::round(uniform(rng, 300.0, 600.0));
+        // A pool must end where the lumen rises clear of its level (no vertical fluid face),
+        // except at the ends of the colon.
+        for (double s : {r[0], r[1]}) {
+            const std::size_t i = sampleAt(a, s);
+            if (s > 0.0 && s < end && a.centerlineMm[i].y + a.radiusMm[i] + 2.0 > pool.levelYMm)
+                throw std::logic_error("phantom anatomy: a fluid pool is cut at arc " +
+                                       std::to_string(s) + " mm");
+        }
+        a.fluidPools.push_back(pool);
+    }
+}
 
 double Ellipsoid::volumeMl() const
 {

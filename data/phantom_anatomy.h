@@ -89,12 +89,27 @@ struct PhantomAnatomy {
     Ellipsoid lungs[2];                ///< right (-x), left (+x)
     std::vector<Ellipsoid> gasPockets; ///< small-bowel gas
 
+    // Variants (empty for the default phantom): see addCollapses() and addFluidPools().
+    std::vector<PhantomCollapse> collapsed;   ///< sorted by arc
+    std::vector<PhantomFluidPool> fluidPools; ///< sorted by arc
+
     double lengthMm() const { return stepMm * double(centerlineMm.size() - 1); }
 };
 
 /// The anatomy for a seed. Same body, colon and folds for every seed.
 /// @throw std::logic_error when a built-in invariant fails (a programming error).
 PhantomAnatomy buildPhantomAnatomy(uint64_t seed);
+
+/// The `collapse` variant: one or two stretches of 20-40 mm of the sigmoid lose their lumen,
+/// at least 10 mm (plus the polyp radius) away from every polyp; with two, the middle piece
+/// is 100-140 mm of sigmoid (about 60 mL). Drawn from a random stream of its own, so the
+/// rest of the anatomy does not change.
+void addCollapses(PhantomAnatomy& anatomy, uint64_t seed);
+
+/// The `fluid` variant: tagged fluid (+300..+600 HU) pools posterior of flat levels in the
+/// rectum, the descending colon and the ascending colon with the cecum, each 25-45% of the
+/// lumen diameter deep where the colon lies lowest (most posterior). Own random stream.
+void addFluidPools(PhantomAnatomy& anatomy, uint64_t seed);
 
 /// Image geometry of a phantom size: FOV 400 x 400 x 375 mm centred on the world origin.
 ImageGeometry phantomGeometry(PhantomSize size);

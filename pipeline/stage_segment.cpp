@@ -1,29 +1,130 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "volume/image_io.h"
+#include "volume/lumen_mask.h"
 #include "volume/segment.h"
 
 #include <filesystem>
+#include <iomanip>
+#include <sstream>
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace flyover {
 
-json runSegment(StudyRun& run, Progress* progress)
+
+namespace {
+
+json matrixJson(const Mat3d& m)
 {
-    if (!run.state.hu)
-        run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
-    LumenSegmentation seg = segmentLumen(*run.state.hu, run.opt.params.segment, progress);
-    writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
-    run.state.sdf = seg.sdf;
+    json rows = json::array();
+    for (const auto& r : m) rows.push_back(json::array({r[0], r[1], r[2]}));
+    return rows;
+}
+
+json geometryJson(const ImageGeometry& g)
+{
+    return json{{"size", g.size},
+                {"spacing_mm", vec3Json(g.spacingMm)},
+                {"origin_mm", vec3Json(g.originMm)},
+                {"direction", matrixJson(g.direction)}};
+}
+
+/// The manifest report of a segmentation (both sources).
+json segmentationJson(const LumenSegmentation& seg)
+{
+    json pieces = json::array();
+    for (const auto& p : seg.pieces)
+        pieces.push_back(json{{"order", p.order},
+                              {"volume_ml", p.volumeMl},
+                              {"centroid_mm", vec3Json(p.centroidMm)},
+                              {"min_mm", vec3Json(p.minMm)},
+                              {"max_mm", vec3Json(p.maxMm)},
+                              {"frame_angle_deg", p.frameAngleDeg}});
     json comps = json::array();
     for (const auto& c : seg.components)
         comps.push_back(json{{"volume_ml", c.volumeMl},    {"mean_hu", c.meanHu},
                              {"centroid_mm", vec3Json(c.centroidMm)},
                              {"min_mm", vec3Json(c.minMm)}, {"max_mm", vec3Json(c.maxMm)},
                              {"kept", c.kept},             {"reason", c.reason}});
-    return json{{"lumen_volume_ml", seg.lumenVolumeMl}, {"components", comps}};
+    json pools = json::array();
+    for (const auto& p : seg.fluidPools)
+        pools.push_back(json{{"volume_ml", p.volumeMl},     {"mean_hu", p.meanHu},
+                             {"surface_hu", p.surfaceHu},   {"level_mm", p.levelMm},
+                             {"min_mm", vec3Json(p.minMm)}, {"max_mm", vec3Json(p.maxMm)},
+                             {"joined", p.joined},          {"reason", p.reason}});
+    return json{{"lumen_volume_ml", seg.lumenVolumeMl},
+                {"mask_volume_ml", seg.maskVolumeMl},
+                {"fluid_volume_ml", seg.fluidVolumeMl},
+                {"gravity_direction", vec3Json(seg.gravityDirection)},
+                {"pieces_order", "frame angle: around the lumen's centroid in the coronal plane, from "
+                                 "inferior-right through the patient's left, superior and right "
+                                 "(rectum -> cecum for a normal colon)"},
+                {"pieces", pieces},
+                {"components", comps},
+                {"fluid_pools", pools}};
+}
+
+/// One line in the run log when the lumen is in several pieces (a collapsed colon).
+void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
+{
+    if (!run.opt.log || seg.pieces.size() < 2) return;
+    std::ostringstream msg;
+    msg << "segment: the lumen is in " << seg.pieces.size()
+        << " pieces (collapsed segments?), all kept, in order along the colon frame:" << std::fixed
+        << std::setprecision(1);
+    for (const auto& p : seg.pieces)
+        msg << (p.order ? "," : "") << " #" << p.order + 1 << " " << p.volumeMl << " mL at ("
+            << p.centroidMm.x << ", " << p.centroidMm.y << ", " << p.centroidMm.z << ") mm";
+    run.opt.log->message(msg.str());
+}
+
+json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
+{
+    writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
+    run.state.sdf = seg.sdf;
+    reportPieces(run, seg);
+    return segmentationJson(seg);
+}
+
+} // namespace
+
+json runSegment(StudyRun& run, Progress* progress)
+{
+    if (!run.state.hu)
+        run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
+    LumenSegmentation seg = segmentLumen(*run.state.hu, run.opt.params.segment, progress);
+    json report = writeSegmentation(run, seg);
+    report["source"] = "ct";
+    return report;
+}
+
+json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* progress)
+{
+    if (!run.opt.ctPath.empty() && !run.state.hu)
+        run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
+    const SegmentParams& params = run.opt.params.segment;
+    MaskSummary summary;
+    LumenSegmentation seg;
+    {
+        auto source = openImage(maskPath);
+        seg = segmentFromMask(*source, params, run.state.hu.get(), progress, &summary);
+    }
+    if (run.opt.log && summary.voxelsOutsideReference > 0)
+        run.opt.log->message("segment: warning: " + std::to_string(summary.voxelsOutsideReference) +
+                             " mask voxels lie outside the CT's extent");
+    json report = writeSegmentation(run, seg);
+    report["source"] = "mask";
+    report["mask"] = json{{"path", fs::absolute(maskPath).string()},
+                          {"label", params.maskLabel},
+                          {"label_voxels", summary.labelVoxels},
+                          {"labels_present", summary.labelsPresent},
+                          {"resampled", summary.resampled},
+                          {"voxels_outside_ct", summary.voxelsOutsideReference},
+                          {"geometry", geometryJson(summary.geometry)}};
+    return report;
 }
 
 } // namespace flyover

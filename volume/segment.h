@@ -1,11 +1,24 @@
 /// @file segment.h
-/// @brief Colon lumen segmentation on the sparse HU grid.
+/// @brief Colon lumen segmentation on the sparse HU grid, or from an external mask
+///        (volume/lumen_mask.h), into a lumen mask and a signed distance level set.
 ///
-/// Air candidates (HU < airThresholdHu) among the active voxels are split into connected
-/// components; components touching the grid border, lungs (parenchyma HU and superior
-/// position) and small gas pockets are dropped; the remaining large components are the
-/// lumen. The lumen surface is then placed at the partial-volume midpoint (surfaceIsoHu)
-/// of the HU field near the kept air, and redistanced into a signed distance grid.
+/// From HU (segmentLumen):
+/// 1. Air candidates (HU < airThresholdHu) among the active (in-body) voxels are split into
+///    face-connected components. Components touching the outside of the body or the scan
+///    border, lungs (mean HU above lungMinMeanHu), small gas pockets (< minComponentMl) and
+///    components much smaller than the colon (< keepFraction of the reference component:
+///    the largest remaining one, or the one at seedMm) are dropped; every other component
+///    is kept: a collapsed colon gives several pieces, and all of them are kept.
+/// 2. Tagged fluid (cleanse = true, volume/cleanse.h): components of voxels above
+///    fluidThresholdHu that lie under kept air across a flat air-fluid level join the
+///    lumen, together with the partial-volume rim between air and fluid.
+/// 3. The lumen surface is placed at the partial-volume midpoint of the HU field: at
+///    surfaceIsoHu against air, at the midpoint of wallHu and the pool's fluid HU against
+///    fluid; it is redistanced into a signed distance grid (mm, negative inside).
+/// 4. The lumen's connected pieces are measured and ordered along the colon frame.
+///
+/// What it does not do: it does not bridge collapsed segments (the centerline does), and it
+/// does not know the patient's orientation beyond what the air-fluid levels tell.
 #pragma once
 
 #include "volume/progress.h"
@@ -13,6 +26,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,13 +34,33 @@ namespace flyover {
 
 struct SegmentParams {
     double airThresholdHu = -800.0;   ///< air candidates are below this (HU)
-    double surfaceIsoHu = -500.0;     ///< lumen surface: partial-volume midpoint air/wall (HU)
-    double minComponentMl = 20.0;     ///< air components smaller than this are dropped (mL)
+    /// Lumen surface against air: the partial-volume midpoint of air (-1000) and the wall
+    /// (wallHu, +40 by default), in HU.
+    double surfaceIsoHu = -480.0;
+    double minComponentMl = 20.0;     ///< air components smaller than this are dropped (mL, >= 0)
     double lungMinMeanHu = -930.0;    ///< a component whose mean HU is above this is lung (HU)
-    double keepFraction = 0.05;       ///< keep components >= this fraction of the largest kept
-    int bandVoxels = 3;               ///< exterior narrow band of the level set (voxels)
-    static constexpr int VERSION = 1;
+    /// Keep components of at least this fraction of the reference component (the largest
+    /// remaining one, or the seeded one), in [0, 1]. Low on purpose: a 60 mL piece of a
+    /// collapsed 1.6 L colon must be kept; minComponentMl drops small-bowel gas.
+    double keepFraction = 0.02;
+    int bandVoxels = 3;               ///< exterior narrow band of the level set (voxels, 1..64)
+    /// The colon component is the one containing this point (LPS mm), or the nearest one
+    /// within SEED_REACH_MM; it is kept whatever its size and mean HU. Unset: the largest.
+    std::optional<Vec3d> seedMm;
+    bool cleanse = true;              ///< join tagged fluid under air-fluid levels to the lumen
+    double fluidThresholdHu = 200.0;  ///< tagged fluid is above this (HU)
+    double wallHu = 40.0;             ///< colon wall (HU): the surface in fluid lies midway to the fluid's HU
+    /// External masks (segmentFromMask): the label that is lumen; 0 = every non-zero voxel.
+    int maskLabel = 0;
+    /// External masks: width (Gaussian sigma, in the mask's largest voxel spacing) of the
+    /// constrained smoothing that removes the staircase of a binary mask; 0 = none. The
+    /// surface never crosses a mask voxel centre, and the volume is restored afterwards.
+    double maskSmoothingVoxels = 1.0;
+    static constexpr int VERSION = 2;
 };
+
+/// How far from the seed (mm) an air component may lie and still be taken as the seeded one.
+inline constexpr double SEED_REACH_MM = 10.0;
 
 /// What happened to one connected air component.
 struct AirComponent {
@@ -34,18 +68,54 @@ struct AirComponent {
     double meanHu = 0;
     Vec3d centroidMm, minMm, maxMm;  ///< world LPS mm
     bool kept = false;
-    std::string reason;              ///< "colon", "lung", "small", "border", "fraction"
+    /// "colon", "seed" (kept: the seeded component), "lung", "small", "border", "fraction"
+    std::string reason;
+};
+
+/// A component of tagged fluid (above fluidThresholdHu) that touches the kept air.
+struct FluidPool {
+    double volumeMl = 0;
+    double meanHu = 0;              ///< of its interior voxels (the fluid's value)
+    double surfaceHu = 0;           ///< where its surface against the wall is placed (HU)
+    double levelMm = 0;             ///< position of the air-fluid level along the gravity direction (world mm)
+    Vec3d minMm, maxMm;             ///< world LPS mm
+    bool joined = false;
+    std::string reason;             ///< "air-fluid level" (joined), "no level below air", "cleanse off"
+};
+
+/// One connected piece of the final lumen (a collapsed colon has several).
+struct LumenPiece {
+    int order = 0;                  ///< 0-based rank along the colon frame (see frameAngleDeg)
+    double volumeMl = 0;            ///< voxel count x voxel volume
+    Vec3d centroidMm, minMm, maxMm; ///< world LPS mm
+    /// Median, over the piece's voxels, of the angle around the lumen's centroid in the
+    /// coronal (x-z) plane, in [0, 360): 0 points inferior and 30 degrees to the patient's
+    /// right, angles grow through the patient's left, superior and right. For a colon this
+    /// runs rectum -> sigmoid -> descending -> transverse -> ascending -> cecum.
+    double frameAngleDeg = 0;
 };
 
 struct LumenSegmentation {
     openvdb::BoolGrid::Ptr mask;   ///< lumen voxels (active = inside); name "lumen_mask"
     openvdb::FloatGrid::Ptr sdf;   ///< signed distance (mm), negative inside; name "lumen_sdf"
-    std::vector<AirComponent> components;
-    double lumenVolumeMl = 0;
+    std::vector<AirComponent> components;   ///< largest first
+    std::vector<FluidPool> fluidPools;      ///< largest first
+    std::vector<LumenPiece> pieces;         ///< in frame order
+    /// Unit world direction in which the fluid settles (LPS; +y: the patient lay supine);
+    /// the zero vector when no air-fluid level was found.
+    Vec3d gravityDirection;
+    double lumenVolumeMl = 0;      ///< enclosed by the level set (sub-voxel)
+    double maskVolumeMl = 0;       ///< mask voxel count x voxel volume
+    double fluidVolumeMl = 0;      ///< joined fluid and air-fluid rim voxels x voxel volume
 };
 
-/// @throw InputError when no component qualifies as colon lumen (message lists what was found).
+/// @throw InputError when no component qualifies as colon lumen (the one-line message lists
+///        what was found and why each was rejected), when the seed is in no air component,
+///        or when the grid's voxels are not cubic; ParameterError for bad parameters.
 LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams& params,
                                Progress* progress = nullptr);
+
+/// Checks every SegmentParams field. @throw ParameterError naming the field.
+void validateSegmentParams(const SegmentParams& params);
 
 } // namespace flyover

@@ -666,3 +666,143 @@ TEST(PhantomOtherGas, LungsAndBowelGasAreClosedAndFarFromTheColon)
 }
 
 } // namespace
+
+// ---------------------------------------------------------------------------------------
+// Variants: tagged fluid, collapsed stretches, no colon
+
+/// FNV-1a of a buffer's bytes (stable across platforms, unlike std::hash).
+template <typename T>
+uint64_t fnv1a(const std::vector<T>& v)
+{
+    uint64_t h = 1469598103934665603ull;
+    const auto* p = reinterpret_cast<const unsigned char*>(v.data());
+    for (std::size_t i = 0; i < v.size() * sizeof(T); ++i) {
+        h ^= p[i];
+        h *= 1099511628211ull;
+    }
+    return h;
+}
+
+TEST(PhantomVariants, DefaultPhantomBytesUnchanged_GoldenRegression)
+{
+    // Golden digests of the default small phantom, seed 1, taken before the variants existed:
+    // other modules' tests depend on these voxels.
+    SCOPED_TRACE(describe(PhantomSize::Small, SEED));
+    EXPECT_EQ(fnv1a(smallPhantom().ct.voxels), 0xa217579875abf29cull);
+    EXPECT_EQ(fnv1a(smallPhantom().truthLumen.voxels), 0xb47bcc64ee27050cull);
+    EXPECT_TRUE(smallPhantom().truth.collapsed.empty());
+    EXPECT_TRUE(smallPhantom().truth.fluidPools.empty());
+    EXPECT_EQ(smallPhantom().truth.fluidVolumeMl, 0.0);
+}
+
+/// Arc length (mm) of the truth centerline sample nearest to p (1 mm samples): a search
+/// every 8 samples, refined around the best one (parts of the colon that are not adjacent
+/// lie far further apart than 8 mm).
+double nearestArcMm(const PhantomTruth& t, const Vec3d& p)
+{
+    const std::vector<Vec3d>& c = t.centerlineMm;
+    std::size_t best = 0;
+    for (std::size_t i = 0; i < c.size(); i += 8)
+        if (distance(c[i], p) < distance(c[best], p)) best = i;
+    const std::size_t lo = best >= 8 ? best - 8 : 0, hi = std::min(c.size() - 1, best + 8);
+    for (std::size_t i = lo; i <= hi; ++i)
+        if (distance(c[i], p) < distance(c[best], p)) best = i;
+    return double(best);
+}
+
+TEST(PhantomVariants, FluidLiesPosteriorOfFlatLevelsAndIsLumen)
+{
+    PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
+    p.fluid = true;
+    SCOPED_TRACE(describe(p.size, p.seed) + " fluid");
+    const Phantom ph = makePhantom(p);
+    ASSERT_EQ(ph.truth.fluidPools.size(), 3u);
+    for (const PhantomFluidPool& pool : ph.truth.fluidPools) {
+        EXPECT_GE(pool.hu, 300.0);
+        EXPECT_LE(pool.hu, 600.0);
+    }
+    // Voxels at least a voxel posterior of their pool's level are fluid (its HU within noise),
+    // at least a voxel anterior are air; both are truth lumen.
+    const auto& g = ph.ct.geometry;
+    const double h = g.spacingMm.y;
+    int64_t fluid = 0, air = 0, wrong = 0;
+    for (int64_t k = 0; k < g.size[2]; ++k)
+        for (int64_t j = 0; j < g.size[1]; ++j)
+            for (int64_t i = 0; i < g.size[0]; ++i) {
+                if (!ph.truthLumen.at(i, j, k)) continue;
+                // Only voxels whose 26 neighbours are lumen (no wall partial volume).
+                bool interior = true;
+                for (int dk = -1; dk <= 1 && interior; ++dk)
+                    for (int dj = -1; dj <= 1 && interior; ++dj)
+                        for (int di = -1; di <= 1 && interior; ++di)
+                            interior = ph.truthLumen.at(i + di, j + dj, k + dk) != 0;
+                if (!interior) continue;
+                const Vec3d w = g.worldFromIndex({double(i), double(j), double(k)});
+                const double arc = nearestArcMm(ph.truth, w);
+                for (const PhantomFluidPool& pool : ph.truth.fluidPools) {
+                    if (arc < pool.arcStartMm || arc > pool.arcEndMm) continue;
+                    const double hu = ph.ct.at(i, j, k);
+                    if (w.y > pool.levelYMm + h) {
+                        ++fluid;
+                        wrong += std::abs(hu - pool.hu) > 6 * NOISE_HU;
+                    } else if (w.y < pool.levelYMm - h) {
+                        ++air;
+                        wrong += std::abs(hu - ph::AIR_HU) > 6 * NOISE_HU;
+                    }
+                }
+            }
+    EXPECT_GT(fluid, 2000);
+    EXPECT_GT(air, 2000);
+    EXPECT_EQ(wrong, 0);
+    EXPECT_GT(ph.truth.fluidVolumeMl, 50.0);
+    EXPECT_LT(ph.truth.fluidVolumeMl, 0.2 * ph.truth.lumenVolumeMl);
+    // The truth lumen is air + fluid: the same colon as without fluid, voxel for voxel.
+    PhantomParams plain = p;
+    plain.fluid = false;
+    EXPECT_TRUE(makePhantom(plain).truthLumen.voxels == ph.truthLumen.voxels);
+}
+
+TEST(PhantomVariants, CollapsedStretchesHaveNoLumen)
+{
+    for (uint64_t seed : {1u, 2u}) {
+        PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+        p.collapse = true;
+        SCOPED_TRACE(describe(p.size, p.seed) + " collapse");
+        const Phantom ph = makePhantom(p);
+        ASSERT_FALSE(ph.truth.collapsed.empty());
+        ASSERT_LE(ph.truth.collapsed.size(), 2u);
+        for (const PhantomCollapse& c : ph.truth.collapsed) {
+            EXPECT_GE(c.arcEndMm - c.arcStartMm, 20.0);
+            EXPECT_LE(c.arcEndMm - c.arcStartMm, 40.0);
+            for (const PhantomPolyp& polyp : ph.truth.polyps)
+                EXPECT_TRUE(polyp.arcMm + polyp.radiusMm < c.arcStartMm || polyp.arcMm - polyp.radiusMm > c.arcEndMm);
+        }
+        // The truth centerline is the full path; no truth lumen voxel is nearest to a point
+        // more than a voxel inside a collapsed stretch.
+        EXPECT_EQ(ph.truth.centerlineMm.size(), ph::buildPhantomAnatomy(seed).centerlineMm.size());
+        const auto& g = ph.truthLumen.geometry;
+        int64_t inCollapse = 0;
+        for (int64_t k = 0; k < g.size[2]; ++k)
+            for (int64_t j = 0; j < g.size[1]; ++j)
+                for (int64_t i = 0; i < g.size[0]; ++i) {
+                    if (!ph.truthLumen.at(i, j, k)) continue;
+                    const double arc = nearestArcMm(ph.truth, g.worldFromIndex({double(i), double(j), double(k)}));
+                    for (const PhantomCollapse& c : ph.truth.collapsed)
+                        inCollapse += arc > c.arcStartMm + g.spacingMm.x && arc < c.arcEndMm - g.spacingMm.x;
+                }
+        EXPECT_EQ(inCollapse, 0);
+    }
+}
+
+TEST(PhantomVariants, NoColonLeavesBodyLungsAndGas)
+{
+    PhantomParams p{PhantomSize::Small, SEED, NOISE_HU};
+    p.colon = false;
+    const Phantom ph = makePhantom(p);
+    EXPECT_EQ(std::count(ph.truthLumen.voxels.begin(), ph.truthLumen.voxels.end(), uint8_t(1)), 0);
+    EXPECT_EQ(ph.truth.lumenVolumeMl, 0.0);
+    EXPECT_TRUE(ph.truth.centerlineMm.empty());
+    // Where the colon's centerline ran there is now fat or soft tissue, not air.
+    for (std::size_t i = 0; i < smallAnatomy().centerlineMm.size(); i += 50)
+        EXPECT_GT(sampleNearest(ph.ct, smallAnatomy().centerlineMm[i]), -200) << "arc " << i << " mm";
+}

@@ -4,13 +4,17 @@
 #include "test_shapes.h"
 #include "volume/centerline.h"
 #include "volume/error.h"
+#include "volume/lumen_mask.h"
 
 #include <gtest/gtest.h>
 
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/LevelSetMeasure.h>
 
 #include <tbb/task_arena.h>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -63,7 +67,7 @@ double tubeVolumeMl(double lengthMm, double radiusMm)
 SegmentParams midpointParams()
 {
     SegmentParams p;
-    p.surfaceIsoHu = -480.0;  // exact midpoint of this phantom's tissue (+40) and air (-1000)
+    p.surfaceIsoHu = -480.0;  // exact midpoint of this phantom's tissue (+40) and air (-1000): the default
     return p;
 }
 
@@ -171,8 +175,10 @@ TEST(SegmentLumen, MaskDiceAgainstAnalyticTube)
         const double dice = 2.0 * double(both) / double(truth + found);
         EXPECT_GE(dice, 0.99) << "true " << truth << " found " << found << " both " << both;
 
-        // The default iso-value (-500 HU) sits 20 HU off this phantom's midpoint: still fine.
-        const LumenSegmentation seg500 = segmentLumen(*hu, SegmentParams{});
+        // An iso-value 20 HU off this phantom's midpoint (-500 HU): still fine.
+        SegmentParams params500;
+        params500.surfaceIsoHu = -500.0;
+        const LumenSegmentation seg500 = segmentLumen(*hu, params500);
         std::size_t both500 = 0;
         for (auto it = seg500.mask->cbeginValueOn(); it; ++it) {
             const openvdb::Coord ijk = it.getCoord();
@@ -183,7 +189,7 @@ TEST(SegmentLumen, MaskDiceAgainstAnalyticTube)
             2.0 * double(both500) / double(truth + seg500.mask->activeVoxelCount());
         EXPECT_GE(dice500, 0.98);
         std::cout << "[ dice ] seed " << seed << ": " << dice << " at the midpoint iso-value, "
-                  << dice500 << " at the default -500 HU\n";
+                  << dice500 << " at -500 HU\n";
     }
 }
 
@@ -394,6 +400,269 @@ TEST(SegmentLumen, SameResultWithOneThread)
     std::size_t differ = 0;
     for (auto it = a.sdf->cbeginValueOn(); it; ++it) differ += accB.getValue(it.getCoord()) != *it;
     EXPECT_EQ(differ, 0u);
+}
+
+// ------------------------------------------------------------------ external masks
+
+/// An oblique image lattice: direction cosines of a rotation, an origin off zero.
+ImageGeometry obliqueGeometry(std::array<int64_t, 3> size, const Vec3d& spacingMm)
+{
+    ImageGeometry g;
+    g.size = size;
+    g.spacingMm = spacingMm;
+    g.originMm = {-37.3, 12.9, 104.2};
+    const double a = 0.35, b = -0.2;  // rotation about z, then about x
+    const Mat3d rz{{{std::cos(a), -std::sin(a), 0}, {std::sin(a), std::cos(a), 0}, {0, 0, 1}}};
+    const Mat3d rx{{{1, 0, 0}, {0, std::cos(b), -std::sin(b)}, {0, std::sin(b), std::cos(b)}}};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {
+            g.direction[r][c] = 0;
+            for (int k = 0; k < 3; ++k) g.direction[r][c] += rz[r][k] * rx[k][c];
+        }
+    return g;
+}
+
+/// A label image: `label` where the shape's signed distance (local mm) at the voxel centre
+/// is negative, `otherLabel` on a slab elsewhere, 0 around.
+template <typename Shape>
+Image3<float> labelImage(const ImageGeometry& g, Shape&& signedDistanceMm, float label)
+{
+    Image3<float> img;
+    img.geometry = g;
+    img.voxels.assign(std::size_t(g.voxelCount()), 0.0f);
+    for (int64_t k = 0; k < g.size[2]; ++k)
+        for (int64_t j = 0; j < g.size[1]; ++j)
+            for (int64_t i = 0; i < g.size[0]; ++i) {
+                const Vec3d local{i * g.spacingMm.x, j * g.spacingMm.y, k * g.spacingMm.z};
+                if (signedDistanceMm(local) < 0) img.at(i, j, k) = label;
+            }
+    return img;
+}
+
+std::size_t countLabel(const Image3<float>& img, float label)
+{
+    return std::size_t(std::count(img.voxels.begin(), img.voxels.end(), label));
+}
+
+struct SurfaceError {
+    double rmsMm = 0, maxMm = 0, meanNormalDeg = 0;
+};
+
+/// The level set sampled on the analytic surface: |sdf| (position error of the zero crossing)
+/// and the angle between its gradient and the true normal.
+template <typename Normal>
+SurfaceError surfaceError(const openvdb::FloatGrid& sdf, const ImageGeometry& g, Normal&& normal,
+                          const std::vector<Vec3d>& surfaceLocal)
+{
+    const openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(sdf);
+    const double h = sdf.voxelSize()[0];
+    SurfaceError e;
+    double sum2 = 0, sumDeg = 0;
+    for (const Vec3d& pl : surfaceLocal) {
+        const Vec3d u{pl.x / g.spacingMm.x, pl.y / g.spacingMm.y, pl.z / g.spacingMm.z};
+        const Vec3d w = g.worldFromIndex(u);
+        auto at = [&](const Vec3d& q) { return double(sampler.wsSample(openvdb::Vec3d(q.x, q.y, q.z))); };
+        const double v = at(w);
+        sum2 += v * v;
+        e.maxMm = std::max(e.maxMm, std::abs(v));
+        // World gradient by central differences of one voxel, compared in world.
+        Vec3d grad;
+        for (int a = 0; a < 3; ++a) {
+            Vec3d d;
+            d[a] = h;
+            grad[a] = at(w + d) - at(w - d);
+        }
+        const Vec3d nl = normal(pl);  // local frame == world frame rotated by the direction cosines
+        Vec3d nw;
+        for (int r = 0; r < 3; ++r)
+            nw[r] = g.direction[r][0] * nl.x + g.direction[r][1] * nl.y + g.direction[r][2] * nl.z;
+        sumDeg += std::acos(std::clamp(dot(normalize(grad), nw), -1.0, 1.0)) * 180.0 / PI;
+    }
+    e.rmsMm = std::sqrt(sum2 / double(surfaceLocal.size()));
+    e.meanNormalDeg = sumDeg / double(surfaceLocal.size());
+    return e;
+}
+
+/// Points on a sphere (local mm), by a golden-angle spiral.
+std::vector<Vec3d> spherePoints(const Vec3d& c, double r, int n)
+{
+    std::vector<Vec3d> pts;
+    for (int i = 0; i < n; ++i) {
+        const double z = 1.0 - 2.0 * (i + 0.5) / n, rho = std::sqrt(1 - z * z);
+        const double phi = i * 2.39996322972865332;
+        pts.push_back(c + Vec3d{rho * std::cos(phi), rho * std::sin(phi), z} * r);
+    }
+    return pts;
+}
+
+TEST(SegmentFromMask, BinarySphereWithoutStaircaseNorShrinking)
+{
+    // A sphere of 7.3 voxels off the lattice, on an oblique 1 mm lattice.
+    const ImageGeometry g = obliqueGeometry({32, 32, 32}, {1.0, 1.0, 1.0});
+    const Vec3d c{15.3, 16.1, 15.7};
+    const double r = 7.3;
+    auto sd = [&](const Vec3d& p) { return distance(p, c) - r; };
+    auto normal = [&](const Vec3d& p) { return normalize(p - c); };
+    const Image3<float> mask = labelImage(g, sd, 1.0f);
+    const double maskMl = double(countLabel(mask, 1.0f)) / 1000.0;
+    const std::vector<Vec3d> surface = spherePoints(c, r, 400);
+
+    SegmentParams raw;
+    raw.maskSmoothingVoxels = 0;  // the halfway surface of the binary mask: a staircase
+    const LumenSegmentation stair = segmentFromMask(mask, raw);
+    const LumenSegmentation smooth = segmentFromMask(mask, SegmentParams{});
+    const SurfaceError eStair = surfaceError(*stair.sdf, g, normal, surface);
+    const SurfaceError eSmooth = surfaceError(*smooth.sdf, g, normal, surface);
+    std::cout << "[ surface ] sphere r " << r << " voxels: staircase rms " << eStair.rmsMm << " mm, max "
+              << eStair.maxMm << " mm, normals " << eStair.meanNormalDeg << " deg; smoothed rms "
+              << eSmooth.rmsMm << " mm, max " << eSmooth.maxMm << " mm, normals " << eSmooth.meanNormalDeg
+              << " deg\n";
+    EXPECT_LT(eSmooth.rmsMm, 0.2);
+    EXPECT_LT(eSmooth.maxMm, 0.5);
+    EXPECT_LT(eSmooth.meanNormalDeg, 0.5 * eStair.meanNormalDeg);
+    EXPECT_LT(eSmooth.meanNormalDeg, 5.0);
+
+    // Volume: level set (sub-voxel sum, and OpenVDB's own measure) = mask voxel count.
+    const double vdbMl = openvdb::tools::levelSetVolume(*smooth.sdf) / 1000.0;
+    std::cout << "[ volume ] mask " << maskMl << " mL, level set " << smooth.lumenVolumeMl << " mL, "
+              << "levelSetVolume " << vdbMl << " mL, analytic " << 4.0 / 3.0 * PI * r * r * r / 1000.0 << " mL\n";
+    EXPECT_NEAR(smooth.lumenVolumeMl, maskMl, 0.01 * maskMl);
+    EXPECT_NEAR(vdbMl, maskMl, 0.01 * maskMl);
+    // The surface never crosses a mask voxel centre: the mask comes back unchanged.
+    const Image3<uint8_t> back = rasterizeLumen(*smooth.sdf, g);
+    std::size_t differ = 0;
+    for (std::size_t v = 0; v < back.voxels.size(); ++v) differ += (back.voxels[v] != 0) != (mask.voxels[v] != 0);
+    EXPECT_EQ(differ, 0u);
+    EXPECT_EQ(smooth.pieces.size(), 1u);
+    EXPECT_EQ(smooth.mask->activeVoxelCount(), countLabel(mask, 1.0f));
+}
+
+TEST(SegmentFromMask, ThinObliqueTubeKeepsItsVolumeAndStaysWhole)
+{
+    // A tube of radius 2.2 voxels (a thin, collapsed colon at 3 mm) crossing the lattice
+    // obliquely, and a one-voxel line: neither may vanish or break.
+    const ImageGeometry g = obliqueGeometry({48, 40, 36}, {1.0, 1.0, 1.0});
+    const test::Axis tube = test::Axis::straight({6.2, 7.1, 5.3}, {41.7, 30.4, 29.2});
+    auto sd = [&](const Vec3d& p) {
+        const double line = std::max(std::abs(p.y - 33.0), std::abs(p.z - 6.0));  // along x
+        const double lineSd = (p.x > 8 && p.x < 40) ? line - 0.4 : 1e9;
+        return std::min(tube.distanceMm(p) - 2.2, lineSd);
+    };
+    const Image3<float> mask = labelImage(g, sd, 1.0f);
+    const double maskMl = double(countLabel(mask, 1.0f)) / 1000.0;
+    const LumenSegmentation seg = segmentFromMask(mask, SegmentParams{});
+    SCOPED_TRACE("mask " + std::to_string(maskMl) + " mL");
+    EXPECT_NEAR(seg.lumenVolumeMl, maskMl, 0.01 * maskMl);
+    EXPECT_NEAR(openvdb::tools::levelSetVolume(*seg.sdf) / 1000.0, maskMl, 0.02 * maskMl);
+    EXPECT_EQ(seg.pieces.size(), 2u);
+    EXPECT_EQ(seg.mask->activeVoxelCount(), countLabel(mask, 1.0f));
+}
+
+TEST(SegmentFromMask, LabelMapPicksTheLabelAndNamesThoseThere)
+{
+    const ImageGeometry g = obliqueGeometry({24, 24, 24}, {1.5, 1.5, 1.5});
+    Image3<float> labels = labelImage(g, [](const Vec3d& p) { return distance(p, {16, 16, 16}) - 8.0; }, 20.0f);
+    for (int64_t k = 0; k < 4; ++k)
+        for (int64_t j = 0; j < 24; ++j)
+            for (int64_t i = 0; i < 24; ++i) labels.at(i, j, k) = 18.0f;  // "small bowel"
+    SegmentParams p;
+    p.maskLabel = 20;
+    MaskSummary summary;
+    const LumenSegmentation seg = segmentFromMask(labels, p, nullptr, nullptr, &summary);
+    EXPECT_EQ(summary.labelVoxels, int64_t(countLabel(labels, 20.0f)));
+    EXPECT_EQ(summary.labelsPresent, (std::vector<int>{18, 20}));
+    EXPECT_FALSE(summary.resampled);
+    EXPECT_NEAR(seg.maskVolumeMl, double(countLabel(labels, 20.0f)) * 1.5 * 1.5 * 1.5 / 1000.0, 1e-9);
+    EXPECT_NEAR(seg.sdf->voxelSize()[0], 1.5, 1e-12);
+
+    p.maskLabel = 7;
+    try {
+        segmentFromMask(labels, p);
+        FAIL() << "expected InputError";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("no voxel holds label 7 (labels present: 18, 20)"), std::string::npos)
+            << e.what();
+    }
+    p.maskLabel = 0;  // every non-zero voxel
+    EXPECT_EQ(segmentFromMask(labels, p).mask->activeVoxelCount(),
+              countLabel(labels, 20.0f) + countLabel(labels, 18.0f));
+}
+
+TEST(SegmentFromMask, AnisotropicMaskMatchedToTheCtGrid)
+{
+    // A CT grid of 1 mm cubic voxels and a mask of 2 x 2 x 3 mm on another oblique lattice:
+    // the lumen lands on the CT grid, where the analytic sphere is.
+    HuPhantom ph = basePhantom(3);
+    ph.bodyIndex = openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(59, 59, 59));
+    const auto hu = test::makeHuGrid(ph);
+    const Vec3d centreWorld = ph.frame.worldFromLocal({30.2, 29.6, 30.9});
+    const double r = 12.0;
+    ImageGeometry g = obliqueGeometry({24, 24, 18}, {2.0, 2.0, 3.0});
+    // Put the mask lattice around the sphere.
+    const Vec3d shift = centreWorld - g.worldFromIndex({11.5, 11.5, 8.5});
+    g.originMm = g.originMm + shift;
+    const Image3<float> mask = labelImage(g, [&](const Vec3d& p) {
+        return distance(g.worldFromIndex({p.x / 2.0, p.y / 2.0, p.z / 3.0}), centreWorld) - r;
+    }, 1.0f);
+    MaskSummary summary;
+    const LumenSegmentation seg = segmentFromMask(mask, SegmentParams{}, hu.get(), nullptr, &summary);
+    EXPECT_TRUE(summary.resampled);
+    EXPECT_EQ(summary.voxelsOutsideReference, 0);
+    EXPECT_TRUE(seg.sdf->transform() == hu->transform());
+    const double maskMl = double(countLabel(mask, 1.0f)) * 12.0 / 1000.0;
+    EXPECT_NEAR(seg.lumenVolumeMl, maskMl, 0.01 * maskMl);
+    // Against the analytic sphere on the CT grid: Dice well above what the 3 mm slices allow.
+    std::size_t both = 0, truth = 0;
+    auto acc = seg.mask->getConstAccessor();
+    for (auto it = ph.bodyIndex.begin(); it; ++it) {
+        const openvdb::Vec3d w = hu->transform().indexToWorld(*it);
+        const bool in = distance(Vec3d{w[0], w[1], w[2]}, centreWorld) < r;
+        truth += in;
+        both += in && acc.isValueOn(*it);
+    }
+    const double dice = 2.0 * double(both) / double(truth + seg.mask->activeVoxelCount());
+    std::cout << "[ dice ] 2x2x3 mm mask on the 1 mm CT grid: " << dice << "\n";
+    EXPECT_GE(dice, 0.95);
+
+    // A mask from elsewhere does not overlap the CT: refused, naming the CT's extent.
+    ImageGeometry far = g;
+    far.originMm = far.originMm + Vec3d{500, 0, 0};
+    Image3<float> farMask = mask;
+    farMask.geometry = far;
+    try {
+        segmentFromMask(farMask, SegmentParams{}, hu.get());
+        FAIL() << "expected InputError";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("does not overlap the CT"), std::string::npos) << e.what();
+    }
+}
+
+TEST(RasterizeLumen, HuLumenOnAnotherLattice)
+{
+    // The HU segmentation of the tube, rasterised on the grid's own lattice, is its mask; on a
+    // coarser anisotropic lattice it still overlays the analytic tube.
+    HuPhantom ph = basePhantom(8);
+    ph.features = {colonTube()};
+    const LumenSegmentation seg = segmentLumen(*test::makeHuGrid(ph), SegmentParams{});
+    ImageGeometry own;
+    own.size = {100, 100, 180};
+    const openvdb::math::Mat4d m = ph.frame.xf->baseMap()->getAffineMap()->getMat4();
+    own.spacingMm = {1, 1, 1};
+    own.originMm = {m[3][0], m[3][1], m[3][2]};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) own.direction[r][c] = m[c][r];
+    const Image3<uint8_t> img = rasterizeLumen(*seg.sdf, own);
+    auto acc = seg.mask->getConstAccessor();
+    std::size_t differ = 0, inside = 0;
+    for (int64_t k = 0; k < 180; ++k)
+        for (int64_t j = 0; j < 100; ++j)
+            for (int64_t i = 0; i < 100; ++i) {
+                const bool a = img.at(i, j, k) != 0, b = acc.isValueOn(openvdb::Coord(int(i), int(j), int(k)));
+                differ += a != b;
+                inside += a;
+            }
+    EXPECT_EQ(differ, 0u);
+    EXPECT_EQ(inside, seg.mask->activeVoxelCount());
 }
 
 } // namespace

@@ -1,0 +1,227 @@
+// segment_bench: lumen segmentation (volume/segment.h) on a phantom's HU grid, against a
+// plain pass over the same grid (air threshold + face-connected components), as a ratio.
+//
+//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse]
+//
+// The phantom is generated and ingested once and saved as a temporary .vdb; each measured
+// pass then runs in a fresh child process (this program with --grid FILE --mode MODE) that
+// loads only the grid, so that its peak resident memory is that of the pass plus the grid,
+// not of the phantom generator. Prints the median and range of the wall times of N runs, the
+// median CPU time (user + system: steadier than wall time on a shared machine), and each
+// child's resident memory after loading and at its peak.
+#include "data/phantom.h"
+#include "volume/ingest.h"
+#include "volume/segment.h"
+#include "volume/segment_tools.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using namespace flyover;
+
+namespace {
+
+double peakRssMb()
+{
+    rusage usage{};
+    ::getrusage(RUSAGE_SELF, &usage);
+    return double(usage.ru_maxrss) / 1024.0;  // Linux: kilobytes
+}
+
+/// User + system CPU time of this process so far (s).
+double cpuSeconds()
+{
+    rusage usage{};
+    ::getrusage(RUSAGE_SELF, &usage);
+    return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+           1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
+
+double currentRssMb()
+{
+    std::ifstream status("/proc/self/status");
+    std::string line;
+    while (std::getline(status, line))
+        if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+    return 0;
+}
+
+/// The plain pass: air candidates below -800 HU among the active voxels, then components.
+std::size_t thresholdAndComponents(const openvdb::FloatGrid& hu)
+{
+    auto air = std::make_shared<openvdb::BoolTree>(hu.tree(), false, true, openvdb::TopologyCopy());
+    openvdb::tree::LeafManager<openvdb::BoolTree> leaves(*air);
+    leaves.foreach([&](openvdb::BoolTree::LeafNodeType& leaf, std::size_t) {
+        const auto* src = hu.tree().probeConstLeaf(leaf.origin());
+        for (auto it = src->cbeginValueOn(); it; ++it)
+            if (!(*it < -800.0f)) leaf.setValueOff(it.pos(), false);
+    });
+    detail::pruneInactive(*air);
+    return detail::connectedComponents(*air).size();
+}
+
+/// Wall time of each step that segmentLumen reports, summed over the runs.
+struct StepTimes : Progress {
+    std::vector<std::pair<std::string, double>> steps;
+    std::chrono::steady_clock::time_point last = std::chrono::steady_clock::now();
+    std::string current = "start";
+    void update(double, const std::string& what) override
+    {
+        const auto now = std::chrono::steady_clock::now();
+        const double s = std::chrono::duration<double>(now - last).count();
+        auto it = std::find_if(steps.begin(), steps.end(), [&](const auto& p) { return p.first == current; });
+        if (it == steps.end()) steps.emplace_back(current, s);
+        else it->second += s;
+        last = now;
+        current = what;
+    }
+};
+
+int child(const std::string& gridPath, const std::string& mode, int runs)
+{
+    openvdb::initialize();
+    openvdb::io::File file(gridPath);
+    file.open();
+    const auto hu = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("ct_hu"));
+    file.close();
+    const double loadedMb = currentRssMb();
+    std::vector<double> seconds, cpu;
+    std::string what;
+    StepTimes steps;
+    for (int r = 0; r < runs; ++r) {
+        const double c0 = cpuSeconds();
+        const auto t0 = std::chrono::steady_clock::now();
+        if (mode == "segment") {
+            steps.last = t0;
+            steps.current = "start";
+            const LumenSegmentation seg = segmentLumen(*hu, SegmentParams{}, &steps);
+            std::ostringstream s;
+            s << seg.pieces.size() << " piece(s), lumen " << seg.lumenVolumeMl << " mL, fluid "
+              << seg.fluidVolumeMl << " mL";
+            what = s.str();
+        } else {
+            what = std::to_string(thresholdAndComponents(*hu)) + " air components";
+        }
+        seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        cpu.push_back(cpuSeconds() - c0);
+    }
+    std::sort(seconds.begin(), seconds.end());
+    std::sort(cpu.begin(), cpu.end());
+    for (const auto& [step, total] : steps.steps)
+        std::printf("#   %-28s %.3f s (mean of %d runs)\n", (step + ":").c_str(), total / runs, runs);
+    std::printf("%s %.3f %.3f %.3f %.3f %.0f %.0f %s\n", mode.c_str(), seconds[seconds.size() / 2],
+                seconds.front(), seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
+    return 0;
+}
+
+struct Measure {
+    double median = 0, min = 0, max = 0, cpuMedian = 0, loadedMb = 0, peakMb = 0;
+    std::string what;
+};
+
+Measure runChild(const std::string& self, const std::string& grid, const std::string& mode, int runs)
+{
+    const std::string cmd = "'" + self + "' --grid '" + grid + "' --mode " + mode + " --runs " + std::to_string(runs);
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    if (!pipe) throw std::runtime_error("cannot run " + cmd);
+    char buffer[1024];
+    std::string out;
+    while (std::fgets(buffer, sizeof buffer, pipe)) out += buffer;
+    if (::pclose(pipe) != 0) throw std::runtime_error(cmd + " failed:\n" + out);
+    // Step lines (starting with '#') first, then one line of figures.
+    std::string figures, line;
+    std::istringstream lines(out);
+    while (std::getline(lines, line)) {
+        if (line.rfind("#", 0) == 0) std::printf("%s\n", line.c_str() + 1);
+        else if (!line.empty()) figures = line;
+    }
+    std::istringstream in(figures);
+    Measure m;
+    std::string name;
+    in >> name >> m.median >> m.min >> m.max >> m.cpuMedian >> m.loadedMb >> m.peakMb;
+    std::getline(in, m.what);
+    return m;
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    std::string size = "full", grid, mode;
+    int runs = 5;
+    bool fluid = false, collapse = false;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        if (a == "--size" && i + 1 < argc) size = argv[++i];
+        else if (a == "--runs" && i + 1 < argc) runs = std::max(1, std::atoi(argv[++i]));
+        else if (a == "--grid" && i + 1 < argc) grid = argv[++i];
+        else if (a == "--mode" && i + 1 < argc) mode = argv[++i];
+        else if (a == "--fluid") fluid = true;
+        else if (a == "--collapse") collapse = true;
+        else {
+            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse]\n";
+            return 2;
+        }
+    }
+    try {
+        if (!grid.empty()) return child(grid, mode, runs);
+
+        openvdb::initialize();
+        PhantomParams pp;
+        pp.size = parsePhantomSize(size);
+        pp.fluid = fluid;
+        pp.collapse = collapse;
+        const auto t0 = std::chrono::steady_clock::now();
+        const fs::path tmp = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + ".vdb");
+        double truthMl = 0;
+        {
+            Phantom ph = makePhantom(pp);
+            truthMl = ph.truth.lumenVolumeMl;
+            Image3<float> ct;
+            ct.geometry = ph.ct.geometry;
+            ct.voxels.assign(ph.ct.voxels.begin(), ph.ct.voxels.end());
+            ph = Phantom{};
+            IngestReport rep;
+            openvdb::FloatGrid::Ptr hu = ingestImage(ct, IngestParams{}, &rep);
+            hu->setName("ct_hu");
+            openvdb::io::File file(tmp.string());
+            file.write({hu});
+            std::printf("phantom %s%s%s: %lld x %lld x %lld, HU grid %.4g mm voxels, %lld active voxels, "
+                        "%.0f MB; truth lumen %.1f mL (built in %.1f s)\n",
+                        size.c_str(), fluid ? " --fluid" : "", collapse ? " --collapse" : "",
+                        (long long)rep.inputSize[0], (long long)rep.inputSize[1], (long long)rep.inputSize[2],
+                        rep.voxelMm, (long long)rep.activeVoxels, double(rep.memoryBytes) / 1e6, truthMl,
+                        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        }
+        const std::string self = fs::read_symlink("/proc/self/exe").string();
+        const Measure seg = runChild(self, tmp.string(), "segment", runs);
+        const Measure plain = runChild(self, tmp.string(), "threshold", runs);
+        fs::remove(tmp);
+        for (const auto& [name, m] : {std::pair<const char*, const Measure&>{"segmentLumen", seg},
+                                      std::pair<const char*, const Measure&>{"threshold + components", plain}})
+            std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS %.0f MB after "
+                        "loading the grid, peak %.0f MB;%s\n",
+                        name, m.median, m.min, m.max, runs, m.cpuMedian, m.loadedMb, m.peakMb, m.what.c_str());
+        std::printf("%-24s: %.1f x the plain pass's wall time, %.1f x its CPU time, %.2f x its peak memory\n",
+                    "ratio", seg.median / plain.median, seg.cpuMedian / plain.cpuMedian, seg.peakMb / plain.peakMb);
+    } catch (const std::exception& e) {
+        std::cerr << "segment_bench: " << e.what() << "\n";
+        return 1;
+    }
+    return 0;
+}

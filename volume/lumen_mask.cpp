@@ -1,0 +1,432 @@
+// External masks -> lumen level set (constrained smoothing of the binary surface, volume
+// restored by a constant offset), and lumen level set -> mask image on any lattice.
+#include "volume/lumen_mask.h"
+
+#include "volume/error.h"
+#include "volume/ingest.h"
+#include "volume/segment_tools.h"
+
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <iomanip>
+#include <optional>
+#include <set>
+#include <sstream>
+
+namespace flyover {
+
+namespace {
+
+using openvdb::BoolTree;
+using openvdb::Coord;
+using openvdb::FloatGrid;
+using openvdb::FloatTree;
+using BoolLeaf = BoolTree::LeafNodeType;
+using FloatLeaf = FloatTree::LeafNodeType;
+using BoolConstAccessor = openvdb::tree::ValueAccessor<const BoolTree>;
+using FloatConstAccessor = openvdb::tree::ValueAccessor<const FloatTree>;
+using detail::Neighbours;
+
+/// A mask voxel centre counts as inside (outside) where the resampled indicator is at least
+/// 1 - CONSTRAINT_TOLERANCE (at most CONSTRAINT_TOLERANCE); on the mask's own lattice the
+/// indicator is exactly 0 or 1 at every centre, so every centre is constrained.
+constexpr float CONSTRAINT_TOLERANCE = 0.25f;
+/// How far from a constrained voxel centre (in output voxels) the smoothed surface must stay.
+constexpr float CONSTRAINT_MARGIN_VOXELS = 0.05f;
+
+/// A dense image in memory as an ImageSource.
+class DenseMaskSource final : public ImageSource {
+public:
+    explicit DenseMaskSource(const Image3<float>& image) : mImage(image)
+    {
+        mName = "mask image";
+        mGeometry = image.geometry;
+        mDescription = "dense mask in memory";
+    }
+    void readSlices(int64_t k0, int64_t k1, float* out) override
+    {
+        const std::size_t perSlice = static_cast<std::size_t>(mGeometry.size[0] * mGeometry.size[1]);
+        std::memcpy(out, mImage.voxels.data() + perSlice * static_cast<std::size_t>(k0),
+                    perSlice * static_cast<std::size_t>(k1 - k0) * sizeof(float));
+    }
+
+private:
+    const Image3<float>& mImage;
+};
+
+bool holdsLabel(float v, int label)
+{
+    if (label == 0) return v > 0.5f;
+    return std::isfinite(v) && std::lround(v) == label;
+}
+
+/// The label voxels, in the mask's index space, read a slab at a time.
+BoolTree::Ptr readLabel(ImageSource& mask, int label, MaskSummary& summary, Progress* progress)
+{
+    const ImageGeometry& g = mask.geometry();
+    const int64_t nx = g.size[0], ny = g.size[1], nz = g.size[2];
+    constexpr int64_t SLAB = 8;
+    std::vector<float> slab(static_cast<std::size_t>(nx * ny * SLAB));
+    auto tree = std::make_shared<BoolTree>(false);
+    openvdb::tree::ValueAccessor<BoolTree> acc(*tree);
+    std::set<int> present;
+    for (int64_t k0 = 0; k0 < nz; k0 += SLAB) {
+        const int64_t k1 = std::min(nz, k0 + SLAB);
+        mask.readSlices(k0, k1, slab.data());
+        std::size_t v = 0;
+        for (int64_t k = k0; k < k1; ++k)
+            for (int64_t j = 0; j < ny; ++j)
+                for (int64_t i = 0; i < nx; ++i, ++v) {
+                    const float value = slab[v];
+                    if (value != 0.0f && std::isfinite(value) && present.size() < 64)
+                        present.insert(int(std::lround(value)));
+                    if (holdsLabel(value, label)) acc.setValueOn(Coord(int(i), int(j), int(k)), true);
+                }
+        reportProgress(progress, 0.2 * double(k1) / double(nz), "read mask");
+    }
+    summary.labelsPresent.assign(present.begin(), present.end());
+    summary.labelVoxels = static_cast<int64_t>(tree->activeVoxelCount());
+    return tree;
+}
+
+openvdb::Vec3d toVdb(const Vec3d& v) { return {v.x, v.y, v.z}; }
+Vec3d fromVdb(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
+
+/// When the mask's voxel centres are output voxel centres (same spacing and axes, origin
+/// on the output lattice): the integer offset from mask index to output index.
+std::optional<Coord> latticeOffset(const ImageGeometry& g, const openvdb::math::Transform& xf)
+{
+    const double h = xf.voxelSize()[0];
+    for (int c = 0; c < 3; ++c)
+        if (std::abs(g.spacingMm[c] - h) > 1e-6 * h) return std::nullopt;
+    const openvdb::Vec3d o = xf.worldToIndex(toVdb(g.worldFromIndex({0, 0, 0})));
+    const Coord offset = Coord::round(o);
+    for (int c = 0; c < 3; ++c)
+        if (std::abs(o[c] - offset[c]) > 1e-4) return std::nullopt;
+    const Vec3d steps[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (const Vec3d& p : steps) {
+        const openvdb::Vec3d ijk = xf.worldToIndex(toVdb(g.worldFromIndex(p))) - o;
+        for (int c = 0; c < 3; ++c)
+            if (std::abs(ijk[c] - p[c]) > 1e-4) return std::nullopt;
+    }
+    return offset;
+}
+
+/// The mask's indicator (1 inside, 0 outside) on the output lattice: the label voxels
+/// shifted by `offset` when the lattices agree, else trilinear samples of the label at the
+/// output voxel centres (active where > 0).
+FloatTree::Ptr indicatorOnGrid(const BoolTree& label, const ImageGeometry& g,
+                               const openvdb::math::Transform& xf, const std::optional<Coord>& offset)
+{
+    if (offset) {
+        auto out = std::make_shared<FloatTree>(0.0f);
+        openvdb::tree::ValueAccessor<FloatTree> acc(*out);
+        for (auto it = label.cbeginValueOn(); it; ++it) acc.setValue(it.getCoord() + *offset, 1.0f);
+        return out;
+    }
+    // Output voxels near a label voxel: the nearest one to each label centre, grown by the
+    // mask's largest spacing in output voxels.
+    BoolTree near(false);
+    {
+        openvdb::tree::ValueAccessor<BoolTree> acc(near);
+        for (auto it = label.cbeginValueOn(); it; ++it) {
+            const Coord m = it.getCoord();
+            const Vec3d w = g.worldFromIndex({double(m.x()), double(m.y()), double(m.z())});
+            acc.setValueOn(Coord::round(xf.worldToIndex(toVdb(w))), true);
+        }
+    }
+    const double h = xf.voxelSize()[0];
+    const double maxSpacing = std::max({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z});
+    detail::dilateVoxels(near, int(std::ceil(maxSpacing / h)) + 1, Neighbours::All);
+
+    auto out = std::make_shared<FloatTree>(near, 0.0f, openvdb::TopologyCopy());
+    openvdb::tree::LeafManager<FloatTree> leaves(*out);
+    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+        BoolConstAccessor labelAcc(label);
+        for (auto it = leaf.beginValueOn(); it; ++it) {
+            const Vec3d u = g.indexFromWorld(fromVdb(xf.indexToWorld(it.getCoord())));
+            const Coord base(int(std::floor(u.x)), int(std::floor(u.y)), int(std::floor(u.z)));
+            const double fx = u.x - base.x(), fy = u.y - base.y(), fz = u.z - base.z();
+            double value = 0;
+            for (int dz = 0; dz < 2; ++dz)
+                for (int dy = 0; dy < 2; ++dy)
+                    for (int dx = 0; dx < 2; ++dx)
+                        if (labelAcc.isValueOn(base.offsetBy(dx, dy, dz)))
+                            value += (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
+            if (value > 1e-6) it.setValue(static_cast<float>(std::min(value, 1.0)));
+            else it.setValueOff();
+        }
+    });
+    return out;
+}
+
+/// The constraints of a binary mask at an output voxel: its centre must stay inside (value
+/// at most -margin), outside (at least +margin), or is free.
+inline float constrained(float phi, float indicator, float marginMm)
+{
+    if (indicator >= 1.0f - CONSTRAINT_TOLERANCE) return std::min(phi, -marginMm);
+    if (indicator <= CONSTRAINT_TOLERANCE) return std::max(phi, marginMm);
+    return phi;
+}
+
+/// Sum over the active voxels of clamp(0.5 - phi' / h, 0, 1) with phi' = the constrained
+/// value of phi - offset: the sub-voxel volume (in voxels) of the offset level set that still
+/// keeps every mask centre on its side. Summed per leaf, then in leaf order.
+double insideVoxels(const FloatTree& phi, const FloatTree& indicator, double offsetMm, double h,
+                    float marginMm)
+{
+    openvdb::tree::LeafManager<const FloatTree> leaves(phi);
+    std::vector<double> perLeaf(leaves.leafCount(), 0.0);
+    leaves.foreach([&](const FloatLeaf& leaf, std::size_t n) {
+        FloatConstAccessor indAcc(indicator);
+        double s = 0;
+        for (auto it = leaf.cbeginValueOn(); it; ++it) {
+            const float v = constrained(float(*it - offsetMm), indAcc.getValue(it.getCoord()), marginMm);
+            s += std::clamp(0.5 - v / h, 0.0, 1.0);
+        }
+        perLeaf[n] = s;
+    });
+    double total = 0;
+    for (double v : perLeaf) total += v;
+    return total;
+}
+
+/// Jacobi iterations of the discrete Laplacian (each replaces a voxel by the mean of its six
+/// neighbours: diffusion for 1/6 voxel^2, i.e. sigma^2 grows by h^2 / 3) on the voxels of
+/// `work`, each followed by the constraints: phi <= -margin at inside centres, >= +margin at
+/// outside centres.
+void constrainedSmoothing(FloatTree& phi, const BoolTree& work, const FloatTree& indicator,
+                          int iterations, float marginMm)
+{
+    openvdb::tree::LeafManager<const BoolTree> leaves(work);
+    std::vector<std::array<float, FloatLeaf::SIZE>> next(leaves.leafCount());
+    static const Coord STEPS[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+    for (int iter = 0; iter < iterations; ++iter) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.leafCount(), 8),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            FloatConstAccessor phiAcc(phi), indAcc(indicator);
+            for (std::size_t n = r.begin(); n != r.end(); ++n)
+                for (auto it = leaves.leaf(n).cbeginValueOn(); it; ++it) {
+                    const Coord ijk = it.getCoord();
+                    float sum = 0;
+                    for (const Coord& d : STEPS) sum += phiAcc.getValue(ijk + d);
+                    next[n][it.pos()] = constrained(sum / 6.0f, indAcc.getValue(ijk), marginMm);
+                }
+        });
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.leafCount(), 8),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t n = r.begin(); n != r.end(); ++n) {
+                FloatLeaf* target = phi.probeLeaf(leaves.leaf(n).origin());
+                if (!target) continue;
+                for (auto it = leaves.leaf(n).cbeginValueOn(); it; ++it)
+                    target->setValueOnly(it.pos(), next[n][it.pos()]);
+            }
+        });
+    }
+}
+
+openvdb::math::Transform::Ptr outputTransform(const ImageGeometry& g, const FloatGrid* reference)
+{
+    if (reference) {
+        const auto& xf = reference->transform();
+        const openvdb::Vec3d vs = xf.voxelSize();
+        if (!xf.isLinear() || !(vs[0] > 0) || std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] ||
+            std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
+            throw InputError("segmentFromMask: the reference grid's voxels are not cubic");
+        return xf.copy();
+    }
+    const double voxelMm = std::min({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z});
+    return makeGridTransform(g.originMm, g.direction, voxelMm);
+}
+
+std::string labelsText(const std::vector<int>& labels)
+{
+    if (labels.empty()) return "none: every voxel is 0";
+    std::ostringstream s;
+    for (std::size_t i = 0; i < labels.size(); ++i) s << (i ? ", " : "") << labels[i];
+    if (labels.size() >= 64) s << ", ...";
+    return s.str();
+}
+
+} // namespace
+
+LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params,
+                                  const FloatGrid* reference, Progress* progress, MaskSummary* summaryOut)
+{
+    validateSegmentParams(params);
+    if (!mask.isRegular())
+        throw InputError(mask.name() + ": the mask's slices are not on a regular lattice");
+    MaskSummary summary;
+    summary.geometry = mask.geometry();
+    const ImageGeometry& g = summary.geometry;
+    reportProgress(progress, 0.0, "read mask");
+    BoolTree::Ptr label = readLabel(mask, params.maskLabel, summary, progress);
+    if (label->empty()) {
+        std::ostringstream msg;
+        msg << mask.name() << ": no voxel holds "
+            << (params.maskLabel == 0 ? std::string("a non-zero label") : "label " + std::to_string(params.maskLabel))
+            << " (labels present: " << labelsText(summary.labelsPresent) << ")";
+        throw InputError(msg.str());
+    }
+
+    const openvdb::math::Transform::Ptr xf = outputTransform(g, reference);
+    const double h = xf->voxelSize()[0];
+    const double voxelMl = std::abs(xf->voxelVolume()) / 1000.0;
+    if (reference) {
+        // The mask must overlap the CT; label voxels beyond the CT's active box are counted.
+        const openvdb::CoordBBox box = reference->evalActiveVoxelBoundingBox();
+        openvdb::Index64 outside = 0;
+        for (auto it = label->cbeginValueOn(); it; ++it) {
+            const Coord m = it.getCoord();
+            const Vec3d w = g.worldFromIndex({double(m.x()), double(m.y()), double(m.z())});
+            const openvdb::Vec3d ijk = xf->worldToIndex(toVdb(w));
+            bool in = true;
+            for (int c = 0; c < 3; ++c) in = in && ijk[c] >= box.min()[c] - 0.5 && ijk[c] <= box.max()[c] + 0.5;
+            outside += in ? 0 : 1;
+        }
+        summary.voxelsOutsideReference = static_cast<int64_t>(outside);
+        if (outside == label->activeVoxelCount()) {
+            const openvdb::Vec3d lo = xf->indexToWorld(box.min()), hi = xf->indexToWorld(box.max());
+            std::ostringstream msg;
+            msg << std::fixed << std::setprecision(1) << mask.name()
+                << ": the mask does not overlap the CT (no label voxel lies within the CT's box, "
+                << "LPS mm from (" << std::min(lo[0], hi[0]) << ", " << std::min(lo[1], hi[1]) << ", "
+                << std::min(lo[2], hi[2]) << ") to (" << std::max(lo[0], hi[0]) << ", "
+                << std::max(lo[1], hi[1]) << ", " << std::max(lo[2], hi[2])
+                << ")); are they from the same scan?";
+            throw InputError(msg.str());
+        }
+    }
+    const std::optional<Coord> offset = latticeOffset(g, *xf);
+    summary.resampled = !offset;
+    reportProgress(progress, 0.25, "mask on the output grid");
+    FloatTree::Ptr indicator = indicatorOnGrid(*label, g, *xf, offset);
+    const double maskVolumeMl =
+        double(summary.labelVoxels) * g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
+    label.reset();
+
+    // f0 = 0.5 - indicator: its linear zero crossing lies halfway between inside and outside
+    // centres, where a binary mask's surface is. The region covers the exterior band, the
+    // smoothing's reach and the constant offset below.
+    const double maxSpacing = std::max({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z});
+    const double sigmaMm = params.maskSmoothingVoxels * maxSpacing;
+    const int iterations = int(std::ceil(3.0 * sigmaMm * sigmaMm / (h * h)));
+    const int shellVoxels = params.bandVoxels + 3;
+    BoolTree region(*indicator, false, true, openvdb::TopologyCopy());
+    detail::dilateVoxels(region, shellVoxels, Neighbours::All);
+    auto f = std::make_shared<FloatTree>(region, 0.5f, openvdb::TopologyCopy());
+    {
+        openvdb::tree::LeafManager<FloatTree> leaves(*f);
+        leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+            FloatConstAccessor indAcc(*indicator);
+            for (auto it = leaf.beginValueOn(); it; ++it) it.setValue(0.5f - indAcc.getValue(it.getCoord()));
+        });
+    }
+    FloatGrid::Ptr fGrid = FloatGrid::create(f);
+    fGrid->setTransform(xf->copy());
+    reportProgress(progress, 0.35, "mask level set");
+    FloatGrid::Ptr phi = detail::redistance(*fGrid);
+    fGrid.reset();
+    f.reset();
+
+    const float marginMm = static_cast<float>(CONSTRAINT_MARGIN_VOXELS * h);
+    if (iterations > 0) {
+        // Smooth within reach of the surface only: beyond 2 sigma + a voxel nothing moves.
+        const float reachMm = static_cast<float>(2.0 * sigmaMm + h);
+        BoolTree work(phi->tree(), false, true, openvdb::TopologyCopy());
+        {
+            openvdb::tree::LeafManager<BoolTree> leaves(work);
+            leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
+                const FloatLeaf* src = phi->tree().probeConstLeaf(leaf.origin());
+                for (auto it = src->cbeginValueOn(); it; ++it)
+                    if (!(std::abs(*it) < reachMm)) leaf.setValueOff(it.pos(), false);
+            });
+        }
+        reportProgress(progress, 0.5, "constrained smoothing");
+        constrainedSmoothing(phi->tree(), work, *indicator, iterations, marginMm);
+        phi = detail::redistance(*phi);
+    }
+    reportProgress(progress, 0.75, "restore the mask's volume");
+
+    // A constant offset (bisection, within one voxel) so that the sub-voxel volume enclosed by
+    // the level set equals the mask's voxel-count volume (no shrinking, no growing), with the
+    // constraints applied after it, so that no mask centre changes side.
+    const double targetVoxels = maskVolumeMl / voxelMl;
+    double lo = -h, hi = h;
+    for (int i = 0; i < 40; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        (insideVoxels(phi->tree(), *indicator, mid, h, marginMm) < targetVoxels ? lo : hi) = mid;
+    }
+    const float volumeOffsetMm = static_cast<float>(0.5 * (lo + hi));
+    {
+        openvdb::tree::LeafManager<FloatTree> leaves(phi->tree());
+        leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+            FloatConstAccessor indAcc(*indicator);
+            for (auto it = leaf.beginValueOn(); it; ++it)
+                it.setValue(constrained(*it - volumeOffsetMm, indAcc.getValue(it.getCoord()), marginMm));
+        });
+    }
+    indicator.reset();
+    phi->setTransform(xf->copy());
+    reportProgress(progress, 0.9, "trim band and build mask");
+
+    LumenSegmentation result;
+    detail::finishLumen(phi, params, result, progress);
+    if (summaryOut) *summaryOut = summary;
+    reportProgress(progress, 1.0, "lumen from mask");
+    return result;
+}
+
+LumenSegmentation segmentFromMask(const Image3<float>& mask, const SegmentParams& params,
+                                  const FloatGrid* reference, Progress* progress, MaskSummary* summary)
+{
+    DenseMaskSource source(mask);
+    return segmentFromMask(source, params, reference, progress, summary);
+}
+
+Image3<uint8_t> rasterizeLumen(const FloatGrid& sdf, const ImageGeometry& geometry)
+{
+    Image3<uint8_t> out;
+    out.geometry = geometry;
+    out.voxels.assign(static_cast<std::size_t>(geometry.voxelCount()), 0);
+    const openvdb::CoordBBox active = sdf.evalActiveVoxelBoundingBox();
+    if (active.empty()) return out;
+    // The image's index box that can reach the level set's active box (its 8 corners mapped).
+    std::array<int64_t, 3> lo{geometry.size[0], geometry.size[1], geometry.size[2]}, hi{-1, -1, -1};
+    for (int corner = 0; corner < 8; ++corner) {
+        const openvdb::Vec3d c((corner & 1) ? active.max().x() + 1.0 : active.min().x() - 1.0,
+                               (corner & 2) ? active.max().y() + 1.0 : active.min().y() - 1.0,
+                               (corner & 4) ? active.max().z() + 1.0 : active.min().z() - 1.0);
+        const Vec3d u = geometry.indexFromWorld(fromVdb(sdf.transform().indexToWorld(c)));
+        for (int a = 0; a < 3; ++a) {
+            lo[std::size_t(a)] = std::min(lo[std::size_t(a)], int64_t(std::floor(u[a])));
+            hi[std::size_t(a)] = std::max(hi[std::size_t(a)], int64_t(std::ceil(u[a])));
+        }
+    }
+    for (int a = 0; a < 3; ++a) {
+        lo[std::size_t(a)] = std::max<int64_t>(lo[std::size_t(a)], 0);
+        hi[std::size_t(a)] = std::min<int64_t>(hi[std::size_t(a)], geometry.size[std::size_t(a)] - 1);
+    }
+    if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return out;
+    tbb::parallel_for(tbb::blocked_range<int64_t>(lo[2], hi[2] + 1), [&](const tbb::blocked_range<int64_t>& r) {
+        const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>
+            sampler(sdf.getConstAccessor(), sdf.transform());
+        for (int64_t k = r.begin(); k != r.end(); ++k)
+            for (int64_t j = lo[1]; j <= hi[1]; ++j)
+                for (int64_t i = lo[0]; i <= hi[0]; ++i) {
+                    const Vec3d w = geometry.worldFromIndex({double(i), double(j), double(k)});
+                    if (sampler.wsSample(toVdb(w)) < 0.0f) out.at(i, j, k) = 1;
+                }
+    });
+    return out;
+}
+
+} // namespace flyover
