@@ -1,20 +1,18 @@
-// Centerline on the sparse lumen grid:
+// Centerline on the sparse lumen grid (see centerline.h for the method in brief):
 //  1. flat leaf-blocked index of the lumen voxels (sdf < 0), D = -sdf;
-//  2. 26-connected components; the largest one only (bridging collapsed pieces comes later);
-//  3. endpoints by geodesic farthest points (two full Dijkstra passes), or the voxel nearest to
-//     CenterlineParams::rectumMm plus the point farthest from it;
-//  4. minimal path under the cost D^-p per unit length (bucket-queue Dijkstra), backtracked;
-//  5. end trimming, centering on the ridge of D, twiced Gaussian smoothing, straight extension
-//     into the blind ends, orientation (rectum = lower z), uniform resampling, radii, frames.
-// Everything after step 1 that touches all voxels is serial and deterministic.
-//
-// Time for 5M lumen voxels at 0.78 mm on 2 cores: about 3.5 s (labelling 0.5 s, each geodesic
-// pass 0.55 s, the medial pass 1.9 s, the rest 0.1 s). Ideas for the 3 s target: run the two
-// farthest-point passes on a 2x coarser voxel set (the ends are trimmed anyway), fuse the
-// labelling with the first pass, skip voxels within a voxel of the wall in the medial pass,
-// search the medial path from both ends.
+//  2. 26-connected pieces by breadth-first search; the last voxel a search reaches is
+//     farthest from its seed in steps, so the labelling pass also yields one geodesic
+//     farthest end per piece, and a second search from it yields the other end;
+//  3. per piece, a minimal path under the cost D^-p per unit length (bucket-queue Dijkstra)
+//     through the piece's core (voxels at least half as deep as the deepest nearby), which
+//     is all a path through the middle needs and a quarter of the voxels;
+//  4. per piece: end trimming, ridge of D, cross-section centroids, twiced Gaussian
+//     smoothing, straight extension into the blind ends;
+//  5. pieces ordered and bridged (centerline_bridge.h), uniform resampling, radii, frames.
+// Searches are serial and deterministic; per-point geometry runs in parallel over points.
 #include "volume/centerline.h"
 
+#include "volume/centerline_bridge.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/Interpolation.h>
@@ -33,6 +31,10 @@
 #include <sstream>
 #include <utility>
 #include <vector>
+#include <cstdio>
+#include <chrono>
+#include <ctime>
+#include <cstdlib>
 
 namespace flyover {
 
@@ -46,6 +48,7 @@ constexpr int LEAF_LOG2 = 3;  // FloatTree leaves are 8^3
 constexpr int LEAF_DIM = 1 << LEAF_LOG2;
 constexpr int LEAF_VOXELS = LEAF_DIM * LEAF_DIM * LEAF_DIM;
 static_assert(FloatLeaf::DIM == LEAF_DIM, "FloatTree leaves are expected to be 8^3");
+static_assert(LEAF_DIM % 2 == 0, "leaf origins must have even coordinates for the coarse lattice");
 
 using Slot = std::uint32_t;
 constexpr Slot NO_SLOT = std::numeric_limits<Slot>::max();
@@ -90,8 +93,9 @@ struct LumenIndex {
                Coord(off >> (2 * LEAF_LOG2), (off >> LEAF_LOG2) & (LEAF_DIM - 1), off & (LEAF_DIM - 1));
     }
 
-    /// Calls fn(neighbourSlot, stepIndex) for each 26-neighbour of `s` that is a lumen voxel.
-    template<typename Fn>
+    /// Calls fn(neighbourSlot, stepIndex) for each 26-neighbour of `s` that is a lumen voxel;
+    /// with STRIDE 2, for the neighbours two voxels away (the lattice of even coordinates).
+    template<int STRIDE = 1, typename Fn>
     void forEachNeighbour(Slot s, Fn&& fn) const
     {
         const std::size_t block = s / LEAF_VOXELS;
@@ -101,8 +105,8 @@ struct LumenIndex {
         const auto& nb = neighbour[block];
         for (int k = 0; k < 26; ++k) {
             const Step& st = STEPS[k];
-            const int nx = x + st.dx, ny = y + st.dy, nz = z + st.dz;
-            // nx in [-1, 8]: the arithmetic shift gives -1, 0 or +1 for the neighbouring leaf.
+            const int nx = x + STRIDE * st.dx, ny = y + STRIDE * st.dy, nz = z + STRIDE * st.dz;
+            // nx in [-2, 9]: the arithmetic shift gives -1, 0 or +1 for the neighbouring leaf.
             const int b = nb[((nx >> LEAF_LOG2) + 1) * 9 + ((ny >> LEAF_LOG2) + 1) * 3 +
                              ((nz >> LEAF_LOG2) + 1)];
             if (b < 0) continue;
@@ -167,17 +171,23 @@ LumenIndex buildIndex(const FloatTree& sdf)
     return index;
 }
 
-/// 26-connected lumen components: a label per slot and the largest component (ties: the one
-/// found first in slot order).
-struct Components {
-    std::vector<std::int32_t> label;  // per slot, -1 for non-lumen
-    std::vector<std::size_t> size;    // per label
-    std::int32_t largest = -1;
+void checkCancelled(Progress* progress)
+{
+    if (progress && progress->cancelled()) throw Cancelled();
+}
+
+/// 26-connected lumen pieces: a label per slot, and per piece its voxel count and the voxel
+/// its breadth-first labelling search reached last (farthest in steps from the seed: for a
+/// tube, one of its two ends).
+struct Pieces {
+    std::vector<std::int32_t> label;  ///< per slot, -1 for non-lumen
+    std::vector<std::size_t> size;    ///< per label
+    std::vector<Slot> lastReached;    ///< per label
 };
 
-Components labelComponents(const LumenIndex& index)
+Pieces labelPieces(const LumenIndex& index, Progress* progress)
 {
-    Components c;
+    Pieces c;
     c.label.assign(index.slotCount(), -1);
     std::vector<Slot> queue;
     for (Slot s = 0; s < index.slotCount(); ++s) {
@@ -186,27 +196,49 @@ Components labelComponents(const LumenIndex& index)
         queue.clear();
         queue.push_back(s);
         c.label[s] = id;
-        for (std::size_t head = 0; head < queue.size(); ++head)
+        for (std::size_t head = 0; head < queue.size(); ++head) {
+            if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
             index.forEachNeighbour(queue[head], [&](Slot t, int) {
                 if (c.label[t] < 0) {
                     c.label[t] = id;
                     queue.push_back(t);
                 }
             });
+        }
         c.size.push_back(queue.size());
-        if (c.largest < 0 || queue.size() > c.size[c.largest]) c.largest = id;
+        c.lastReached.push_back(queue.back());
     }
     return c;
 }
 
-void checkCancelled(Progress* progress)
+/// Breadth-first search from `source` over its piece: steps[s] = number of 26-neighbour steps
+/// from the source (slots of this piece only; others untouched). Returns the slot reached
+/// last, the farthest in steps (ties: the first found).
+Slot stepsFrom(const LumenIndex& index, Slot source, std::vector<std::int32_t>& steps,
+               Progress* progress)
 {
-    if (progress && progress->cancelled()) throw Cancelled();
+    std::vector<Slot> queue{source};
+    steps[source] = 0;
+    for (std::size_t head = 0; head < queue.size(); ++head) {
+        if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
+        const Slot u = queue[head];
+        const std::int32_t next = steps[u] + 1;
+        index.forEachNeighbour(u, [&](Slot t, int) {
+            if (steps[t] < 0) {
+                steps[t] = next;
+                queue.push_back(t);
+            }
+        });
+    }
+    const Slot last = queue.back();
+    return last;
 }
 
-/// Single-source Dijkstra over the 26-connected lumen voxels. edgeCost(from, to, stepIndex)
-/// must lie in [minEdge, maxEdge], minEdge > 0. Stops once `target` is settled (pass NO_SLOT to
-/// settle the whole component); `dist` then holds final distances for settled slots only.
+/// Single-source Dijkstra over the 26-connected lumen voxels for which allowed[s] != 0.
+/// With STRIDE 2 the steps join voxels two apart (see LumenIndex::forEachNeighbour).
+/// edgeCost(from, to, stepIndex) must lie in [minEdge, maxEdge], minEdge > 0, or be +infinity
+/// (no edge). Stops once
+/// `target` is settled; returns whether it was reached. `prev` then leads back from it.
 ///
 /// The queue is a ring of buckets of width just below minEdge (Dial's algorithm generalised to
 /// real weights): a relaxation from bucket k always lands in a later bucket, and every slot of
@@ -214,10 +246,10 @@ void checkCancelled(Progress* progress)
 /// each push and pop is O(1). Where the weight range is too wide for a ring of reasonable size
 /// (a steep wallPenalty), a binary heap takes over. Both are serial and break ties by insertion
 /// order, so the result does not depend on the thread count.
-template<typename EdgeCost>
-void dijkstra(const LumenIndex& index, Slot source, Slot target, EdgeCost&& edgeCost,
-              double minEdge, double maxEdge, std::vector<double>& dist, std::vector<Slot>& prev,
-              Progress* progress)
+template<int STRIDE, typename EdgeCost>
+bool dijkstra(const LumenIndex& index, const std::vector<std::uint8_t>& allowed, Slot source,
+              Slot target, EdgeCost&& edgeCost, double minEdge, double maxEdge,
+              std::vector<double>& dist, std::vector<Slot>& prev, Progress* progress)
 {
     dist.assign(index.slotCount(), std::numeric_limits<double>::infinity());
     prev.assign(index.slotCount(), NO_SLOT);
@@ -242,10 +274,11 @@ void dijkstra(const LumenIndex& index, Slot source, Slot target, EdgeCost&& edge
                 --pending;
                 if (done[u]) continue;  // stale entry from before an improvement
                 done[u] = 1;
-                if (u == target) return;
+                if (u == target) return true;
                 tick();
                 const double d = dist[u];
-                index.forEachNeighbour(u, [&](Slot v, int k) {
+                index.forEachNeighbour<STRIDE>(u, [&](Slot v, int k) {
+                    if (!allowed[v]) return;
                     const double nd = d + edgeCost(u, v, k);
                     if (nd < dist[v]) {
                         dist[v] = nd;
@@ -261,7 +294,7 @@ void dijkstra(const LumenIndex& index, Slot source, Slot target, EdgeCost&& edge
             }
             bucket.clear();
         }
-        return;
+        return false;
     }
 
     using Entry = std::pair<double, Slot>;
@@ -271,9 +304,10 @@ void dijkstra(const LumenIndex& index, Slot source, Slot target, EdgeCost&& edge
         const auto [d, u] = heap.top();
         heap.pop();
         if (d > dist[u]) continue;  // stale entry
-        if (u == target) return;
+        if (u == target) return true;
         tick();
-        index.forEachNeighbour(u, [&](Slot v, int k) {
+        index.forEachNeighbour<STRIDE>(u, [&](Slot v, int k) {
+            if (!allowed[v]) return;
             const double nd = d + edgeCost(u, v, k);
             if (nd < dist[v]) {
                 dist[v] = nd;
@@ -282,21 +316,33 @@ void dijkstra(const LumenIndex& index, Slot source, Slot target, EdgeCost&& edge
             }
         });
     }
+    return false;
 }
 
-/// The settled slot with the largest finite distance (ties: lowest slot).
-Slot farthest(const std::vector<double>& dist)
+/// Per block, the largest D over the block and its 26 neighbouring blocks: the depth of the
+/// lumen's middle near each voxel, to which the core of a piece is relative.
+std::vector<float> nearbyMaxDepth(const LumenIndex& index)
 {
-    Slot best = NO_SLOT;
-    double bestD = -1.0;
-    for (Slot s = 0; s < dist.size(); ++s)
-        if (dist[s] < std::numeric_limits<double>::infinity() && dist[s] > bestD) {
-            bestD = dist[s];
-            best = s;
+    const std::size_t blocks = index.blockOrigin.size();
+    std::vector<float> own(blocks, 0.0f), nearby(blocks, 0.0f);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            const float* d = &index.depthMm[b * LEAF_VOXELS];
+            own[b] = *std::max_element(d, d + LEAF_VOXELS);
         }
-    return best;
+    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            float m = 0.0f;
+            for (std::int32_t nb : index.neighbour[b])
+                if (nb >= 0) m = std::max(m, own[static_cast<std::size_t>(nb)]);
+            nearby[b] = m;
+        }
+    });
+    return nearby;
 }
-
 Vec3d toVec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
 
 /// Arc length at each vertex of a polyline.
@@ -455,7 +501,6 @@ std::vector<Vec3d> gaussianSmooth(const std::vector<Vec3d>& pts, double sigmaSam
     });
     return out;
 }
-
 void validate(const openvdb::FloatGrid& sdf, const CenterlineParams& p)
 {
     auto bad = [](const std::string& what) { throw ParameterError("CenterlineParams." + what); };
@@ -467,6 +512,9 @@ void validate(const openvdb::FloatGrid& sdf, const CenterlineParams& p)
     if (p.rectumMm && !(std::isfinite(p.rectumMm->x) && std::isfinite(p.rectumMm->y) &&
                         std::isfinite(p.rectumMm->z)))
         bad("rectumMm must be a finite point");
+    if (!(p.minPieceMl >= 0) || !std::isfinite(p.minPieceMl)) bad("minPieceMl must be finite and >= 0");
+    if (!(p.bridgeTurnMmPerRad >= 0) || !std::isfinite(p.bridgeTurnMmPerRad))
+        bad("bridgeTurnMmPerRad must be finite and >= 0");
     const auto& xf = sdf.transform();
     if (!xf.isLinear()) throw InputError("extractCenterline: the sdf grid's transform is not linear");
     const openvdb::Vec3d vs = xf.voxelSize();
@@ -475,14 +523,403 @@ void validate(const openvdb::FloatGrid& sdf, const CenterlineParams& p)
         throw InputError("extractCenterline: the sdf grid's voxels are not cubic");
 }
 
+/// The sdf at a world position by trilinear interpolation (mm). One probe per thread.
+class SdfProbe {
+public:
+    explicit SdfProbe(const openvdb::FloatGrid& grid) : mAcc(grid.tree()), mXf(grid.transform()) {}
+    double operator()(const Vec3d& worldMm)
+    {
+        float v = 0.0f;
+        openvdb::tools::BoxSampler::sample(
+            mAcc, mXf.worldToIndex(openvdb::Vec3d(worldMm.x, worldMm.y, worldMm.z)), v);
+        return static_cast<double>(v);
+    }
+
+private:
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> mAcc;
+    const openvdb::math::Transform& mXf;
+};
+
+/// Distance from `origin` (inside the lumen) along the unit vector `dir` to the first zero
+/// crossing of the sdf; -1 when there is none within maxMm. Sphere tracing: a step of 90% of
+/// |sdf| never reaches the wall, however thin (a fold), because |sdf| is at most the distance
+/// to the nearest wall; a floor of a quarter voxel bounds the step count near the wall. The
+/// crossing is then located by four regula falsi steps in the bracketing interval.
+double rayToWall(SdfProbe& sdf, const Vec3d& origin, const Vec3d& dir, double maxMm, double voxelMm)
+{
+    double tIn = 0.0, sIn = sdf(origin);
+    if (!(sIn < 0.0)) return 0.0;
+    const double minStep = 0.25 * voxelMm;
+    while (tIn < maxMm) {
+        const double t = tIn + std::max(-0.9 * sIn, minStep);
+        const double s = sdf(origin + dir * t);
+        if (s >= 0.0) {
+            double a = tIn, fa = sIn, b = t, fb = s;
+            for (int k = 0; k < 4; ++k) {
+                const double m = a + (b - a) * fa / (fa - fb);
+                const double fm = sdf(origin + dir * m);
+                if (fm < 0.0) {
+                    a = m;
+                    fa = fm;
+                } else {
+                    b = m;
+                    fb = fm;
+                }
+            }
+            return a + (b - a) * fa / (fa - fb);
+        }
+        tIn = t;
+        sIn = s;
+    }
+    return -1.0;
+}
+
+/// The lumen's cross-section in the plane through p perpendicular to the unit vector t, as
+/// the star-shaped polygon of the wall hits of RAYS rays from p.
+struct Section {
+    Vec3d centroidMm;
+    double areaMm2 = 0;
+    bool ok = false;   ///< every ray hit the wall within reach and the centroid is in the lumen
+};
+
+constexpr int SECTION_RAYS = 32;
+
+Section crossSection(SdfProbe& sdf, const Vec3d& p, const Vec3d& t, double maxRayMm, double voxelMm)
+{
+    const Vec3d helper = std::abs(t.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+    const Vec3d u1 = normalize(cross(t, helper)), u2 = cross(t, u1);
+    std::array<Vec3d, SECTION_RAYS> hit;
+    constexpr double TWO_PI = 6.283185307179586476925;
+    for (int k = 0; k < SECTION_RAYS; ++k) {
+        const double a = TWO_PI * k / SECTION_RAYS;
+        const Vec3d dir = u1 * std::cos(a) + u2 * std::sin(a);
+        const double r = rayToWall(sdf, p, dir, maxRayMm, voxelMm);
+        if (!(r > 0.0)) return {};
+        hit[k] = dir * r;  // relative to p
+    }
+    // Fan of triangles (p, hit k, hit k+1): area-weighted centroids.
+    Section sec;
+    Vec3d moment;
+    for (int k = 0; k < SECTION_RAYS; ++k) {
+        const Vec3d& a = hit[k];
+        const Vec3d& b = hit[(k + 1) % SECTION_RAYS];
+        const double area = 0.5 * length(cross(a, b));
+        sec.areaMm2 += area;
+        moment += (a + b) * (area / 3.0);
+    }
+    if (!(sec.areaMm2 > 0.0)) return {};
+    sec.centroidMm = p + moment / sec.areaMm2;
+    sec.ok = sdf(sec.centroidMm) < 0.0;
+    return sec;
+}
+
+/// Moves an evenly sampled path (spacing spacingMm) to the centroids of the lumen's cross-
+/// sections perpendicular to it, taken every sectionStride samples. A haustral fold or a large
+/// polyp cuts into the sections within its thickness and pulls their centroids (and the ridge
+/// of D, over a whole lumen radius either side) off the axis of the lumen; such sections are
+/// recognised by an area below 85% of the median over the neighbouring SECTION_WINDOW_MM
+/// either side (a fold takes a quarter to a third of the section, taper and bends change the
+/// area by a few per cent over that window) and skipped: their displacement, like that of
+/// sections whose rays do not all reach the wall (the end caps, an oblique cut at a tight
+/// bend), is interpolated linearly from the nearest kept sections.
+std::vector<Vec3d> centerOnSections(const std::vector<Vec3d>& pts, const openvdb::FloatGrid& grid,
+                                    double voxelMm, double spacingMm, long* firstKept = nullptr,
+                                    long* lastKept = nullptr)
+{
+    const long n = static_cast<long>(pts.size());
+    if (n < 3) return pts;
+    constexpr double SECTION_WINDOW_MM = 20.0;
+    const double MIN_AREA_FRACTION = 0.9;
+    const double GROW_MM = 3.0;
+    const double SHIFT_FRACTION = 1.0;
+    const double TANGENT_SIGMA_MM = 8.0;
+    const long stride = std::max(1L, static_cast<long>(std::lround(std::min(voxelMm, 1.0) / spacingMm)));
+    std::vector<long> at;
+    for (long i = 0; i < n; i += stride) at.push_back(i);
+    if (at.back() != n - 1) at.push_back(n - 1);
+    const long m = static_cast<long>(at.size());
+
+    // Section normals from the path smoothed over two voxels (the sampled path has
+    // voxel-scale wiggles that would tilt single sections).
+    const std::vector<Vec3d> smooth = gaussianSmooth(pts, std::max(2.0 * voxelMm, TANGENT_SIGMA_MM) / spacingMm);
+    const long half = std::max(1L, static_cast<long>(std::lround(voxelMm / spacingMm)));
+
+    std::vector<Section> sections(static_cast<std::size_t>(m));
+    tbb::parallel_for(tbb::blocked_range<long>(0, m, 16), [&](const tbb::blocked_range<long>& r) {
+        SdfProbe sdf(grid);
+        for (long j = r.begin(); j != r.end(); ++j) {
+            const long i = at[j];
+            const Vec3d t = normalize(smooth[std::min(n - 1, i + half)] - smooth[std::max(0L, i - half)]);
+            if (length(t) == 0) continue;
+            const double depth = std::max(-sdf(pts[i]), voxelMm);
+            Section s = crossSection(sdf, pts[i], t, 3.0 * depth, voxelMm);
+            // A centroid farther than the local depth from the point is not the same stretch of
+            // lumen (the section reaches round a tight bend or into a pocket).
+            if (s.ok && distance(s.centroidMm, pts[i]) > SHIFT_FRACTION * depth) s.ok = false;
+            sections[j] = s;
+        }
+    });
+
+    const long window = std::max(2L, static_cast<long>(std::lround(SECTION_WINDOW_MM / (stride * spacingMm))));
+    std::vector<char> keep(static_cast<std::size_t>(m), 0);
+    std::vector<double> areas;
+    for (long j = 0; j < m; ++j) {
+        if (!sections[j].ok) continue;
+        areas.clear();
+        for (long k = std::max(0L, j - window); k <= std::min(m - 1, j + window); ++k)
+            if (sections[k].ok) areas.push_back(sections[k].areaMm2);
+        auto mid = areas.begin() + static_cast<long>(areas.size() / 2);
+        std::nth_element(areas.begin(), mid, areas.end());
+        keep[j] = sections[j].areaMm2 >= MIN_AREA_FRACTION * *mid;
+    }
+    {
+        // Sections next to a skipped one are tilted through the same fold or polyp by the
+        // path's own deviation there: skip them too.
+        const long grow = std::max(1L, static_cast<long>(std::lround(GROW_MM / (stride * spacingMm))));
+        std::vector<char> grown(keep);
+        for (long j = 0; j < m; ++j)
+            if (!keep[j] && sections[j].ok)
+                for (long k = std::max(0L, j - grow); k <= std::min(m - 1, j + grow); ++k) grown[k] = 0;
+        keep.swap(grown);
+    }
+
+    {
+        // The centroids of a tube's sections lie on a smooth curve. Where the lumen is no tube
+        // (a pouch, two limbs merged in a coarse mask) neighbouring sections cut different
+        // parts of it and their centroids jump: skip a section whose centroid lies more than
+        // half a voxel off the line through the kept centroids within two voxels either side.
+        const long reach = std::max(2L, static_cast<long>(std::lround(2.0 * voxelMm / (stride * spacingMm))));
+        const double tolerance = 0.5 * voxelMm;
+        std::vector<char> smoothOk(keep);
+        for (long j = 0; j < m; ++j) {
+            if (!keep[j]) continue;
+            double n = 0, st = 0, stt = 0;
+            Vec3d sc, stc;
+            for (long k = std::max(0L, j - reach); k <= std::min(m - 1, j + reach); ++k) {
+                if (k == j || !keep[k]) continue;
+                const double t = double(k - j);
+                n += 1;
+                st += t;
+                stt += t * t;
+                sc += sections[k].centroidMm;
+                stc += sections[k].centroidMm * t;
+            }
+            const double den = n * stt - st * st;
+            if (n < 2 || !(den > 0)) continue;
+            const Vec3d slope = (stc * n - sc * st) / den;
+            const Vec3d at0 = (sc - slope * st) / n;  // the fitted line at t = 0
+            if (distance(at0, sections[j].centroidMm) > tolerance) smoothOk[j] = 0;
+        }
+        keep.swap(smoothOk);
+    }
+
+    // Skipped sections get positions from the kept centroids around them: a cubic Hermite
+    // curve through the two kept neighbours, with tangents from kept centroids a few mm
+    // further on (Catmull-Rom), so a skipped fold neither keeps the path's own deviation there
+    // nor cuts a bend. Gaps longer than SPLINE_GAP_MM (the end caps, long oblique stretches)
+    // instead get the displacement interpolated linearly; before the first and after the last
+    // kept section the displacement is held.
+    constexpr double SPLINE_GAP_MM = 25.0;
+    constexpr double TANGENT_BASE_MM = 5.0;
+    std::vector<long> kept;
+    for (long j = 0; j < m; ++j)
+        if (keep[j]) kept.push_back(j);
+    if (kept.empty()) return pts;
+    if (firstKept) *firstKept = at[kept.front()];
+    if (lastKept) *lastKept = at[kept.back()];
+    std::vector<Vec3d> shift(static_cast<std::size_t>(m));
+    for (long j : kept) shift[j] = sections[j].centroidMm - pts[at[j]];
+    for (long k = 0; k < kept.front(); ++k) shift[k] = shift[kept.front()];
+    for (long k = kept.back() + 1; k < m; ++k) shift[k] = shift[kept.back()];
+    const long baseSamples = std::max(1L, static_cast<long>(std::lround(TANGENT_BASE_MM / spacingMm)));
+    auto centroidTangent = [&](std::size_t q) {  // d centroid / d sample index at kept[q]
+        std::size_t lo = q, hi = q;
+        while (lo > 0 && at[kept[q]] - at[kept[lo]] < baseSamples) --lo;
+        while (hi + 1 < kept.size() && at[kept[hi]] - at[kept[q]] < baseSamples) ++hi;
+        if (hi == lo) return Vec3d{};
+        return (sections[kept[hi]].centroidMm - sections[kept[lo]].centroidMm) /
+               double(at[kept[hi]] - at[kept[lo]]);
+    };
+    for (std::size_t q = 0; q + 1 < kept.size(); ++q) {
+        const long j0 = kept[q], j1 = kept[q + 1];
+        if (j1 - j0 < 2) continue;
+        const double h = double(at[j1] - at[j0]);
+        if (h * spacingMm > SPLINE_GAP_MM) {
+            for (long k = j0 + 1; k < j1; ++k) {
+                const double a = double(at[k] - at[j0]) / h;
+                shift[k] = shift[j0] * (1.0 - a) + shift[j1] * a;
+            }
+            continue;
+        }
+        const Vec3d c0 = sections[j0].centroidMm, c1 = sections[j1].centroidMm;
+        const Vec3d m0 = centroidTangent(q) * h, m1 = centroidTangent(q + 1) * h;
+        for (long k = j0 + 1; k < j1; ++k) {
+            const double t = double(at[k] - at[j0]) / h, t2 = t * t, t3 = t2 * t;
+            const Vec3d pos = c0 * (2 * t3 - 3 * t2 + 1) + m0 * (t3 - 2 * t2 + t) +
+                              c1 * (-2 * t3 + 3 * t2) + m1 * (t3 - t2);
+            shift[k] = pos - pts[at[k]];
+        }
+    }
+
+    std::vector<Vec3d> out(pts.size());
+    for (long j = 0; j + 1 < m; ++j)
+        for (long i = at[j]; i <= at[j + 1]; ++i) {
+            const double a = double(i - at[j]) / double(at[j + 1] - at[j]);
+            out[i] = pts[i] + shift[j] * (1.0 - a) + shift[j + 1] * a;
+        }
+    return out;
+}
+
+/// Ends, part 1. The geodesic farthest voxels lie on the wall of the blind ends, generally not
+/// at the pole of the end cap (the voxel metric is anisotropic), and within a cap D has no
+/// ridge: the cheapest path runs straight from that wall voxel to where the medial axis
+/// begins, at an angle to the lumen's axis. Along that approach D grows as fast as the path
+/// advances (dD/ds ~ 1), while along the medial axis it changes slowly (taper and folds:
+/// |dD/ds| well below 1). So each end loses its leading run on which D rises by more than
+/// half the distance travelled over the next 1.5 voxels.
+std::vector<Vec3d> trimEnds(const std::vector<Vec3d>& fine, DepthProbe& depthAt, double voxelMm)
+{
+    std::vector<double> depth(fine.size());
+    for (std::size_t i = 0; i < fine.size(); ++i) depth[i] = depthAt(fine[i]);
+    const std::vector<double> s = arcLengths(fine);
+    const double windowMm = 1.5 * voxelMm;
+    const double slope = 0.5;
+    std::size_t first = 0, last = fine.size() - 1;
+    for (std::size_t j = 0; first < last; ++first) {
+        while (j < last && s[j] - s[first] < windowMm) ++j;
+        if (depth[j] - depth[first] < slope * (s[j] - s[first])) break;
+    }
+    for (std::size_t j = last; last > first; --last) {
+        while (j > first && s[last] - s[j] < windowMm) --j;
+        if (depth[j] - depth[last] < slope * (s[last] - s[j])) break;
+    }
+    // Never trim a path away completely: keep its middle if nothing qualifies.
+    if (last <= first) first = last = fine.size() / 2;
+    return std::vector<Vec3d>(fine.begin() + first, fine.begin() + last + 1);
+}
+
+/// Smoothing along arc length of an evenly sampled path. A Gaussian alone pulls a bend of
+/// radius R inwards by about sigma^2 / (2 R) (0.8 mm for sigma 4 mm on a 10 mm flexure), so the
+/// residual is smoothed once more and added back ("twicing", the filter 2G - G^2): the bias
+/// drops to fourth order in sigma while voxel-scale staircase noise is still removed.
+std::vector<Vec3d> smoothTwiced(const std::vector<Vec3d>& fine, double sigmaMm)
+{
+    if (fine.size() < 3 || !(sigmaMm > 0)) return fine;
+    const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
+    if (!(spacing > 0)) return fine;
+    const double sigma = sigmaMm / spacing;
+    const std::vector<Vec3d> once = gaussianSmooth(fine, sigma);
+    std::vector<Vec3d> residual(fine.size());
+    for (std::size_t i = 0; i < fine.size(); ++i) residual[i] = fine[i] - once[i];
+    const std::vector<Vec3d> back = gaussianSmooth(residual, sigma);
+    std::vector<Vec3d> out(fine.size());
+    for (std::size_t i = 0; i < fine.size(); ++i) out[i] = once[i] + back[i];
+    return out;
+}
+
+/// Ends, part 2: continues the path straight along its end tangent into the blind end until
+/// D falls to 60% of its value at the end. The path stops about one radius short of the cap
+/// wall (where sections stop being whole); the extension lets the end cameras look into the
+/// cap while keeping a reasonable radius there. Within the cap the direction is extrapolated,
+/// so its error grows with the extension's length: 60% rather than half keeps the end within
+/// a voxel of the axis' straight continuation on the test shapes. Extends path.back().
+void extendEnd(std::vector<Vec3d>& path, DepthProbe& depthAt, double fineMm)
+{
+    const Vec3d end = path.back();
+    const double endDepth = depthAt(end);
+    if (!(endDepth > 0) || path.size() < 2) return;
+    // End tangent: least-squares line through the last radius of path.
+    const std::vector<double> s = arcLengths(path);
+    const double tangentMm = std::min(endDepth, 0.5 * s.back());
+    const long lastIndex = static_cast<long>(path.size()) - 1;
+    long k = lastIndex;
+    while (k > 0 && s.back() - s[k] < tangentMm) --k;
+    Vec3d a, b;
+    fitLine(path, std::min(k, lastIndex - 1), lastIndex, a, b);
+    const Vec3d dir = normalize(b);
+    if (length(dir) == 0) return;
+    for (double x = fineMm; x <= 2.0 * endDepth; x += fineMm) {
+        const Vec3d q = end + dir * x;
+        if (depthAt(q) < 0.6 * endDepth) break;
+        path.push_back(q);
+    }
+}
+
+/// Rounds of centring on sections: each starts from the previous one's path and section
+/// planes; the third changes the path by well under a tenth of a voxel on the phantoms.
+constexpr int SECTION_ITERATIONS = 3;
+
+/// From the voxel path of one piece to its smooth centerline, sampled every fineMm.
+std::vector<Vec3d> refinePath(const std::vector<Vec3d>& raw, const openvdb::FloatGrid& grid,
+                              double voxelMm, double fineMm, const CenterlineParams& params)
+{
+    if (raw.size() < 2) return raw;
+    DepthProbe depthAt(grid);  // serial uses below
+    std::vector<Vec3d> fine = trimEnds(resampleEven(raw, fineMm), depthAt, voxelMm);
+    if (fine.size() >= 3) {
+        const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
+        if (spacing > 0) fine = resampleEven(centerOnRidge(fine, grid, voxelMm, spacing), fineMm);
+    }
+    if (params.centerSections)
+        for (int iteration = 0; iteration < SECTION_ITERATIONS && fine.size() >= 3; ++iteration) {
+            const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
+            if (!(spacing > 0)) break;
+            long first = 0, last = -1;
+            std::vector<Vec3d> moved = centerOnSections(fine, grid, voxelMm, spacing, &first, &last);
+            // Beyond the outermost whole sections (the end caps, the approach of the voxel path
+            // from the cap wall) the path is not centred: cut it there; the ends are continued
+            // straight along the centred path below.
+            if (iteration + 1 == SECTION_ITERATIONS && last > first) {
+                // At most two lumen radii: a longer stretch of broken sections at an end is a
+                // lumen that is no tube there, not an end cap, and it is kept.
+                const long n = static_cast<long>(moved.size());
+                first = std::min(first, static_cast<long>(2.0 * depthAt(moved[first]) / spacing));
+                last = std::max(last, n - 1 - static_cast<long>(2.0 * depthAt(moved[last]) / spacing));
+                if (last > first) moved = std::vector<Vec3d>(moved.begin() + first, moved.begin() + last + 1);
+            }
+            fine = resampleEven(moved, fineMm);
+        }
+    fine = smoothTwiced(fine, params.smoothingMm);
+    extendEnd(fine, depthAt, fineMm);
+    std::reverse(fine.begin(), fine.end());
+    extendEnd(fine, depthAt, fineMm);
+    std::reverse(fine.begin(), fine.end());
+    return fine;
+}
+
+/// Outward unit tangent at the back end of a path: the chord over its last few millimetres.
+Vec3d backOutward(const std::vector<Vec3d>& path, double voxelMm)
+{
+    if (path.size() < 2) return {0, 0, 1};
+    const std::vector<double> s = arcLengths(path);
+    const double reach = std::min(std::max(3.0 * voxelMm, 5.0), 0.5 * s.back());
+    std::size_t k = path.size() - 1;
+    while (k > 0 && s.back() - s[k] < reach) --k;
+    const Vec3d d = normalize(path.back() - path[k]);
+    return length(d) > 0 ? d : Vec3d{0, 0, 1};
+}
+
+Vec3d frontOutward(const std::vector<Vec3d>& path, double voxelMm)
+{
+    std::vector<Vec3d> r(path.rbegin(), path.rend());
+    return backOutward(r, voxelMm);
+}
+
+/// One piece's centerline and where it came from.
+struct PiecePath {
+    std::int32_t label = -1;
+    std::vector<Vec3d> pointsMm;
+};
+
 } // namespace
 
 Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const CenterlineParams& params,
-                             Progress* progress)
+                             Progress* progress, CenterlineReport* report)
 {
     validate(sdfGrid, params);
     const openvdb::math::Transform& xf = sdfGrid.transform();
     const double voxelMm = xf.voxelSize()[0];
+    const double voxelMl = voxelMm * voxelMm * voxelMm / 1000.0;
     reportProgress(progress, 0.0, "index lumen voxels");
 
     // A level set has no active tiles; voxelise a copy if a caller hands one in anyway.
@@ -497,206 +934,272 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     const LumenIndex index = buildIndex(grid->tree());
     if (index.slotCount() == 0)
         throw InputError("extractCenterline: the lumen is empty (no active sdf voxel below 0)");
-    reportProgress(progress, 0.1, "lumen components");
+    reportProgress(progress, 0.1, "lumen pieces");
 
-    // 2. Endpoints. A collapsed colon gives several lumen components; for now the centerline
-    // covers the largest one only (bridging the pieces is a later step).
-    const Components comps = labelComponents(index);
-    const std::int32_t mainLabel = comps.largest;
-    auto inMain = [&](Slot s) { return comps.label[s] == mainLabel; };
-    const std::array<double, 26> stepMm = [&] {
-        std::array<double, 26> a{};
-        for (int k = 0; k < 26; ++k) a[k] = STEPS[k].lengthVoxels * voxelMm;
-        return a;
-    }();
-    const double minStepMm = voxelMm, maxStepMm = std::sqrt(3.0) * voxelMm;
-    auto geodesic = [&](Slot, Slot, int k) { return stepMm[k]; };
-    std::vector<double> dist;
-    std::vector<Slot> prev;
+    // 2. Pieces, largest first (ties: lower label, i.e. first in slot order).
+    const Pieces pieces = labelPieces(index, progress);
+    std::vector<std::int32_t> bySize(pieces.size.size());
+    for (std::size_t i = 0; i < bySize.size(); ++i) bySize[i] = static_cast<std::int32_t>(i);
+    std::stable_sort(bySize.begin(), bySize.end(),
+                     [&](std::int32_t a, std::int32_t b) { return pieces.size[a] > pieces.size[b]; });
+    std::vector<std::int32_t> used;
+    for (std::size_t r = 0; r < bySize.size(); ++r)
+        if (r == 0 || double(pieces.size[bySize[r]]) * voxelMl >= params.minPieceMl)
+            used.push_back(bySize[r]);
 
-    Slot rectum = NO_SLOT, cecum = NO_SLOT;
-    if (params.rectumMm) {
-        // The lumen voxel nearest to the given point becomes the rectum end; the cecum end is
-        // the voxel geodesically farthest from it.
-        const Vec3d target = *params.rectumMm;
-        double best = std::numeric_limits<double>::infinity();
-        for (Slot s = 0; s < index.slotCount(); ++s) {
-            if (!index.isLumen(s) || !inMain(s)) continue;
-            const double d = distance(toVec(xf.indexToWorld(index.coord(s))), target);
-            if (d < best) {
-                best = d;
-                rectum = s;
-            }
-        }
-        reportProgress(progress, 0.2, "geodesic farthest point");
-        dijkstra(index, rectum, NO_SLOT, geodesic, minStepMm, maxStepMm, dist, prev, progress);
-        cecum = farthest(dist);
-    } else {
-        // Geodesic farthest points: deepest voxel -> farthest A -> farthest B from A. For a
-        // tube, A and B are the two blind ends.
-        Slot deepest = NO_SLOT;
-        for (Slot s = 0; s < index.slotCount(); ++s)
-            if (index.isLumen(s) && inMain(s) &&
-                (deepest == NO_SLOT || index.depthMm[s] > index.depthMm[deepest]))
-                deepest = s;
-        reportProgress(progress, 0.2, "geodesic farthest points");
-        dijkstra(index, deepest, NO_SLOT, geodesic, minStepMm, maxStepMm, dist, prev, progress);
-        const Slot a = farthest(dist);
-        reportProgress(progress, 0.35, "geodesic farthest points");
-        dijkstra(index, a, NO_SLOT, geodesic, minStepMm, maxStepMm, dist, prev, progress);
-        const Slot b = farthest(dist);
-        // Which end is the rectum is decided once the ends are known well (below).
-        rectum = a;
-        cecum = b;
-    }
-    reportProgress(progress, 0.5, "minimal path");
-
-    // 3. Minimal path rectum -> cecum. A step of length l between voxels u and v costs
-    // l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid rule for the integral of
-    // D^-p along the step, symmetric in u and v (the same path either way). Near the wall D is
-    // small and the cost explodes, so the path keeps to the ridge of D, the medial axis; on a
-    // bend the ridge stays optimal because any sideways shift lowers D linearly while it shortens
-    // the path only at second order. eps = half a voxel: the distance is not resolved below that,
-    // and it bounds the cost of voxels at the wall.
+    // 3. Per piece: ends, minimal path through the core, refinement. A step of length l
+    // between voxels u and v costs l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid
+    // rule for the integral of D^-p along the step, symmetric in u and v (the same path either
+    // way). Near the wall D is small and the cost explodes, so the path keeps to the ridge of
+    // D, the medial axis; on a bend the ridge stays optimal because any sideways shift lowers
+    // D linearly while it shortens the path only at second order. eps = half a voxel: the
+    // distance is not resolved below that, and it bounds the cost of voxels at the wall.
     const double eps = 0.5 * voxelMm;
     std::vector<float> weight(index.slotCount(), 0.0f);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t s = r.begin(); s != r.end(); ++s)
-            if (index.depthMm[s] >= 0.0f)
-                weight[s] = static_cast<float>(
-                    std::pow(std::max<double>(index.depthMm[s], eps), -params.wallPenalty));
-    });
+    std::vector<std::uint8_t> core(index.slotCount(), 0);
+    {
+        // The core: voxels at least half as deep as the deepest voxel nearby (within one to
+        // two leaves). The minimal path runs along the ridge of D, deep inside the core, so
+        // leaving out the outer shell does not change it, while it quarters the search.
+        const std::vector<float> nearby = nearbyMaxDepth(index);
+        const float coreMarginMm = static_cast<float>(3.0 * voxelMm);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t s = r.begin(); s != r.end(); ++s) {
+                const float d = index.depthMm[s];
+                if (d < 0.0f) continue;
+                weight[s] = static_cast<float>(std::pow(std::max<double>(d, eps), -params.wallPenalty));
+                const float m = nearby[s / LEAF_VOXELS];
+                core[s] = d >= std::min(0.5f * m, m - coreMarginMm);
+            }
+        });
+    }
     float minWeight = std::numeric_limits<float>::max(), maxWeight = 0.0f;
     for (std::size_t s = 0; s < index.slotCount(); ++s)
         if (index.depthMm[s] >= 0.0f) {
             minWeight = std::min(minWeight, weight[s]);
             maxWeight = std::max(maxWeight, weight[s]);
         }
+    const std::array<double, 26> stepMm = [&] {
+        std::array<double, 26> a{};
+        for (int k = 0; k < 26; ++k) a[k] = STEPS[k].lengthVoxels * voxelMm;
+        return a;
+    }();
     auto medial = [&](Slot u, Slot v, int k) {
         return stepMm[k] * 0.5 * (double(weight[u]) + double(weight[v]));
     };
-    dijkstra(index, rectum, cecum, medial, minStepMm * double(minWeight),
-             maxStepMm * double(maxWeight), dist, prev, progress);
-    std::vector<Vec3d> raw;
-    for (Slot s = cecum; s != NO_SLOT; s = prev[s]) raw.push_back(toVec(xf.indexToWorld(index.coord(s))));
-    std::reverse(raw.begin(), raw.end());
-    reportProgress(progress, 0.8, "smooth and resample");
-
-    Centerline cl;
-    cl.stepMm = params.stepMm;
-    if (raw.size() < 2) {
-        CenterlinePoint p;
-        p.positionMm = raw.front();
-        p.radiusMm = index.depthMm[rectum];
-        cl.points.push_back(p);
-        computeTangentsAndNormals(cl);
-        reportProgress(progress, 1.0, "centerline done");
-        return cl;
-    }
-
-    DepthProbe depthAt(*grid);  // serial uses below
-
-    // 4. Work on a fine even resampling of the voxel path.
-    const double fineMm = std::min(0.25 * voxelMm, 0.5 * params.stepMm);
-    std::vector<Vec3d> fine = resampleEven(raw, fineMm);
-
-    // Ends, part 1. The geodesic farthest voxels lie on the wall of the blind ends, generally
-    // not at the pole of the end cap (the voxel metric is anisotropic), and within a cap D has
-    // no ridge: the cheapest path runs straight from that wall voxel to where the medial axis
-    // begins, at an angle to the lumen's axis. Along that approach D grows as fast as the path
-    // advances (dD/ds ~ 1), while along the medial axis it changes slowly (taper and folds:
-    // |dD/ds| well below 1). So each end loses its leading run on which D rises by more than
-    // half the distance travelled over the next 1.5 voxels.
-    {
-        std::vector<double> depth(fine.size());
-        for (std::size_t i = 0; i < fine.size(); ++i) depth[i] = depthAt(fine[i]);
-        const std::vector<double> s = arcLengths(fine);
-        const double windowMm = 1.5 * voxelMm;
-        const double slope = 0.5;
-        std::size_t first = 0, last = fine.size() - 1;
-        for (std::size_t j = 0; first < last; ++first) {
-            while (j < last && s[j] - s[first] < windowMm) ++j;
-            if (depth[j] - depth[first] < slope * (s[j] - s[first])) break;
-        }
-        for (std::size_t j = last; last > first; --last) {
-            while (j > first && s[last] - s[j] < windowMm) --j;
-            if (depth[j] - depth[last] < slope * (s[last] - s[j])) break;
-        }
-        // Never trim a path away completely: keep its middle if nothing qualifies.
-        if (last <= first) first = last = fine.size() / 2;
-        fine = std::vector<Vec3d>(fine.begin() + first, fine.begin() + last + 1);
-    }
-
-    if (fine.size() >= 3) {
-        const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
-        if (spacing > 0) fine = resampleEven(centerOnRidge(fine, *grid, voxelMm, spacing), fineMm);
-    }
-
-    // Smooth along arc length. A Gaussian alone pulls a bend of radius R inwards by about
-    // sigma^2 / (2 R) (0.8 mm for sigma 4 mm on a 10 mm flexure), so the residual is smoothed
-    // once more and added back ("twicing", the filter 2G - G^2): the bias drops to fourth order
-    // in sigma while voxel-scale staircase noise is still removed.
-    if (fine.size() >= 3) {
-        const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
-        if (spacing > 0 && params.smoothingMm > 0) {
-            const double sigma = params.smoothingMm / spacing;
-            const std::vector<Vec3d> once = gaussianSmooth(fine, sigma);
-            std::vector<Vec3d> residual(fine.size());
-            for (std::size_t i = 0; i < fine.size(); ++i) residual[i] = fine[i] - once[i];
-            const std::vector<Vec3d> back = gaussianSmooth(residual, sigma);
-            for (std::size_t i = 0; i < fine.size(); ++i) fine[i] = once[i] + back[i];
-        }
-    }
-
-    // Ends, part 2: continue the path straight along its end tangent into the blind end until
-    // D falls to 60% of its value at the end. The medial axis stops about one radius short of
-    // the cap wall; the extension lets the end cameras look into the cap while keeping a
-    // reasonable radius there. Within the cap the medial axis is undefined and the direction is
-    // extrapolated, so its error grows with the extension's length: 60% rather than half keeps
-    // the end within a voxel of the axis' straight continuation on the test shapes.
-    auto extend = [&](std::vector<Vec3d>& path) {  // extends path.back()
-        const Vec3d end = path.back();
-        const double endDepth = depthAt(end);
-        if (!(endDepth > 0) || path.size() < 2) return;
-        // End tangent: least-squares line through the last radius of path.
-        const std::vector<double> s = arcLengths(path);
-        const double tangentMm = std::min(endDepth, 0.5 * s.back());
-        const long lastIndex = static_cast<long>(path.size()) - 1;
-        long k = lastIndex;
-        while (k > 0 && s.back() - s[k] < tangentMm) --k;
-        Vec3d a, b;
-        fitLine(path, std::min(k, lastIndex - 1), lastIndex, a, b);
-        const Vec3d dir = normalize(b);
-        if (length(dir) == 0) return;
-        for (double x = fineMm; x <= 2.0 * endDepth; x += fineMm) {
-            const Vec3d q = end + dir * x;
-            if (depthAt(q) < 0.6 * endDepth) break;
-            path.push_back(q);
-        }
+    auto medialCoarse = [&](Slot u, Slot v, int k) {
+        const double len = 2.0 * stepMm[k];
+        if (!(double(index.depthMm[u]) + double(index.depthMm[v]) > len))
+            return std::numeric_limits<double>::infinity();
+        return len * 0.5 * (double(weight[u]) + double(weight[v]));
     };
-    extend(fine);
-    std::reverse(fine.begin(), fine.end());
-    extend(fine);
-    std::reverse(fine.begin(), fine.end());
+    auto isEven = [](Slot s) {
+        const int off = static_cast<int>(s % LEAF_VOXELS);
+        return (off & ((1 << (2 * LEAF_LOG2)) | (1 << LEAF_LOG2) | 1)) == 0;
+    };
+    std::vector<std::uint8_t> coarse(index.slotCount(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s)
+            coarse[s] = core[s] && isEven(static_cast<Slot>(s));
+    });
+    const double minEdge = voxelMm * double(minWeight), maxEdge = std::sqrt(3.0) * voxelMm * double(maxWeight);
 
-    // Without an explicit rectum point the rectum is the lower end (LPS: +z is superior). The
-    // finished ends lie on the medial axis; the farthest voxels found above lie on the cap walls,
-    // up to a radius off the axis, which could invert the order of a nearly horizontal lumen.
-    if (!params.rectumMm && fine.back().z < fine.front().z) std::reverse(fine.begin(), fine.end());
+    const double fineMm = std::min(0.25 * voxelMm, 0.5 * params.stepMm);
+    std::vector<std::int32_t> steps(index.slotCount(), -1);
+    std::vector<Slot> pieceSlots;
+    std::vector<double> dist;
+    std::vector<Slot> prev;
+    std::vector<PiecePath> paths;
+    for (std::size_t u = 0; u < used.size(); ++u) {
+        const std::int32_t label = used[u];
+        reportProgress(progress, 0.2 + 0.6 * double(u) / double(used.size()), "minimal path");
+        // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches
+        // the other end last. Both lie on the wall of the blind ends; the path runs between
+        // the core voxels nearest to them in steps.
+        const Slot a = pieces.lastReached[label];
+        const Slot b = stepsFrom(index, a, steps, progress);
+        // The search runs on the coarsest set that connects the ends: the core's voxels of even
+        // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
+        // whole piece (a stricture, or a piece next to a much deeper one, can break the core).
+        // A two-voxel step is taken only where the inscribed balls of its ends overlap, so it
+        // never crosses a wall; the path's precision does not matter, the refinement below
+        // moves it to the sections' centroids.
+        Slot ends[2][2] = {{NO_SLOT, NO_SLOT}, {NO_SLOT, NO_SLOT}};  // [coarse, core][near, far]
+        pieceSlots.clear();
+        for (Slot s = 0; s < index.slotCount(); ++s) {
+            if (pieces.label[s] != label) continue;
+            pieceSlots.push_back(s);
+            if (!core[s]) continue;
+            for (int level = 0; level < 2; ++level) {
+                if (level == 0 && !isEven(s)) continue;
+                Slot* e = ends[level];
+                if (e[0] == NO_SLOT || steps[s] < steps[e[0]]) e[0] = s;
+                if (e[1] == NO_SLOT || steps[s] > steps[e[1]]) e[1] = s;
+            }
+        }
+        Slot from = NO_SLOT, to = NO_SLOT;
+        if (ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
+            dijkstra<2>(index, coarse, ends[0][0], ends[0][1], medialCoarse, 2.0 * minEdge,
+                        2.0 * maxEdge, dist, prev, progress)) {
+            from = ends[0][0];
+            to = ends[0][1];
+        } else if (ends[1][0] != NO_SLOT &&
+                   (ends[1][0] == ends[1][1] ||
+                    dijkstra<1>(index, core, ends[1][0], ends[1][1], medial, minEdge, maxEdge,
+                                dist, prev, progress))) {
+            from = ends[1][0];
+            to = ends[1][1];
+        } else {
+            for (Slot s : pieceSlots) core[s] = 1;
+            from = a;
+            to = b;
+            if (a != b) dijkstra<1>(index, core, a, b, medial, minEdge, maxEdge, dist, prev, progress);
+        }
+        std::vector<Slot> route;
+        auto appendRoute = [&](Slot source, Slot target) {  // from prev, after a search
+            std::vector<Slot> part;
+            for (Slot s = target; s != NO_SLOT && s != source; s = prev[s]) part.push_back(s);
+            if (route.empty()) route.push_back(source);
+            route.insert(route.end(), part.rbegin(), part.rend());
+        };
+        std::vector<Slot> middle;
+        if (from != to) {
+            appendRoute(from, to);
+            middle.swap(route);
+        } else {
+            middle.push_back(from);
+        }
+        route.swap(middle);
+        std::vector<Vec3d> raw;
+        for (Slot s : route) raw.push_back(toVec(xf.indexToWorld(index.coord(s))));
+        PiecePath path;
+        path.label = label;
+        path.pointsMm = refinePath(raw, *grid, voxelMm, fineMm, params);
+        paths.push_back(std::move(path));
+    }
+    reportProgress(progress, 0.8, "order and bridge pieces");
+
+    // 4. The rectum end: the lowest piece end in world z (LPS: +z is superior), or the end
+    // nearest to rectumMm; its piece comes first, entered there.
+    std::vector<PieceEnds> ends(paths.size());
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+        const auto& p = paths[i].pointsMm;
+        ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+    }
+    int first = 0;
+    bool firstReversed = false;
+    {
+        double best = std::numeric_limits<double>::infinity();
+        auto score = [&](const Vec3d& e) {
+            return params.rectumMm ? distance(e, *params.rectumMm) : e.z;
+        };
+        for (std::size_t i = 0; i < ends.size(); ++i)
+            for (bool back : {false, true}) {
+                const double sc = score(back ? ends[i].backMm : ends[i].frontMm);
+                if (sc < best) {
+                    best = sc;
+                    first = static_cast<int>(i);
+                    firstReversed = back;
+                }
+            }
+    }
+    const PieceChain chain = orderPieces(ends, first, firstReversed, params.bridgeTurnMmPerRad);
+
+    // 5. One polyline: pieces in chain order, bridges between them.
+    DepthProbe depthAt(*grid);
+    struct Bridge {
+        double startArc, endArc, startDepth, endDepth;
+    };
+    std::vector<Vec3d> chainPts;
+    std::vector<Bridge> bridges;
+    std::vector<CenterlineBridgeInfo> bridgeInfo;
+    for (std::size_t k = 0; k < chain.order.size(); ++k) {
+        std::vector<Vec3d> pts = paths[chain.order[k]].pointsMm;
+        if (chain.reversed[k]) std::reverse(pts.begin(), pts.end());
+        if (k > 0) {
+            const Vec3d exit = chainPts.back();
+            const Vec3d exitOut = chain.reversed[k - 1] ? ends[chain.order[k - 1]].frontOut
+                                                        : ends[chain.order[k - 1]].backOut;
+            const Vec3d entryOut = chain.reversed[k] ? ends[chain.order[k]].backOut
+                                                     : ends[chain.order[k]].frontOut;
+            const std::vector<Vec3d> curve = bridgeCurve(exit, exitOut, pts.front(), entryOut, fineMm);
+            Bridge b;
+            b.startArc = arcLengths(chainPts).back();
+            b.startDepth = std::max(0.0, depthAt(exit));
+            b.endDepth = std::max(0.0, depthAt(pts.front()));
+            chainPts.insert(chainPts.end(), curve.begin() + 1, curve.end() - 1);
+            const double bridgeLength = arcLengths(curve).back();
+            b.endArc = b.startArc + bridgeLength;
+            bridges.push_back(b);
+            CenterlineBridgeInfo info;
+            info.fromPiece = chain.order[k - 1];
+            info.toPiece = chain.order[k];
+            info.gapMm = distance(exit, pts.front());
+            info.lengthMm = bridgeLength;
+            bridgeInfo.push_back(info);
+        }
+        chainPts.insert(chainPts.end(), pts.begin(), pts.end());
+    }
 
     // Uniform arc-length resampling at stepMm from the rectum end; the remainder (< stepMm) at
-    // the cecum end is dropped so that every step is exactly stepMm.
-    const std::vector<double> s = arcLengths(fine);
-    const std::size_t count = static_cast<std::size_t>(std::floor(s.back() / params.stepMm + 1e-9)) + 1;
-    cl.points.resize(count);
-    std::size_t hint = 0;
-    for (std::size_t i = 0; i < count; ++i) {
-        CenterlinePoint& p = cl.points[i];
-        p.positionMm = pointAt(fine, s, double(i) * params.stepMm, hint);
+    // the cecum end is dropped so that every step is exactly stepMm. Radii: D at the point; on
+    // a bridge (no lumen to measure) linear in arc length between D at its two ends.
+    Centerline cl;
+    cl.stepMm = params.stepMm;
+    const std::vector<double> s = arcLengths(chainPts);
+    if (chainPts.size() < 2 || !(s.back() > 0)) {
+        CenterlinePoint p;
+        p.positionMm = chainPts.front();
         p.radiusMm = std::max(0.0, depthAt(p.positionMm));
+        cl.points.push_back(p);
+    } else {
+        const std::size_t count = static_cast<std::size_t>(std::floor(s.back() / params.stepMm + 1e-9)) + 1;
+        cl.points.resize(count);
+        std::size_t hint = 0, bridge = 0;
+        for (std::size_t i = 0; i < count; ++i) {
+            const double arc = double(i) * params.stepMm;
+            CenterlinePoint& p = cl.points[i];
+            p.positionMm = pointAt(chainPts, s, arc, hint);
+            while (bridge < bridges.size() && bridges[bridge].endArc <= arc) ++bridge;
+            if (bridge < bridges.size() && bridges[bridge].startArc < arc) {
+                const Bridge& b = bridges[bridge];
+                const double t = (arc - b.startArc) / std::max(b.endArc - b.startArc, 1e-9);
+                p.bridged = true;
+                p.radiusMm = b.startDepth + (b.endDepth - b.startDepth) * t;
+            } else {
+                p.radiusMm = std::max(0.0, depthAt(p.positionMm));
+            }
+        }
     }
     computeTangentsAndNormals(cl);
+
+    if (report) {
+        report->pieces.clear();
+        report->bridges = bridgeInfo;
+        report->rectumRule = params.rectumMm ? "nearest to rectum_mm" : "lowest end";
+        std::vector<int> infoOf(pieces.size.size(), -1);
+        for (std::size_t r = 0; r < bySize.size(); ++r) {
+            CenterlinePieceInfo info;
+            info.volumeMl = double(pieces.size[bySize[r]]) * voxelMl;
+            infoOf[bySize[r]] = static_cast<int>(r);
+            report->pieces.push_back(info);
+        }
+        for (std::size_t k = 0; k < chain.order.size(); ++k) {
+            const PiecePath& path = paths[chain.order[k]];
+            CenterlinePieceInfo& info = report->pieces[infoOf[path.label]];
+            info.used = true;
+            info.chainIndex = static_cast<int>(k);
+            info.pathLengthMm = arcLengths(path.pointsMm).back();
+            info.entryMm = chain.reversed[k] ? path.pointsMm.back() : path.pointsMm.front();
+            info.exitMm = chain.reversed[k] ? path.pointsMm.front() : path.pointsMm.back();
+        }
+        for (CenterlineBridgeInfo& b : report->bridges) {
+            b.fromPiece = infoOf[paths[b.fromPiece].label];
+            b.toPiece = infoOf[paths[b.toPiece].label];
+        }
+    }
     reportProgress(progress, 1.0, "centerline done");
     return cl;
 }

@@ -1,6 +1,22 @@
 /// @file centerline.h
-/// @brief The lumen centerline from the signed distance grid: geodesic farthest endpoints,
-///        a minimal path whose cost grows towards the wall, smoothing, uniform resampling.
+/// @brief The lumen centerline from the signed distance grid: one ordered, smooth path from
+///        the rectum to the cecum through the middle of the lumen, resampled at a uniform
+///        arc-length step, with the gaps between the pieces of a collapsed colon bridged.
+///
+/// Per lumen piece (26-connected component of the voxels where sdf < 0):
+/// 1. endpoints by geodesic farthest points (two breadth-first passes over the piece);
+/// 2. a minimal path between them whose cost per unit length is D^-wallPenalty (D: distance to
+///    the wall), so it keeps to the middle of the lumen;
+/// 3. the path is moved to the centroids of the lumen's cross-sections perpendicular to it
+///    (sections cut by a haustral fold or a large polyp are recognised by their area and
+///    skipped), smoothed along its arc length, and continued straight into the blind ends.
+/// Pieces are then joined into one chain starting at the rectum end (the lowest end in world
+/// z, or the end nearest rectumMm), in the order and directions that minimise the total
+/// bridge length plus a turning penalty; each gap is bridged by a smooth curve whose points
+/// are flagged `bridged`.
+///
+/// What it does not do: it does not read files, segment, or look at HU; a bridge does not
+/// follow the collapsed bowel through the tissue (there is no lumen there to follow).
 #pragma once
 
 #include "volume/centerline_types.h"
@@ -9,20 +25,60 @@
 #include <openvdb/openvdb.h>
 
 #include <optional>
+#include <string>
+#include <vector>
 
 namespace flyover {
 
 struct CenterlineParams {
     double stepMm = 1.0;            ///< arc-length step of the output (mm, > 0)
-    double wallPenalty = 2.0;       ///< exponent p of the cost 1/D^p (D: distance to wall, mm)
+    double wallPenalty = 2.0;       ///< exponent p of the cost 1/D^p (D: distance to wall, mm; >= 0)
     double smoothingMm = 4.0;       ///< Gaussian smoothing sigma along the path (mm, >= 0)
-    std::optional<Vec3d> rectumMm;  ///< overrides the rectum endpoint (LPS mm)
-    static constexpr int VERSION = 1;
+    std::optional<Vec3d> rectumMm;  ///< the path starts at the lumen end nearest this point (LPS mm)
+    /// Move the path to the centroids of the lumen cross-sections (robust to haustral folds and
+    /// polyps); false: keep it on the ridge of D (the medial axis).
+    bool centerSections = true;
+    /// Lumen pieces smaller than this are ignored (mL, >= 0); the largest piece is always used.
+    double minPieceMl = 0.5;
+    /// Bridge cost added per radian that a bridge turns away from the piece ends' directions,
+    /// when choosing the order of the pieces (mm per radian, >= 0).
+    double bridgeTurnMmPerRad = 20.0;
+    static constexpr int VERSION = 2;
 };
 
-/// @param sdf  lumen signed distance grid in world mm, negative inside the lumen
-/// @throw InputError when the lumen is empty
+/// One lumen piece as the centerline saw it.
+struct CenterlinePieceInfo {
+    double volumeMl = 0;            ///< voxel count x voxel volume
+    bool used = false;              ///< false: smaller than minPieceMl
+    int chainIndex = -1;            ///< position in the travel order (0: rectum piece), -1 if unused
+    double pathLengthMm = 0;        ///< length of its own path (before resampling)
+    Vec3d entryMm, exitMm;          ///< where the path enters and leaves it (LPS mm)
+};
+
+/// One bridge across a gap between pieces.
+struct CenterlineBridgeInfo {
+    int fromPiece = 0, toPiece = 0; ///< indices into CenterlineReport::pieces
+    double gapMm = 0;               ///< straight distance between the two piece ends
+    double lengthMm = 0;            ///< length of the bridge curve
+};
+
+struct CenterlineReport {
+    std::vector<CenterlinePieceInfo> pieces;   ///< largest first
+    std::vector<CenterlineBridgeInfo> bridges; ///< in travel order
+    std::string rectumRule;                    ///< "lowest end" or "nearest to rectum_mm"
+};
+
+/// @param sdf      lumen signed distance grid in world mm, negative inside the lumen, with
+///                 cubic voxels and a linear transform; every lumen voxel active (as
+///                 segmentLumen and segmentFromMask produce it)
+/// @param params   see CenterlineParams
+/// @param report   optional: the pieces and bridges
+/// @return points ordered rectum -> cecum, stepMm apart; radiusMm = D at the point, and on
+///         bridges the linear interpolation of D between the two piece ends (there is no lumen
+///         to measure there)
+/// @throw InputError when the lumen is empty or the grid unusable; ParameterError for bad
+///        parameters; Cancelled through `progress`
 Centerline extractCenterline(const openvdb::FloatGrid& sdf, const CenterlineParams& params,
-                             Progress* progress = nullptr);
+                             Progress* progress = nullptr, CenterlineReport* report = nullptr);
 
 } // namespace flyover

@@ -5,12 +5,15 @@
 #include "test_shapes.h"
 #include "volume/error.h"
 #include "volume/segment.h"
+#include "volume/image_io.h"
+#include "volume/lumen_mask.h"
 
 #include <gtest/gtest.h>
 
 #include <tbb/task_arena.h>
 
 #include <openvdb/tools/Composite.h>
+#include <openvdb/tools/Interpolation.h>
 
 #include <algorithm>
 #include <chrono>
@@ -226,17 +229,23 @@ TEST(Centerline, RectumOverridePicksNearestEnd)
     }
 }
 
-TEST(Centerline, UsesLargestLumenComponent)
+TEST(Centerline, IgnoresLumenCrumbsSmallerThanMinPiece)
 {
+    // Pieces of at least minPieceMl are bridged into the path (the collapse tests); a crumb of
+    // air below it (here a 4 mm capsule, ~0.37 mL, lower than the tube so that it would be
+    // taken as the rectum end) is left out.
     const TubeCase tc = straightCase();
     SCOPED_TRACE(tc.describe());
     auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
-    // A second, shorter and lower tube apart from the first.
-    const auto other =
-        test::makeTubeSdf(tc.frame, Axis::straight({80, 10, -40}, {80, 10, -10}), tc.radiusMm);
-    openvdb::tools::csgUnion(*sdf, *other->deepCopy());
-    const Centerline cl = extractCenterline(*sdf, CenterlineParams{});
+    const auto crumb = test::makeTubeSdf(tc.frame, Axis::straight({80, 10, -40}, {80, 10, -38}), 4.0);
+    openvdb::tools::csgUnion(*sdf, *crumb->deepCopy());
+    CenterlineReport report;
+    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, nullptr, &report);
     checkAgainstAxis(cl, tc, CenterlineParams{});
+    ASSERT_EQ(report.pieces.size(), 2u);
+    EXPECT_TRUE(report.pieces[0].used);
+    EXPECT_FALSE(report.pieces[1].used) << "crumb of " << report.pieces[1].volumeMl << " mL";
+    EXPECT_TRUE(report.bridges.empty());
 }
 
 TEST(Centerline, EmptyLumenThrowsAndBadParametersRejected)
