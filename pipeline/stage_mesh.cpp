@@ -1,8 +1,9 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
-#include "surface/extract_surface.h"
+#include "surface/lumen_surface.h"
 
+#include <algorithm>
 #include <filesystem>
 
 namespace fs = std::filesystem;
@@ -10,18 +11,93 @@ using nlohmann::json;
 
 namespace flyover {
 
+namespace {
+
+/// The manifest lists at most this many components (largest first); the totals cover all.
+constexpr std::size_t MAX_LISTED_COMPONENTS = 20;
+
+json componentJson(const MeshComponent& c)
+{
+    return json{{"faces", c.faces},
+                {"genus", c.genus},
+                {"boundary_loops", c.boundaryLoops},
+                {"area_mm2", c.areaMm2},
+                {"enclosed_volume_mm3", c.enclosedVolumeMm3},
+                {"nesting_depth", c.nestingDepth},
+                {"inward_volume_sign", c.hasInwardVolumeSign()}};
+}
+
+} // namespace
+
 json runMesh(StudyRun& run, Progress* progress)
 {
     auto sdf = run.sdf();
-    MeshStats st;
-    TriMesh mesh = extractSurface(*sdf, run.opt.params.mesh, &st, progress);
+    const MeshParams& params = run.opt.params.mesh;
+    LumenSurfaceReport r;
+    TriMesh mesh = makeLumenSurface(*sdf, params, &r, progress);
     writeMesh(run.path("surface.ply"), mesh);
     run.state.mesh = std::move(mesh);
-    return json{{"vertices", st.vertices},          {"faces", st.faces},
-                {"components", st.components},      {"boundary_edges", st.boundaryEdges},
-                {"dropped_faces", st.droppedFaces}, {"area_mm2", st.areaMm2},
-                {"enclosed_volume_mm3", st.enclosedVolumeMm3},
-                {"inward_fraction", st.inwardFraction}};
+
+    const MeshCheck& c = r.check;
+    json components = json::array();
+    for (std::size_t i = 0; i < std::min(c.componentList.size(), MAX_LISTED_COMPONENTS); ++i)
+        components.push_back(componentJson(c.componentList[i]));
+    const MeshStats& e = r.extraction;
+    return json{
+        // The final surface (surface.ply).
+        {"vertices", c.vertices},
+        {"edges", c.edges},
+        {"faces", c.faces},
+        {"components", c.components},
+        {"closed_components", c.closedComponents},
+        {"genus", c.genus},
+        {"boundary_loops", c.boundaryLoops},
+        {"boundary_edges", c.boundaryEdges},
+        {"non_manifold_vertices", c.nonManifoldVertices},
+        {"degenerate_faces", c.degenerateFaces},
+        {"area_mm2", c.areaMm2},
+        {"enclosed_volume_mm3", c.enclosedVolumeMm3},
+        {"component_list", components},
+        // Orientation, checked two ways: per face against the level set's gradient, and per
+        // component by the sign of its enclosed volume.
+        {"inward_fraction", r.orientation.inwardFraction()},
+        {"outward_faces", r.orientation.outward},
+        {"faces_without_gradient", r.orientation.noGradient},
+        {"misoriented_components", c.misorientedComponents},
+        {"sound", r.isSound()},
+        {"extraction",
+         {{"vertices", e.vertices},
+          {"faces", e.faces},
+          {"dropped_faces", e.droppedFaces},
+          {"non_manifold_edges", e.nonManifoldEdges},
+          {"orientation_conflicts", e.orientationConflicts},
+          {"degenerate_repairs", e.degenerateRepairs},
+          {"removed_degenerate_faces", e.removedDegenerateFaces},
+          {"area_mm2", r.rawAreaMm2},
+          {"enclosed_volume_mm3", r.rawVolumeMm3},
+          {"roughness_deg", r.rawRoughnessDeg},
+          {"seconds", r.extractSeconds}}},
+        {"smoothing",
+         {{"method", params.smoothMethod},
+          {"iterations", params.smoothIterations},
+          {"pass_band", params.smoothPassBand},
+          {"max_displacement_mm", r.smoothing.maxDisplacementMm},
+          {"rms_displacement_mm", r.smoothing.rmsDisplacementMm},
+          {"fixed_vertices", r.smoothing.fixedVertices},
+          {"restored_vertices", r.smoothingRestoredVertices},
+          {"enclosed_volume_mm3", r.smoothedVolumeMm3},
+          {"volume_change_fraction", r.smoothingVolumeChange},
+          {"roughness_deg", r.smoothedRoughnessDeg},
+          {"seconds", r.smoothSeconds}}},
+        {"decimation",
+         {{"faces_before", r.decimation.facesBefore},
+          {"faces_after", r.decimation.facesAfter},
+          {"collapses", r.decimation.collapses},
+          {"reached_target", r.decimation.reachedTarget},
+          {"max_error_mm", r.decimationMaxErrorMm},
+          {"hausdorff_mm", r.decimationHausdorffMm},
+          {"seconds", r.decimateSeconds}}},
+        {"check_seconds", r.checkSeconds}};
 }
 
 } // namespace flyover

@@ -6,6 +6,8 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
+#include "surface/mesh_checks.h"
+#include "surface/openmesh_log.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/Interpolation.h>
@@ -13,12 +15,14 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
 #include <limits>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -31,79 +35,136 @@ namespace {
 
 using Tri = std::array<uint32_t, 3>;
 
-/// Orientation of faces relative to the SDF, counted by countInwardFaces.
-struct OrientationCount {
-    std::size_t inward = 0;      ///< normal . -grad > 0
-    std::size_t outward = 0;     ///< normal . -grad < 0
-    std::size_t degenerate = 0;  ///< zero normal: no orientation at all
-    std::size_t noGradient = 0;  ///< zero gradient (outside the band): orientation unknown
+using Sampler = openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
+
+enum class Side { Inward, Outward, Degenerate, NoGradient };
+
+/// Which way triangle p points relative to the level set: its normal (p1 - p0) x (p2 - p0)
+/// against -grad(sdf) at its centroid. The gradient is a central difference over one voxel
+/// (h, the smallest voxel edge) of trilinear world-space samples: valid for any affine (even
+/// rotated or anisotropic) grid transform, unlike an index-space stencil.
+Side classifyTriangle(const Sampler& sampler, double h, const std::array<openvdb::Vec3d, 3>& p)
+{
+    const openvdb::Vec3d n = (p[1] - p[0]).cross(p[2] - p[0]);
+    const double longest2 =
+        std::max({(p[1] - p[0]).lengthSqr(), (p[2] - p[1]).lengthSqr(), (p[0] - p[2]).lengthSqr()});
+    if (isDegenerateTriangle(n.length(), longest2)) return Side::Degenerate;
+    const openvdb::Vec3d c = (p[0] + p[1] + p[2]) / 3.0;
+    openvdb::Vec3d grad;
+    for (int a = 0; a < 3; ++a) {
+        openvdb::Vec3d e(0.0);
+        e[a] = h;
+        grad[a] = (double(sampler.wsSample(c + e)) - double(sampler.wsSample(c - e))) / (2.0 * h);
+    }
+    if (!(grad.lengthSqr() > 0.0)) return Side::NoGradient;
+    return -n.dot(grad) > 0.0 ? Side::Inward : Side::Outward;
+}
+
+double gradientStepMm(const openvdb::FloatGrid& sdf)
+{
+    const openvdb::Vec3d voxel = sdf.voxelSize();
+    return std::min({voxel[0], voxel[1], voxel[2]});
+}
+
+/// Counts per class, plus the indices of the faces that are not inward (rare: a plain
+/// vector per task, joined in index order).
+struct OrientationTally {
+    FaceOrientation count;
+    std::vector<std::size_t> notInward;
 };
 
-/// Classifies every `stride`-th face by whether its normal (v1 - v0) x (v2 - v0) agrees with
-/// -grad(sdf) at its centroid. `corners(i, p)` writes the corners of face i (world mm) into p.
+/// Classifies every `stride`-th face (see classifyTriangle). `corners(i, p)` writes the
+/// corners of face i (world mm) into p.
 template<typename CornersFn>
-OrientationCount countInwardFaces(const openvdb::FloatGrid& sdf, std::size_t faceCount,
-                                  std::size_t stride, const CornersFn& corners)
+OrientationTally tallyOrientation(const openvdb::FloatGrid& sdf, std::size_t faceCount, std::size_t stride,
+                                  const CornersFn& corners)
 {
-    using Sampler =
-        openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
-    // Central differences over one voxel, sampled trilinearly in world space: valid for any
-    // affine (even rotated or anisotropic) grid transform, unlike an index-space stencil.
-    const openvdb::Vec3d voxel = sdf.voxelSize();
-    const double h = std::min({voxel[0], voxel[1], voxel[2]});
+    const double h = gradientStepMm(sdf);
     const std::size_t samples = (faceCount + stride - 1) / stride;
-
     return tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, samples, 1024), OrientationCount{},
-        [&](const tbb::blocked_range<std::size_t>& range, OrientationCount acc) {
+        tbb::blocked_range<std::size_t>(0, samples, 1024), OrientationTally{},
+        [&](const tbb::blocked_range<std::size_t>& range, OrientationTally acc) {
             openvdb::FloatGrid::ConstAccessor accessor = sdf.getConstAccessor();
-            Sampler sampler(accessor, sdf.transform());
+            const Sampler sampler(accessor, sdf.transform());
             std::array<openvdb::Vec3d, 3> p;
             for (std::size_t s = range.begin(); s != range.end(); ++s) {
                 corners(s * stride, p);
-                const openvdb::Vec3d n = (p[1] - p[0]).cross(p[2] - p[0]);
-                const openvdb::Vec3d c = (p[0] + p[1] + p[2]) / 3.0;
-                openvdb::Vec3d grad;
-                for (int a = 0; a < 3; ++a) {
-                    openvdb::Vec3d e(0.0);
-                    e[a] = h;
-                    grad[a] = (double(sampler.wsSample(c + e)) - double(sampler.wsSample(c - e))) /
-                              (2.0 * h);
+                const Side side = classifyTriangle(sampler, h, p);
+                switch (side) {
+                case Side::Inward: ++acc.count.inward; break;
+                case Side::Outward: ++acc.count.outward; break;
+                case Side::Degenerate: ++acc.count.degenerate; break;
+                case Side::NoGradient: ++acc.count.noGradient; break;
                 }
-                const double d = -n.dot(grad);
-                if (!(n.lengthSqr() > 0.0)) ++acc.degenerate;
-                else if (!(grad.lengthSqr() > 0.0)) ++acc.noGradient;
-                else if (d > 0.0) ++acc.inward;
-                else ++acc.outward;
+                if (side != Side::Inward) acc.notInward.push_back(s * stride);
             }
             return acc;
         },
-        [](OrientationCount a, const OrientationCount& b) {
-            a.inward += b.inward;
-            a.outward += b.outward;
-            a.degenerate += b.degenerate;
-            a.noGradient += b.noGradient;
+        [](OrientationTally a, const OrientationTally& b) {
+            a.count.inward += b.count.inward;
+            a.count.outward += b.count.outward;
+            a.count.degenerate += b.count.degenerate;
+            a.count.noGradient += b.count.noGradient;
+            // Joins are of adjacent ranges, left then right: the order stays ascending.
+            a.notInward.insert(a.notInward.end(), b.notInward.begin(), b.notInward.end());
             return a;
         });
 }
 
-OrientationCount countMeshOrientation(const TriMesh& mesh, const openvdb::FloatGrid& sdf)
+template<typename CornersFn>
+FaceOrientation countInwardFaces(const openvdb::FloatGrid& sdf, std::size_t faceCount, std::size_t stride,
+                                 const CornersFn& corners)
 {
-    return countInwardFaces(sdf, mesh.n_faces(), 1, [&](std::size_t i, std::array<openvdb::Vec3d, 3>& p) {
-        int k = 0;
-        for (const auto v : mesh.fv_range(TriMesh::FaceHandle(int(i)))) {
-            const TriMesh::Point& q = mesh.point(v);
-            p[std::size_t(k++)] = openvdb::Vec3d(q[0], q[1], q[2]);
-        }
+    return tallyOrientation(sdf, faceCount, stride, corners).count;
+}
+
+std::array<openvdb::Vec3d, 3> faceCorners(const TriMesh& mesh, TriMesh::FaceHandle f)
+{
+    std::array<openvdb::Vec3d, 3> p;
+    int k = 0;
+    for (const auto v : mesh.fv_range(f)) {
+        const TriMesh::Point& q = mesh.point(v);
+        p[std::size_t(k++)] = openvdb::Vec3d(q[0], q[1], q[2]);
+    }
+    return p;
+}
+
+OrientationTally tallyMeshOrientation(const TriMesh& mesh, const openvdb::FloatGrid& sdf)
+{
+    return tallyOrientation(sdf, mesh.n_faces(), 1, [&](std::size_t i, std::array<openvdb::Vec3d, 3>& p) {
+        p = faceCorners(mesh, TriMesh::FaceHandle(int(i)));
     });
 }
 
-/// Zero-area faces have no orientation and are left out; faces without a gradient count as
-/// not inward (a mesh that does not match its grid must not look well oriented).
-double inwardFraction(const OrientationCount& count, std::size_t faces)
+FaceOrientation countMeshOrientation(const TriMesh& mesh, const openvdb::FloatGrid& sdf)
 {
-    const std::size_t oriented = faces - count.degenerate;
-    return oriented > 0 ? double(count.inward) / double(oriented) : 0.0;
+    return tallyMeshOrientation(mesh, sdf).count;
+}
+
+/// Edge checks on the triangle soup, before OpenMesh refuses anything: the number of edges
+/// with more than two triangles, and of edges two triangles traverse in the same direction.
+std::pair<int64_t, int64_t> countSoupEdgeProblems(const std::vector<Tri>& tris)
+{
+    // Key: (min vertex, max vertex) in the high 63 bits, direction (a < b) in the lowest bit.
+    std::vector<uint64_t> keys;
+    keys.reserve(3 * tris.size());
+    for (const Tri& t : tris)
+        for (int k = 0; k < 3; ++k) {
+            const uint64_t a = t[std::size_t(k)], b = t[std::size_t((k + 1) % 3)];
+            keys.push_back((std::min(a, b) << 32 | std::max(a, b)) << 1 | uint64_t(a < b));
+        }
+    tbb::parallel_sort(keys.begin(), keys.end());
+    int64_t nonManifold = 0, conflicts = 0;
+    for (std::size_t i = 0; i < keys.size();) {
+        std::size_t j = i;
+        std::size_t forward = 0;
+        while (j < keys.size() && (keys[j] >> 1) == (keys[i] >> 1)) forward += keys[j++] & 1u;
+        const std::size_t uses = j - i;
+        if (uses > 2) ++nonManifold;
+        else if (uses == 2 && forward != 1) ++conflicts;
+        i = j;
+    }
+    return {nonManifold, conflicts};
 }
 
 /// Edge-connected components by depth-first search over face neighbours.
@@ -131,22 +192,69 @@ int64_t countComponents(const TriMesh& mesh)
     return components;
 }
 
-/// OpenMesh prints one line per refused face on its error stream; we count them instead.
-/// Note: omerr() is process-wide, so this guard assumes no other thread is reporting
-/// OpenMesh errors at the same time (losing such a message is the only consequence).
-class OpenMeshErrorsMuted {
-public:
-    OpenMeshErrorsMuted() : mWasEnabled(omerr().is_enabled()) { omerr().disable(); }
-    ~OpenMeshErrorsMuted()
-    {
-        if (mWasEnabled) omerr().enable();
-    }
-    OpenMeshErrorsMuted(const OpenMeshErrorsMuted&) = delete;
-    OpenMeshErrorsMuted& operator=(const OpenMeshErrorsMuted&) = delete;
+std::vector<TriMesh::FaceHandle> degenerateFaces(const TriMesh& mesh)
+{
+    std::vector<TriMesh::FaceHandle> faces;
+    for (const auto f : mesh.faces())
+        if (!mesh.status(f).deleted() && isDegenerateFace(mesh, f)) faces.push_back(f);
+    return faces;
+}
 
-private:
-    bool mWasEnabled;
+/// Removes faces without a usable normal, which volumeToMesh emits where two of its
+/// vertices coincide (a needle) and which a smoother would turn into slivers of random
+/// orientation. A needle loses its shortest edge by a collapse (the geometry moves by that
+/// edge's length, about zero); a cap (a corner lying on the opposite edge) has its longest
+/// edge flipped. Both keep the topology (is_collapse_ok, is_flip_ok) and the winding.
+struct DegenerateRepair {
+    int64_t operations = 0;    ///< collapses and flips
+    int64_t removedFaces = 0;  ///< faces the collapses removed
 };
+
+DegenerateRepair repairDegenerateFaces(TriMesh& mesh)
+{
+    std::vector<TriMesh::FaceHandle> bad;
+    for (const auto f : mesh.faces())
+        if (isDegenerateFace(mesh, f)) bad.push_back(f);
+    if (bad.empty()) return {};
+    const std::size_t facesBefore = mesh.n_faces();
+
+    mesh.request_vertex_status();
+    mesh.request_edge_status();
+    mesh.request_face_status();
+    DegenerateRepair repair;
+    // A repair can leave a neighbour degenerate (a cap next to a needle): a few passes.
+    for (int pass = 0; pass < 4 && !bad.empty(); ++pass) {
+        for (const TriMesh::FaceHandle f : bad) {
+            if (mesh.status(f).deleted() || !isDegenerateFace(mesh, f)) continue;
+            TriMesh::HalfedgeHandle shortest, longest;
+            double shortLen = std::numeric_limits<double>::max(), longLen = -1.0;
+            for (const auto h : mesh.fh_range(f)) {
+                const double len = mesh.calc_edge_length(h);
+                if (len < shortLen) { shortLen = len; shortest = h; }
+                if (len > longLen) { longLen = len; longest = h; }
+            }
+            if (shortLen <= 1e-3 * longLen) {
+                if (mesh.is_collapse_ok(shortest)) {
+                    mesh.collapse(shortest);
+                    ++repair.operations;
+                } else if (mesh.is_collapse_ok(mesh.opposite_halfedge_handle(shortest))) {
+                    mesh.collapse(mesh.opposite_halfedge_handle(shortest));
+                    ++repair.operations;
+                }
+            } else if (mesh.is_flip_ok(mesh.edge_handle(longest))) {
+                mesh.flip(mesh.edge_handle(longest));
+                ++repair.operations;
+            }
+        }
+        bad = degenerateFaces(mesh);
+    }
+    mesh.garbage_collection();
+    mesh.release_face_status();
+    mesh.release_edge_status();
+    mesh.release_vertex_status();
+    repair.removedFaces = int64_t(facesBefore) - int64_t(mesh.n_faces());
+    return repair;
+}
 
 template<typename T>
 void releaseVector(std::vector<T>& v)
@@ -211,13 +319,16 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     // measured again on the finished mesh (stats.inwardFraction).
     reportProgress(progress, 0.5, "orientation check");
     const std::size_t stride = std::max<std::size_t>(1, tris.size() / 20000);
-    const OrientationCount sample =
+    const FaceOrientation sample =
         countInwardFaces(sdf, tris.size(), stride, [&](std::size_t i, std::array<openvdb::Vec3d, 3>& p) {
             for (int k = 0; k < 3; ++k) p[k] = openvdb::Vec3d(points[tris[i][k]]);
         });
     if (sample.outward > sample.inward) {
         for (auto& t : tris) std::swap(t[1], t[2]);
     }
+    // Vertex indices fit in 32 bits (volumeToMesh uses Vec3I/Vec4I).
+    const auto [nonManifoldEdges, orientationConflicts] =
+        stats ? countSoupEdgeProblems(tris) : std::pair<int64_t, int64_t>(0, 0);
 
     reportProgress(progress, 0.6, "build mesh");
     // Only vertices referenced by a face enter the mesh (adaptive meshing can leave unused
@@ -242,7 +353,8 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
 
     int64_t dropped = 0;
     {
-        const OpenMeshErrorsMuted muted;
+        // OpenMesh prints one line per refused face on its error stream; we count them instead.
+        const ScopedOpenMeshMute muted(ScopedOpenMeshMute::ERR);
         for (const auto& t : tris) {
             const TriMesh::VertexHandle a(vertexIndex[t[0]]), b(vertexIndex[t[1]]),
                 c(vertexIndex[t[2]]);
@@ -254,6 +366,9 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     releaseVector(tris);
     releaseVector(vertexIndex);
 
+    reportProgress(progress, 0.7, "repair degenerate faces");
+    const DegenerateRepair repaired = repairDegenerateFaces(mesh);
+
     if (stats) {
         reportProgress(progress, 0.8, "mesh statistics");
         MeshStats s;
@@ -263,20 +378,55 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
         for (const auto e : mesh.edges())
             if (e.is_boundary()) ++s.boundaryEdges;
         s.droppedFaces = dropped;
+        s.degenerateRepairs = repaired.operations;
+        s.removedDegenerateFaces = repaired.removedFaces;
+        s.nonManifoldEdges = nonManifoldEdges;
+        s.orientationConflicts = orientationConflicts;
         s.areaMm2 = surfaceAreaMm2(mesh);
         s.enclosedVolumeMm3 = enclosedVolumeInward(mesh);
-        const OrientationCount orientation = countMeshOrientation(mesh, sdf);
-        s.degenerateFaces = int64_t(orientation.degenerate);
-        s.inwardFraction = inwardFraction(orientation, mesh.n_faces());
+        const FaceOrientation orientation = countMeshOrientation(mesh, sdf);
+        s.degenerateFaces = orientation.degenerate;
+        s.inwardFraction = orientation.inwardFraction();
         *stats = s;
     }
     reportProgress(progress, 1.0, "mesh done");
     return mesh;
 }
 
+FaceOrientation checkFaceOrientation(const TriMesh& mesh, const openvdb::FloatGrid& sdf,
+                                     std::vector<TriMesh::FaceHandle>* notInward)
+{
+    OrientationTally tally = tallyMeshOrientation(mesh, sdf);
+    if (notInward) {
+        notInward->clear();
+        for (const std::size_t i : tally.notInward) notInward->push_back(TriMesh::FaceHandle(int(i)));
+    }
+    return tally.count;
+}
+
+struct LumenSideTest::Impl {
+    explicit Impl(const openvdb::FloatGrid& grid)
+        : accessor(grid.getConstAccessor()), sampler(accessor, grid.transform()), h(gradientStepMm(grid))
+    {
+    }
+    openvdb::FloatGrid::ConstAccessor accessor;
+    Sampler sampler;
+    double h;
+};
+
+LumenSideTest::LumenSideTest(const openvdb::FloatGrid& sdf) : mImpl(std::make_unique<Impl>(sdf)) {}
+LumenSideTest::~LumenSideTest() = default;
+
+bool LumenSideTest::isInward(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c) const
+{
+    const std::array<openvdb::Vec3d, 3> p{openvdb::Vec3d(a[0], a[1], a[2]), openvdb::Vec3d(b[0], b[1], b[2]),
+                                          openvdb::Vec3d(c[0], c[1], c[2])};
+    return classifyTriangle(mImpl->sampler, mImpl->h, p) == Side::Inward;
+}
+
 double inwardFaceFraction(const TriMesh& mesh, const openvdb::FloatGrid& sdf)
 {
-    return inwardFraction(countMeshOrientation(mesh, sdf), mesh.n_faces());
+    return countMeshOrientation(mesh, sdf).inwardFraction();
 }
 
 double enclosedVolumeInward(const TriMesh& mesh)

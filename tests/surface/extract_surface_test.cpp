@@ -5,10 +5,10 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
+#include "surface_test_shapes.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/LevelSetSphere.h>
-#include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <gtest/gtest.h>
@@ -25,44 +25,17 @@
 namespace flyover {
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
-
-class OpenVdbEnvironment : public ::testing::Environment {
-public:
-    void SetUp() override { openvdb::initialize(); }
-};
-const auto* const ENV = ::testing::AddGlobalTestEnvironment(new OpenVdbEnvironment);
-
-/// Samples an analytic signed distance (world mm, negative inside) into a narrow-band level
-/// set over [lo, hi], then flood-fills the sign of the inactive interior.
-openvdb::FloatGrid::Ptr sampleSdf(const std::function<double(const openvdb::Vec3d&)>& distanceMm,
-                                  const openvdb::Vec3d& loMm, const openvdb::Vec3d& hiMm,
-                                  double voxelMm, double halfWidthVoxels = 3.0)
-{
-    const float background = float(halfWidthVoxels * voxelMm);
-    auto grid = openvdb::FloatGrid::create(background);
-    grid->setTransform(openvdb::math::Transform::createLinearTransform(voxelMm));
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
-    auto acc = grid->getAccessor();
-    const openvdb::Coord from(openvdb::Coord::floor(loMm / voxelMm));
-    const openvdb::Coord to(openvdb::Coord::ceil(hiMm / voxelMm));
-    for (int i = from.x(); i <= to.x(); ++i)
-        for (int j = from.y(); j <= to.y(); ++j)
-            for (int k = from.z(); k <= to.z(); ++k) {
-                const openvdb::Vec3d p = openvdb::Vec3d(i, j, k) * voxelMm;
-                const double d = distanceMm(p);
-                if (std::fabs(d) < background) acc.setValue(openvdb::Coord(i, j, k), float(d));
-            }
-    openvdb::tools::signedFloodFill(grid->tree());
-    return grid;
-}
+using test::PI;
+using test::sampleSdf;
 
 std::string describe(const MeshStats& s)
 {
     std::ostringstream o;
     o << "V=" << s.vertices << " F=" << s.faces << " components=" << s.components
       << " boundaryEdges=" << s.boundaryEdges << " dropped=" << s.droppedFaces
-      << " degenerate=" << s.degenerateFaces
+      << " degenerate=" << s.degenerateFaces << " repairs=" << s.degenerateRepairs
+      << " removed=" << s.removedDegenerateFaces << " nonManifoldEdges=" << s.nonManifoldEdges
+      << " conflicts=" << s.orientationConflicts
       << " area=" << s.areaMm2 << " volume=" << s.enclosedVolumeMm3
       << " inward=" << s.inwardFraction;
     return o.str();
@@ -95,6 +68,8 @@ TEST(ExtractSurface, SphereIsClosedGenusZeroInwardWithExactMeasures)
     EXPECT_EQ(s.boundaryEdges, 0);
     EXPECT_EQ(s.droppedFaces, 0);
     EXPECT_EQ(s.degenerateFaces, 0);
+    EXPECT_EQ(s.nonManifoldEdges, 0);
+    EXPECT_EQ(s.orientationConflicts, 0);
     EXPECT_EQ(eulerCharacteristic(mesh), 2);  // genus 0
     EXPECT_NEAR(s.areaMm2 / (4.0 * PI * r * r), 1.0, REL_TOL);
     EXPECT_NEAR(s.enclosedVolumeMm3 / (4.0 / 3.0 * PI * r * r * r), 1.0, REL_TOL);
@@ -185,8 +160,11 @@ TEST(ExtractSurface, OrientationFollowsTheSignNotTheShape)
     EXPECT_EQ(s.boundaryEdges, 0);
     EXPECT_NEAR(s.enclosedVolumeMm3 / (-4.0 / 3.0 * PI * r * r * r), 1.0, REL_TOL);
     // volumeToMesh emits a few collapsed quads for this grid (coincident corners): they are
-    // kept (no hole), counted, and have no orientation.
-    EXPECT_LT(s.degenerateFaces, s.faces / 100);
+    // repaired (edge collapses, no hole left), so every face has a normal.
+    EXPECT_GT(s.degenerateRepairs, 0);
+    EXPECT_EQ(s.degenerateFaces, 0);
+    EXPECT_EQ(s.droppedFaces, 0);
+    EXPECT_EQ(eulerCharacteristic(mesh), 2);
     int64_t zeroNormals = 0;
     for (const auto f : mesh.faces()) {
         const auto n = mesh.calc_face_normal(f);
@@ -197,7 +175,7 @@ TEST(ExtractSurface, OrientationFollowsTheSignNotTheShape)
         const auto c = mesh.calc_face_centroid(f);
         ASSERT_GT(n[0] * c[0] + n[1] * c[1] + n[2] * c[2], 0.f) << "face " << f.idx();
     }
-    EXPECT_EQ(zeroNormals, s.degenerateFaces);
+    EXPECT_EQ(zeroNormals, 0);
 }
 
 TEST(InwardFaceFraction, FlippedMeshScoresZero)
@@ -261,8 +239,11 @@ TEST(ExtractSurface, SaddleCheckerboardIsMeshedAndEveryFaceAccountedFor)
     std::vector<openvdb::Vec3I> triangles;
     std::vector<openvdb::Vec4I> quads;
     openvdb::tools::volumeToMesh(*grid, points, triangles, quads, 0.0, 0.0);
-    // Every triangle volumeToMesh produced is either in the mesh or counted as dropped.
-    EXPECT_EQ(s.faces + s.droppedFaces, int64_t(triangles.size() + 2 * quads.size()));
+    // Every triangle volumeToMesh produced is in the mesh, counted as dropped, or removed
+    // by the degenerate-face repair.
+    EXPECT_EQ(s.faces + s.droppedFaces + s.removedDegenerateFaces, int64_t(triangles.size() + 2 * quads.size()));
+    EXPECT_EQ(s.nonManifoldEdges, 0);
+    EXPECT_EQ(s.orientationConflicts, 0);
     EXPECT_EQ(s.faces, int64_t(mesh.n_faces()));
     EXPECT_GT(s.components, 1);  // volumeToMesh separates the saddles into closed pieces
     EXPECT_EQ(s.boundaryEdges, 0);

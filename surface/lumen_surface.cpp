@@ -1,0 +1,200 @@
+#include "surface/lumen_surface.h"
+
+#include "surface/mesh_distance.h"
+#include "volume/error.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace flyover {
+
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point start)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// Reports a sub-step's progress as a slice [lo, hi] of the whole stage.
+class SubProgress : public Progress {
+public:
+    SubProgress(Progress* parent, double lo, double hi) : mParent(parent), mLo(lo), mHi(hi) {}
+    void update(double fraction, const std::string& what) override
+    {
+        mParent->update(mLo + (mHi - mLo) * fraction, what);
+    }
+    bool cancelled() const override { return mParent->cancelled(); }
+
+private:
+    Progress* mParent;
+    double mLo, mHi;
+};
+
+std::optional<SubProgress> slice(Progress* parent, double lo, double hi)
+{
+    if (!parent) return std::nullopt;
+    return SubProgress(parent, lo, hi);
+}
+
+Progress* ptr(std::optional<SubProgress>& p) { return p ? &*p : nullptr; }
+
+} // namespace
+
+int64_t restoreNonInwardFaces(TriMesh& mesh, const std::vector<TriMesh::Point>& extracted,
+                              const openvdb::FloatGrid& sdf)
+{
+    std::vector<TriMesh::FaceHandle> bad;
+    checkFaceOrientation(mesh, sdf, &bad);
+    if (bad.empty()) return 0;
+    const LumenSideTest inward(sdf);
+    int64_t restored = 0;
+    std::vector<TriMesh::VertexHandle> moved;
+    std::vector<char> queued(mesh.n_faces(), 0);
+    while (!bad.empty()) {
+        moved.clear();
+        for (const TriMesh::FaceHandle f : bad)
+            for (const auto v : mesh.fv_range(f)) {
+                const TriMesh::Point& p = extracted[std::size_t(v.idx())];
+                if (mesh.point(v) != p) {
+                    mesh.set_point(v, p);
+                    moved.push_back(v);
+                }
+            }
+        restored += int64_t(moved.size());
+        // Only faces around a restored vertex changed shape.
+        bad.clear();
+        for (const TriMesh::VertexHandle v : moved)
+            for (const auto f : mesh.vf_range(v)) {
+                if (queued[std::size_t(f.idx())]) continue;
+                queued[std::size_t(f.idx())] = 1;
+                std::array<OpenMesh::Vec3d, 3> p;
+                int k = 0;
+                for (const auto w : mesh.fv_range(f)) p[std::size_t(k++)] = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(w));
+                if (!inward.isInward(p[0], p[1], p[2])) bad.push_back(f);
+            }
+        for (const TriMesh::VertexHandle v : moved)
+            for (const auto f : mesh.vf_range(v)) queued[std::size_t(f.idx())] = 0;
+    }
+    return restored;
+}
+
+void validateMeshParams(const MeshParams& p)
+{
+    auto require = [](bool ok, const char* name, double value, const char* expected) {
+        if (ok) return;
+        std::ostringstream msg;
+        msg << "MeshParams." << name << ": expected " << expected << ", got " << value;
+        throw ParameterError(msg.str());
+    };
+    require(std::isfinite(p.isoValueMm), "isoValueMm", p.isoValueMm, "a finite value");
+    require(p.adaptivity >= 0.0 && p.adaptivity <= 1.0, "adaptivity", p.adaptivity, "a value in [0, 1]");
+    if (p.smoothMethod != "taubin" && p.smoothMethod != "none")
+        throw ParameterError("MeshParams.smoothMethod: expected \"taubin\" or \"none\", got \"" +
+                             p.smoothMethod + "\"");
+    require(p.smoothIterations >= 0, "smoothIterations", p.smoothIterations, ">= 0");
+    require(p.smoothPassBand > 0.0 && p.smoothPassBand < 1.0, "smoothPassBand", p.smoothPassBand,
+            "a value in (0, 1)");
+    require(p.decimateTargetFaces >= 0, "decimateTargetFaces", p.decimateTargetFaces, ">= 0");
+    require(p.decimateFraction > 0.0 && p.decimateFraction <= 1.0, "decimateFraction", p.decimateFraction,
+            "a value in (0, 1]");
+    require(p.decimateMaxErrorVoxels >= 0.0 && std::isfinite(p.decimateMaxErrorVoxels), "decimateMaxErrorVoxels",
+            p.decimateMaxErrorVoxels, "a finite value >= 0");
+    require(p.decimateMaxNormalDeviationDeg > 0.0 && p.decimateMaxNormalDeviationDeg <= 180.0,
+            "decimateMaxNormalDeviationDeg", p.decimateMaxNormalDeviationDeg, "a value in (0, 180]");
+}
+
+TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, LumenSurfaceReport* report,
+                         Progress* progress, bool measureDecimationError)
+{
+    validateMeshParams(params);
+    using Clock = std::chrono::steady_clock;
+    LumenSurfaceReport rep;
+    const openvdb::Vec3d voxel = sdf.voxelSize();
+    const double voxelMm = std::min({voxel[0], voxel[1], voxel[2]});
+
+    auto t0 = Clock::now();
+    auto extractProgress = slice(progress, 0.0, 0.3);
+    TriMesh mesh = extractSurface(sdf, params, &rep.extraction, ptr(extractProgress));
+    rep.extractSeconds = secondsSince(t0);
+
+    t0 = Clock::now();
+    reportProgress(progress, 0.3, "raw mesh measures");
+    // The check of the mesh as it stands; reused as the final check when nothing changes it.
+    MeshCheck current = checkMesh(mesh);
+    rep.rawAreaMm2 = current.areaMm2;
+    rep.rawVolumeMm3 = current.enclosedVolumeMm3;
+    rep.rawRoughnessDeg = meanDihedralAngleDeg(mesh);
+    rep.checkSeconds += secondsSince(t0);
+
+    rep.smoothedVolumeMm3 = rep.rawVolumeMm3;
+    rep.smoothedRoughnessDeg = rep.rawRoughnessDeg;
+    if (params.smoothMethod == "taubin" && params.smoothIterations > 0) {
+        t0 = Clock::now();
+        TaubinParams taubin;
+        taubin.iterations = params.smoothIterations;
+        taubin.passBand = params.smoothPassBand;
+        auto smoothProgress = slice(progress, 0.35, 0.5);
+        std::vector<TriMesh::Point> extracted(mesh.n_vertices());
+        for (const auto v : mesh.vertices()) extracted[std::size_t(v.idx())] = mesh.point(v);
+        smoothMeshTaubin(mesh, taubin, &rep.smoothing, ptr(smoothProgress));
+        rep.smoothingRestoredVertices = restoreNonInwardFaces(mesh, extracted, sdf);
+        rep.smoothSeconds = secondsSince(t0);
+        t0 = Clock::now();
+        current = checkMesh(mesh);
+        rep.smoothedVolumeMm3 = current.enclosedVolumeMm3;
+        rep.smoothedRoughnessDeg = meanDihedralAngleDeg(mesh);
+        if (rep.rawVolumeMm3 != 0.0)
+            rep.smoothingVolumeChange = (rep.smoothedVolumeMm3 - rep.rawVolumeMm3) / rep.rawVolumeMm3;
+        rep.checkSeconds += secondsSince(t0);
+    }
+
+    int64_t target = 0;
+    if (params.decimateTargetFaces > 0) target = params.decimateTargetFaces;
+    if (params.decimateFraction < 1.0) {
+        const auto byFraction = int64_t(std::llround(params.decimateFraction * double(mesh.n_faces())));
+        target = target > 0 ? std::min(target, byFraction) : std::max<int64_t>(byFraction, 1);
+    }
+    rep.decimationMaxErrorMm = params.decimateMaxErrorVoxels * voxelMm;
+    rep.decimation.facesBefore = rep.decimation.facesAfter = int64_t(mesh.n_faces());
+    if (target > 0 || rep.decimationMaxErrorMm > 0.0) {
+        t0 = Clock::now();
+        std::optional<TriMesh> before;
+        if (measureDecimationError) before = mesh;
+        DecimateParams decimate;
+        decimate.targetFaces = target;
+        decimate.maxErrorMm = rep.decimationMaxErrorMm;
+        decimate.maxNormalDeviationDeg = params.decimateMaxNormalDeviationDeg;
+        const LumenSideTest inward(sdf);  // decimation runs serially: one instance suffices
+        decimate.acceptTriangle = [&inward](const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b,
+                                            const OpenMesh::Vec3d& c) { return inward.isInward(a, b, c); };
+        auto decimateProgress = slice(progress, 0.5, 0.75);
+        decimateMesh(mesh, decimate, &rep.decimation, ptr(decimateProgress));
+        rep.decimateSeconds = secondsSince(t0);
+        if (before && rep.decimation.collapses > 0) {
+            t0 = Clock::now();
+            reportProgress(progress, 0.75, "decimation error");
+            // Samples every half voxel: the extracted faces are about that size (so their vertices
+            // and centroids are sampled), the decimated ones get a lattice (mesh_distance.h).
+            rep.decimationHausdorffMm = hausdorffDistanceMm(*before, mesh, 0.5 * voxelMm);
+            rep.checkSeconds += secondsSince(t0);
+        }
+    }
+
+    t0 = Clock::now();
+    reportProgress(progress, 0.85, "mesh checks");
+    rep.check = rep.decimation.collapses > 0 ? checkMesh(mesh) : std::move(current);
+    rep.orientation = checkFaceOrientation(mesh, sdf);
+    rep.checkSeconds += secondsSince(t0);
+    reportProgress(progress, 1.0, "mesh done");
+    if (report) *report = rep;
+    return mesh;
+}
+
+} // namespace flyover

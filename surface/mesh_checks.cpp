@@ -1,0 +1,303 @@
+#include "surface/mesh_checks.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <numeric>
+#include <vector>
+
+namespace flyover {
+
+namespace {
+
+using Vec3d = OpenMesh::Vec3d;
+
+constexpr double PI = 3.14159265358979323846;
+
+Vec3d pointOf(const TriMesh& mesh, TriMesh::VertexHandle v)
+{
+    return OpenMesh::vector_cast<Vec3d>(mesh.point(v));
+}
+
+/// A triangle as three points, for the volume and winding sums (mesh faces and loop caps).
+using Triangle = std::array<Vec3d, 3>;
+
+struct Box {
+    Vec3d lo{std::numeric_limits<double>::max()};
+    Vec3d hi{-std::numeric_limits<double>::max()};
+    void add(const Vec3d& p)
+    {
+        lo.minimize(p);
+        hi.maximize(p);
+    }
+    bool contains(const Box& b) const
+    {
+        for (int a = 0; a < 3; ++a)
+            if (b.lo[a] < lo[a] || b.hi[a] > hi[a]) return false;
+        return true;
+    }
+};
+
+/// Everything known about one component while measuring it.
+struct ComponentWork {
+    MeshComponent info;
+    std::vector<Triangle> caps;  ///< fans closing its boundary loops
+    Box box;
+    Vec3d probe{0.0};            ///< a vertex of the component, for the nesting test
+};
+
+/// Solid angle (steradians, signed by winding) of triangle t seen from p
+/// (Van Oosterom and Strackee's formula).
+double solidAngle(const Triangle& t, const Vec3d& p)
+{
+    const Vec3d a = t[0] - p, b = t[1] - p, c = t[2] - p;
+    const double la = a.norm(), lb = b.norm(), lc = c.norm();
+    const double numerator = OpenMesh::dot(a, OpenMesh::cross(b, c));
+    const double denominator = la * lb * lc + OpenMesh::dot(a, b) * lc + OpenMesh::dot(a, c) * lb +
+                               OpenMesh::dot(b, c) * la;
+    return 2.0 * std::atan2(numerator, denominator);
+}
+
+/// Generalised winding number of p with respect to the faces of one component (and its caps).
+double windingNumber(const TriMesh& mesh, const std::vector<TriMesh::FaceHandle>& faces,
+                     const std::vector<Triangle>& caps, const Vec3d& p)
+{
+    const double sum = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, faces.size(), 4096), 0.0,
+        [&](const tbb::blocked_range<std::size_t>& r, double acc) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                Triangle t;
+                int k = 0;
+                for (const auto v : mesh.fv_range(faces[i])) t[std::size_t(k++)] = pointOf(mesh, v);
+                acc += solidAngle(t, p);
+            }
+            return acc;
+        },
+        [](double a, double b) { return a + b; });
+    double capSum = 0.0;
+    for (const Triangle& t : caps) capSum += solidAngle(t, p);
+    return (sum + capSum) / (4.0 * PI);
+}
+
+/// det(p0 - ref, p1 - ref, p2 - ref): six times the signed volume of the tetrahedron.
+double tripleProduct(const Triangle& t, const Vec3d& ref)
+{
+    return OpenMesh::dot(t[0] - ref, OpenMesh::cross(t[1] - ref, t[2] - ref));
+}
+
+} // namespace
+
+bool isDegenerateFace(const TriMesh& mesh, TriMesh::FaceHandle face)
+{
+    Triangle t;
+    int k = 0;
+    for (const auto v : mesh.fv_range(face)) t[std::size_t(k++)] = pointOf(mesh, v);
+    const double twiceArea = OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
+    const double longest2 =
+        std::max({(t[1] - t[0]).sqrnorm(), (t[2] - t[1]).sqrnorm(), (t[0] - t[2]).sqrnorm()});
+    return isDegenerateTriangle(twiceArea, longest2);
+}
+
+double meanDihedralAngleDeg(const TriMesh& mesh)
+{
+    struct Sum {
+        double angle = 0;
+        int64_t count = 0;
+    };
+    auto unitNormal = [&](TriMesh::FaceHandle f, Vec3d& n) {
+        Triangle t;
+        int k = 0;
+        for (const auto v : mesh.fv_range(f)) t[std::size_t(k++)] = pointOf(mesh, v);
+        n = OpenMesh::cross(t[1] - t[0], t[2] - t[0]);
+        if (isDegenerateFace(mesh, f)) return false;
+        n /= n.norm();
+        return true;
+    };
+    const Sum s = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, mesh.n_edges(), 4096), Sum{},
+        [&](const tbb::blocked_range<std::size_t>& r, Sum acc) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const TriMesh::EdgeHandle e{int(i)};
+                const TriMesh::FaceHandle f0 = mesh.face_handle(mesh.halfedge_handle(e, 0));
+                const TriMesh::FaceHandle f1 = mesh.face_handle(mesh.halfedge_handle(e, 1));
+                Vec3d n0, n1;
+                if (!f0.is_valid() || !f1.is_valid() || !unitNormal(f0, n0) || !unitNormal(f1, n1))
+                    continue;
+                // atan2 of |cross| and dot stays accurate for nearly parallel normals.
+                acc.angle += std::atan2(OpenMesh::cross(n0, n1).norm(), OpenMesh::dot(n0, n1));
+                ++acc.count;
+            }
+            return acc;
+        },
+        [](Sum a, const Sum& b) {
+            a.angle += b.angle;
+            a.count += b.count;
+            return a;
+        });
+    return s.count > 0 ? s.angle / double(s.count) * 180.0 / PI : 0.0;
+}
+
+MeshCheck checkMesh(const TriMesh& mesh)
+{
+    MeshCheck check;
+    check.vertices = int64_t(mesh.n_vertices());
+    check.edges = int64_t(mesh.n_edges());
+    check.faces = int64_t(mesh.n_faces());
+
+    // Edge-connected face components (depth-first over face neighbours).
+    constexpr int NONE = -1;
+    std::vector<int> faceComponent(mesh.n_faces(), NONE);
+    std::vector<std::vector<TriMesh::FaceHandle>> componentFaces;
+    {
+        std::vector<TriMesh::FaceHandle> stack;
+        for (const auto f : mesh.faces()) {
+            if (faceComponent[std::size_t(f.idx())] != NONE) continue;
+            const int c = int(componentFaces.size());
+            componentFaces.emplace_back();
+            faceComponent[std::size_t(f.idx())] = c;
+            stack.push_back(f);
+            while (!stack.empty()) {
+                const TriMesh::FaceHandle g = stack.back();
+                stack.pop_back();
+                componentFaces[std::size_t(c)].push_back(g);
+                for (auto ff = mesh.cff_iter(g); ff.is_valid(); ++ff) {
+                    int& mark = faceComponent[std::size_t(ff->idx())];
+                    if (mark == NONE) {
+                        mark = c;
+                        stack.push_back(*ff);
+                    }
+                }
+            }
+        }
+    }
+    std::vector<ComponentWork> work(componentFaces.size());
+
+    // Vertices and edges are counted in the component of any incident face.
+    for (const auto v : mesh.vertices()) {
+        if (!mesh.is_manifold(v)) ++check.nonManifoldVertices;
+        TriMesh::FaceHandle f;
+        for (const auto vf : mesh.vf_range(v)) {
+            f = vf;
+            break;
+        }
+        if (!f.is_valid()) {
+            ++check.isolatedVertices;
+            continue;
+        }
+        ComponentWork& w = work[std::size_t(faceComponent[std::size_t(f.idx())])];
+        if (w.info.vertices == 0) w.probe = pointOf(mesh, v);
+        ++w.info.vertices;
+        w.box.add(pointOf(mesh, v));
+    }
+    for (const auto e : mesh.edges()) {
+        TriMesh::FaceHandle f = mesh.face_handle(e.h0());
+        if (!f.is_valid()) f = mesh.face_handle(e.h1());
+        if (!f.is_valid()) continue;  // a dangling edge: no component
+        ++work[std::size_t(faceComponent[std::size_t(f.idx())])].info.edges;
+        if (e.is_boundary()) ++check.boundaryEdges;
+    }
+
+    // Boundary loops: cycles of boundary halfedges. Each gets a cap, a fan to its centroid,
+    // wound against the adjacent faces (they use the edge b->a, the cap uses a->b).
+    {
+        std::vector<char> seen(mesh.n_halfedges(), 0);
+        for (const auto h : mesh.halfedges()) {
+            if (!h.is_boundary() || seen[std::size_t(h.idx())]) continue;
+            const TriMesh::FaceHandle f = mesh.face_handle(h.opp());
+            if (!f.is_valid()) {  // dangling edge, no face on either side
+                seen[std::size_t(h.idx())] = 1;
+                continue;
+            }
+            ComponentWork& w = work[std::size_t(faceComponent[std::size_t(f.idx())])];
+            std::vector<TriMesh::HalfedgeHandle> loop;
+            // The walk closes for any halfedge structure, but guard it against corrupted
+            // connectivity rather than loop forever.
+            for (TriMesh::HalfedgeHandle g = h; !seen[std::size_t(g.idx())] && loop.size() <= mesh.n_halfedges();
+                 g = mesh.next_halfedge_handle(g)) {
+                seen[std::size_t(g.idx())] = 1;
+                loop.push_back(g);
+            }
+            Vec3d centroid(0.0);
+            for (const auto g : loop) centroid += pointOf(mesh, mesh.from_vertex_handle(g));
+            centroid /= double(loop.size());
+            for (const auto g : loop)
+                w.caps.push_back({pointOf(mesh, mesh.from_vertex_handle(g)),
+                                  pointOf(mesh, mesh.to_vertex_handle(g)), centroid});
+            ++w.info.boundaryLoops;
+        }
+    }
+
+    // Area, degenerate faces and capped volume per component.
+    for (std::size_t c = 0; c < work.size(); ++c) {
+        ComponentWork& w = work[c];
+        const std::vector<TriMesh::FaceHandle>& faces = componentFaces[c];
+        w.info.faces = int64_t(faces.size());
+        // A reference point near the component keeps float cancellation small.
+        const Vec3d ref = 0.5 * (w.box.lo + w.box.hi);
+        struct Sums {
+            double area = 0, volume6 = 0;
+            int64_t degenerate = 0;
+        };
+        const Sums s = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, faces.size(), 4096), Sums{},
+            [&](const tbb::blocked_range<std::size_t>& r, Sums acc) {
+                for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                    Triangle t;
+                    int k = 0;
+                    for (const auto v : mesh.fv_range(faces[i])) t[std::size_t(k++)] = pointOf(mesh, v);
+                    acc.area += 0.5 * OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
+                    acc.volume6 += tripleProduct(t, ref);
+                    if (isDegenerateFace(mesh, faces[i])) ++acc.degenerate;
+                }
+                return acc;
+            },
+            [](Sums a, const Sums& b) {
+                a.area += b.area;
+                a.volume6 += b.volume6;
+                a.degenerate += b.degenerate;
+                return a;
+            });
+        double volume6 = s.volume6;
+        for (const Triangle& t : w.caps) volume6 += tripleProduct(t, ref);
+        w.info.areaMm2 = s.area;
+        // The divergence theorem gives +V for outward normals; ours point inward.
+        w.info.enclosedVolumeMm3 = -volume6 / 6.0;
+        check.degenerateFaces += s.degenerate;
+        const int64_t chi = w.info.vertices - w.info.edges + w.info.faces;
+        w.info.genus = (2 - w.info.boundaryLoops - chi) / 2;
+    }
+
+    // Nesting: component c lies inside d when one of its vertices has winding number +-1 with
+    // respect to d (capped). Only pairs whose bounding boxes nest are evaluated.
+    for (std::size_t c = 0; c < work.size(); ++c)
+        for (std::size_t d = 0; d < work.size(); ++d) {
+            if (c == d || !work[d].box.contains(work[c].box)) continue;
+            const double wn = windingNumber(mesh, componentFaces[d], work[d].caps, work[c].probe);
+            if (std::fabs(wn) > 0.5) ++work[c].info.nestingDepth;
+        }
+
+    std::vector<std::size_t> order(work.size());
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+        return work[a].info.faces > work[b].info.faces;
+    });
+    for (const std::size_t c : order) {
+        const MeshComponent& info = work[c].info;
+        ++check.components;
+        if (info.isClosed()) ++check.closedComponents;
+        check.genus += info.genus;
+        check.boundaryLoops += info.boundaryLoops;
+        check.areaMm2 += info.areaMm2;
+        check.enclosedVolumeMm3 += info.enclosedVolumeMm3;
+        if (!info.hasInwardVolumeSign()) ++check.misorientedComponents;
+        check.componentList.push_back(info);
+    }
+    return check;
+}
+
+} // namespace flyover
