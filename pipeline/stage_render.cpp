@@ -1,7 +1,20 @@
+// The render stage: fly-over frame pairs (PNG) and video (MP4 through the ffmpeg program),
+// fly-through pairs for comparison, the six OST overviews, and coverage with missed regions.
+//
+// Artifacts (all folders are flat):
+//   overview.png              the anterior overview (with the marker when one is asked for)
+//   overviews/                <view>.png for the six canonical views, cameras.json
+//   frames/                   pair_NNNN.png (camera 0 | camera 1), poses.json, flyover.mp4
+//   flythrough/               pair_NNNN.png (forward | backward) at the same positions, poses.json
+//   coverage/                 coverage.json, surface_seen.ply
+// The first fly-over pair is rendered and written before anything else, so it is on disk a
+// fraction of a second after the stage starts (report: first_pair_seconds).
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
 #include "render/camera.h"
+#include "render/coverage.h"
+#include "render/overview.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"
 #include "volume/error.h"
@@ -9,12 +22,22 @@
 #include <tbb/parallel_for.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <spawn.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
-#include <filesystem>
+extern char** environ;
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -23,6 +46,10 @@ namespace flyover {
 
 namespace {
 
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
 json cameraJson(const Camera& c)
 {
     return json{{"position_mm", vec3Json(c.position)}, {"forward", vec3Json(c.forward)},
@@ -30,94 +57,615 @@ json cameraJson(const Camera& c)
                 {"fov_deg", c.fovDeg},                 {"near_mm", c.nearMm}};
 }
 
-} // namespace
-
-json runRender(StudyRun& run, Progress* progress)
+FlyoverParams flyoverParamsOf(const RenderParams& rp)
 {
-    if (!run.state.mesh) run.state.mesh = readMesh(run.path("surface.ply"));
-    if (!run.state.centerline)
-        run.state.centerline =
-            centerlineFromJson(readJson(run.path("centerline.json")), run.path("centerline.json"));
-    const RenderParams& rp = run.opt.params.render;
-    const Centerline& cl = *run.state.centerline;
-    if (cl.points.empty()) throw InputError(run.path("centerline.json") + ": the centerline is empty");
-
-    RayScene scene(*run.state.mesh);
-
-    // Overview (thesis V.C): the whole colon from the front (anterior, looking towards +y in
-    // LPS), head up, so the patient's right is on the image's left as in radiology.
-    RenderOptions ov;
-    ov.widthPx = ov.heightPx = rp.overviewPx;
-    ov.ost = rp.ost;
-    ov.supersample = std::max(rp.supersample, 2);
-    const Camera overview = overviewCamera(scene.boundsMin(), scene.boundsMax(), {0, 1, 0}, {0, 0, 1}, 30.0);
-    writePng(run.path("overview.png"), renderView(scene, overview, ov));
-
-    // Fly-over frame pairs every frameStepMm along the centerline.
     FlyoverParams fp;
     fp.fovDeg = rp.fovDeg;
     fp.rollDeg = rp.rollDeg;
     fp.leftToRight = rp.direction == "right";
     fp.clipOffsetFraction = rp.clipOffsetFraction;
     fp.clipOffsetMm = rp.clipOffsetMm;
+    return fp;
+}
+
+RenderOptions frameOptionsOf(const RenderParams& rp)
+{
     RenderOptions ro;
     ro.widthPx = rp.widthPx;
     ro.heightPx = rp.heightPx;
     ro.ost = rp.ost;
     ro.supersample = rp.supersample;
+    ro.smoothShading = rp.smoothShading;
+    ro.depthCue = rp.depthCue;
+    ro.depthCueRangeMm = rp.depthCueMm;
+    return ro;
+}
 
+/// How a frame was rendered, so that any frame can be reproduced from the JSON alone.
+json renderOptionsJson(const RenderOptions& ro)
+{
+    return json{{"width_px", ro.widthPx},       {"height_px", ro.heightPx},
+                {"ost", ro.ost},                {"supersample", ro.supersample},
+                {"smooth_shading", ro.smoothShading}, {"depth_cue", ro.depthCue},
+                {"depth_cue_mm", ro.depthCueRangeMm}};
+}
+
+/// Centerline indices every `stepMm` of arc length from the first point.
+std::vector<std::size_t> pathIndices(const Centerline& cl, double stepMm)
+{
     const double step = cl.stepMm > 0 ? cl.stepMm : 1.0;
     std::vector<std::size_t> indices;
-    for (double s = 0; ; s += rp.frameStepMm) {
-        const auto i = static_cast<std::size_t>(std::llround(s / step));
+    for (std::size_t k = 0;; ++k) {
+        const auto i = static_cast<std::size_t>(std::llround(double(k) * stepMm / step));
         if (i >= cl.points.size()) break;
-        indices.push_back(i);
+        if (indices.empty() || indices.back() != i) indices.push_back(i);
+    }
+    return indices;
+}
+
+std::string pairName(std::size_t frame)
+{
+    char name[32];
+    std::snprintf(name, sizeof name, "pair_%04zu.png", frame);
+    return name;
+}
+
+/// A folder written under a temporary name that replaces `dir/name` only on commit(); removed
+/// if never committed (an exception on the way), so a half-written folder is never trusted.
+class StagedFolder {
+public:
+    StagedFolder(const fs::path& dir, const std::string& name)
+        : mTarget(dir / name), mTmp(dir / (".tmp-" + std::to_string(::getpid()) + "-" + name))
+    {
+        fs::remove_all(mTmp);
+        fs::create_directories(mTmp);
+    }
+    ~StagedFolder()
+    {
+        std::error_code ec;
+        if (!mCommitted) fs::remove_all(mTmp, ec);
+    }
+    StagedFolder(const StagedFolder&) = delete;
+    StagedFolder& operator=(const StagedFolder&) = delete;
+
+    std::string path(const std::string& file) const { return (mTmp / file).string(); }
+
+    void commit()
+    {
+        const fs::path old = mTarget.parent_path() / (".tmp-" + std::to_string(::getpid()) + "-old-" +
+                                                      mTarget.filename().string());
+        fs::remove_all(old);
+        if (fs::exists(mTarget)) fs::rename(mTarget, old);
+        fs::rename(mTmp, mTarget);
+        fs::remove_all(old);
+        mCommitted = true;
     }
 
-    // Frames go to a fresh folder that replaces frames/ only when complete.
-    const fs::path tmpDir = run.dir / (".tmp-" + std::to_string(::getpid()) + "-frames");
-    fs::remove_all(tmpDir);
-    fs::create_directories(tmpDir);
+private:
+    fs::path mTarget, mTmp;
+    bool mCommitted = false;
+};
+
+/// The full path of an executable on PATH, or "" when there is none.
+std::string findOnPath(const std::string& program)
+{
+    const char* path = std::getenv("PATH");
+    std::string dirs = path ? path : "/usr/local/bin:/usr/bin:/bin";
+    std::size_t start = 0;
+    while (start <= dirs.size()) {
+        const std::size_t end = std::min(dirs.find(':', start), dirs.size());
+        const std::string dir = dirs.substr(start, end - start);
+        const std::string candidate = (dir.empty() ? std::string(".") : dir) + "/" + program;
+        if (::access(candidate.c_str(), X_OK) == 0 && fs::is_regular_file(candidate)) return candidate;
+        start = end + 1;
+    }
+    return "";
+}
+
+/// Feeds raw RGB frames to an ffmpeg process that encodes them to H.264 in an MP4 (no shell:
+/// the output path needs no quoting). ffmpeg's messages go to a log file next to the video and
+/// the last line is quoted if it fails.
+class FfmpegVideo {
+public:
+    FfmpegVideo(const std::string& ffmpeg, const std::string& outPath, const std::string& logPath, int width,
+                int height, int fps)
+        : mOut(outPath), mLog(logPath)
+    {
+        int fds[2];
+        if (::pipe2(fds, O_CLOEXEC) != 0) throw std::runtime_error("render.video: pipe failed: " + std::string(std::strerror(errno)));
+        const std::string size = std::to_string(width) + "x" + std::to_string(height);
+        const std::string rate = std::to_string(fps);
+        std::vector<std::string> args = {ffmpeg, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
+                                         "-s", size, "-framerate", rate, "-i", "-",
+                                         // yuv420p needs even sizes.
+                                         "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-preset",
+                                         "veryfast", "-crf", "20", "-pix_fmt", "yuv420p", "-movflags", "+faststart",
+                                         outPath};
+        std::vector<char*> argv;
+        for (auto& a : args) argv.push_back(a.data());
+        argv.push_back(nullptr);
+        posix_spawn_file_actions_t actions;
+        posix_spawn_file_actions_init(&actions);
+        posix_spawn_file_actions_adddup2(&actions, fds[0], 0);
+        posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+        posix_spawn_file_actions_addopen(&actions, 2, logPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        const int rc = posix_spawn(&mPid, ffmpeg.c_str(), &actions, nullptr, argv.data(), environ);
+        posix_spawn_file_actions_destroy(&actions);
+        ::close(fds[0]);
+        if (rc != 0) {
+            ::close(fds[1]);
+            throw std::runtime_error("render.video: could not start " + ffmpeg + ": " + std::strerror(rc));
+        }
+        mFd = fds[1];
+        // A dying ffmpeg must surface as an error here, not kill the process with SIGPIPE.
+        sigset_t pipeSet;
+        sigemptyset(&pipeSet);
+        sigaddset(&pipeSet, SIGPIPE);
+        pthread_sigmask(SIG_BLOCK, &pipeSet, &mSavedMask);
+    }
+
+    ~FfmpegVideo()
+    {
+        if (mFd >= 0) {
+            ::close(mFd);
+            int status = 0;
+            ::waitpid(mPid, &status, 0);
+        }
+        restoreSignals();
+    }
+    FfmpegVideo(const FfmpegVideo&) = delete;
+    FfmpegVideo& operator=(const FfmpegVideo&) = delete;
+
+    void write(const RgbImage& frame)
+    {
+        const uint8_t* p = frame.rgb.data();
+        std::size_t left = frame.rgb.size();
+        while (left > 0 && !mBroken) {
+            const ssize_t n = ::write(mFd, p, left);
+            if (n < 0) {
+                if (errno == EINTR) continue;
+                mBroken = true;  // ffmpeg exited: finish() reports why
+                break;
+            }
+            p += n;
+            left -= std::size_t(n);
+        }
+    }
+
+    /// Closes the stream, waits for ffmpeg. @throw std::runtime_error when it failed.
+    void finish()
+    {
+        ::close(mFd);
+        mFd = -1;
+        int status = 0;
+        while (::waitpid(mPid, &status, 0) < 0 && errno == EINTR) {
+        }
+        restoreSignals();
+        if (!WIFEXITED(status) || WEXITSTATUS(status) != 0 || mBroken) {
+            std::string last;
+            std::ifstream log(mLog);
+            for (std::string line; std::getline(log, line);)
+                if (!line.empty()) last = line;
+            throw std::runtime_error("render.video: ffmpeg failed writing " + mOut +
+                                     (last.empty() ? std::string() : ": " + last));
+        }
+    }
+
+private:
+    void restoreSignals()
+    {
+        if (!mSignalsRestored) {
+            // Discard a SIGPIPE raised while blocked, then restore the caller's mask.
+            sigset_t pipeSet;
+            sigemptyset(&pipeSet);
+            sigaddset(&pipeSet, SIGPIPE);
+            const timespec zero{0, 0};
+            while (sigtimedwait(&pipeSet, nullptr, &zero) > 0) {
+            }
+            pthread_sigmask(SIG_SETMASK, &mSavedMask, nullptr);
+            mSignalsRestored = true;
+        }
+    }
+
+    std::string mOut, mLog;
+    pid_t mPid = -1;
+    int mFd = -1;
+    bool mBroken = false;
+    bool mSignalsRestored = false;
+    sigset_t mSavedMask;
+};
+
+json missedRegionsJson(const std::vector<MissedRegion>& regions)
+{
+    json out = json::array();
+    for (const MissedRegion& r : regions)
+        out.push_back(json{{"area_mm2", r.areaMm2},
+                           {"centroid_mm", vec3Json(r.centroidMm)},
+                           {"triangles", r.triangles},
+                           {"nearest_centerline_index", r.nearestCenterlineIndex},
+                           {"arc_mm", r.arcMm},
+                           {"distance_to_centerline_mm", r.distanceToCenterlineMm}});
+    return out;
+}
+
+json methodJson(const MethodCoverage& m, double minRegionMm2)
+{
+    return json{{"fraction", m.fraction},
+                {"seen_area_mm2", m.seenAreaMm2},
+                {"missed_regions_min_area_mm2", minRegionMm2},
+                {"missed_regions_count", m.missed.size()},
+                {"missed_area_in_listed_regions_mm2", m.missedInListedRegionsMm2},
+                {"missed_regions", missedRegionsJson(m.missed)}};
+}
+
+/// Per vertex: 1 when every triangle around it was seen, so a missed region shows in full
+/// (its border vertices are 0) and a miss is never hidden by interpolation in a viewer.
+std::vector<uint8_t> vertexSeen(const RayScene& scene, const std::vector<uint8_t>& triangleSeen)
+{
+    std::vector<uint8_t> v(scene.vertexCount(), 1);
+    for (uint32_t f = 0; f < scene.triangleCount(); ++f) {
+        if (triangleSeen[f]) continue;
+        for (const uint32_t i : scene.triangle(f)) v[i] = 0;
+    }
+    return v;
+}
+
+bool isLittleEndian()
+{
+    const uint16_t probe = 1;
+    uint8_t first = 0;
+    std::memcpy(&first, &probe, 1);
+    return first == 1;
+}
+
+/// surface_seen.ply: binary PLY with per-vertex seen_flyover, seen_flythrough (two-way),
+/// seen_flythrough_forward (0/1) and a colour: blue where the fly-over missed, orange where
+/// only the fly-through missed, tissue elsewhere.
+void writeSurfaceSeen(const std::string& path, const RayScene& scene, const CoverageResult& cov)
+{
+    static_assert(sizeof(float) == 4 && sizeof(int32_t) == 4, "PLY needs 32-bit float and int");
+    if (!isLittleEndian()) throw std::runtime_error(path + ": the PLY writer assumes a little-endian machine");
+    const auto flyover = vertexSeen(scene, cov.flyover.seen);
+    const auto twoWay = vertexSeen(scene, cov.flythroughTwoWay.seen);
+    const auto forward = vertexSeen(scene, cov.flythroughForward.seen);
+    writeAtomically(path, [&](const std::string& tmp) {
+        std::ofstream out(tmp, std::ios::binary);
+        out << "ply\nformat binary_little_endian 1.0\n"
+            << "comment flyover surface_seen: 1 = every triangle around the vertex was hit by a primary ray\n"
+            << "comment colour: blue = missed by the fly-over, orange = missed by the two-way fly-through only\n"
+            << "element vertex " << scene.vertexCount() << "\n"
+            << "property float x\nproperty float y\nproperty float z\n"
+            << "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+            << "property uchar seen_flyover\nproperty uchar seen_flythrough\nproperty uchar seen_flythrough_forward\n"
+            << "element face " << scene.triangleCount() << "\n"
+            << "property list uchar int vertex_indices\nend_header\n";
+        std::vector<char> buf;
+        buf.reserve(std::size_t(scene.vertexCount()) * 18 + std::size_t(scene.triangleCount()) * 13);
+        auto put = [&](const void* p, std::size_t n) {
+            const char* c = static_cast<const char*>(p);
+            buf.insert(buf.end(), c, c + n);
+        };
+        for (uint32_t i = 0; i < scene.vertexCount(); ++i) {
+            const Vec3d p = scene.vertex(i);
+            const float xyz[3] = {float(p.x), float(p.y), float(p.z)};
+            put(xyz, sizeof xyz);
+            uint8_t rgb[3] = {225, 170, 160};
+            if (!flyover[i]) rgb[0] = 30, rgb[1] = 80, rgb[2] = 230;
+            else if (!twoWay[i]) rgb[0] = 245, rgb[1] = 170, rgb[2] = 30;
+            const uint8_t props[6] = {rgb[0], rgb[1], rgb[2], flyover[i], twoWay[i], forward[i]};
+            put(props, sizeof props);
+        }
+        for (uint32_t f = 0; f < scene.triangleCount(); ++f) {
+            const uint8_t n = 3;
+            put(&n, 1);
+            for (const uint32_t v : scene.triangle(f)) {
+                const int32_t idx = int32_t(v);
+                put(&idx, 4);
+            }
+        }
+        out.write(buf.data(), std::streamsize(buf.size()));
+        if (!out) throw InputError(path + ": write failed");
+    });
+}
+
+/// Reads the vertices and triangles of a binary little-endian PLY with exactly float x, y, z
+/// per vertex and `list uchar int vertex_indices` of 3 per face (what writeMesh produces),
+/// without building a mesh topology: that takes most of a second for a million triangles, and
+/// the renderer needs none. @return false when the file has another layout (the caller then
+/// reads it with the general reader).
+bool readPlainPly(const std::string& path, std::vector<float>& xyz, std::vector<uint32_t>& tris)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path + ": cannot open for reading");
+    std::string line;
+    std::vector<std::string> header;
+    while (std::getline(in, line)) {
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        if (line.rfind("comment", 0) == 0 || line.rfind("obj_info", 0) == 0) continue;
+        header.push_back(line);
+        if (line == "end_header" || header.size() > 16) break;
+    }
+    long long nv = -1, nf = -1;
+    if (header.size() != 9 || header[0] != "ply" || header[1] != "format binary_little_endian 1.0" ||
+        std::sscanf(header[2].c_str(), "element vertex %lld", &nv) != 1 || header[3] != "property float x" ||
+        header[4] != "property float y" || header[5] != "property float z" ||
+        std::sscanf(header[6].c_str(), "element face %lld", &nf) != 1 ||
+        (header[7] != "property list uchar int vertex_indices" && header[7] != "property list uchar int vertex_index") ||
+        header[8] != "end_header" || !isLittleEndian())
+        return false;
+    if (nv < 0 || nf < 0 || nv >= (1LL << 32) || nf > (1LL << 30)) return false;
+    xyz.resize(std::size_t(3 * nv));
+    in.read(reinterpret_cast<char*>(xyz.data()), std::streamsize(xyz.size() * sizeof(float)));
+    std::vector<char> faces(std::size_t(nf) * 13);
+    in.read(faces.data(), std::streamsize(faces.size()));
+    if (!in) throw InputError(path + ": truncated PLY");
+    tris.resize(std::size_t(3 * nf));
+    for (std::size_t f = 0; f < std::size_t(nf); ++f) {
+        const char* rec = &faces[f * 13];
+        if (uint8_t(rec[0]) != 3) return false;  // not all triangles
+        int32_t idx[3];
+        std::memcpy(idx, rec + 1, sizeof idx);
+        for (int k = 0; k < 3; ++k) {
+            if (idx[k] < 0 || idx[k] >= nv) throw InputError(path + ": face " + std::to_string(f) + " has a bad vertex index");
+            tris[3 * f + std::size_t(k)] = uint32_t(idx[k]);
+        }
+    }
+    return true;
+}
+
+} // namespace
+
+json runRender(StudyRun& run, Progress* progress)
+{
+    const auto tStart = Clock::now();
+    const RenderParams& rp = run.opt.params.render;
+    // Fail before any work when the video cannot be made.
+    std::string ffmpeg;
+    if (rp.video) {
+        ffmpeg = findOnPath("ffmpeg");
+        if (ffmpeg.empty())
+            throw std::runtime_error("render.video: the 'ffmpeg' program is not on PATH; install it "
+                                     "(Debian: apt-get install ffmpeg) or set render.video=false");
+    }
+
+    // The scene straight from the mesh in memory, or from surface.ply's arrays (no topology).
+    std::unique_ptr<RayScene> scenePtr;
+    double readSurfaceSeconds = 0;
+    if (run.state.mesh) {
+        scenePtr = std::make_unique<RayScene>(*run.state.mesh);
+    } else {
+        std::vector<float> xyz;
+        std::vector<uint32_t> tris;
+        if (readPlainPly(run.path("surface.ply"), xyz, tris)) {
+            readSurfaceSeconds = secondsSince(tStart);
+            scenePtr = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
+        } else {
+            run.state.mesh = readMesh(run.path("surface.ply"));
+            readSurfaceSeconds = secondsSince(tStart);
+            scenePtr = std::make_unique<RayScene>(*run.state.mesh);
+        }
+    }
+    const RayScene& scene = *scenePtr;
+    const double sceneSeconds = secondsSince(tStart) - readSurfaceSeconds;
+    const auto tCenterline = Clock::now();
+    if (!run.state.centerline)
+        run.state.centerline =
+            centerlineFromJson(readJson(run.path("centerline.json")), run.path("centerline.json"));
+    const Centerline& cl = *run.state.centerline;
+    if (cl.points.empty()) throw InputError(run.path("centerline.json") + ": the centerline is empty");
+    const double readCenterlineSeconds = secondsSince(tCenterline);
+
+    const FlyoverParams fp = flyoverParamsOf(rp);
+    const RenderOptions ro = frameOptionsOf(rp);
+    const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
+    const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
+
+    // --- fly-over frame pairs; the first one before anything else.
+    StagedFolder frames(run.dir, "frames");
     std::vector<json> poses(indices.size());
-    const auto t0 = std::chrono::steady_clock::now();
-    std::atomic<std::size_t> done{0};
-    tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
+    double firstRenderSeconds = 0, firstPngSeconds = 0;
+    auto renderPair = [&](std::size_t f) {
+        const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
         const auto cams = flyoverCameras(p, fp);
-        const RgbImage a = renderView(scene, cams[0], ro);
-        const RgbImage b = renderView(scene, cams[1], ro);
-        char name[32];
-        std::snprintf(name, sizeof name, "pair_%04zu.png", f);
-        writePng((tmpDir / name).string(), sideBySide(a, b));
+        const RgbImage pair = sideBySide(renderView(scene, cams[0], ro), renderView(scene, cams[1], ro));
+        const auto t1 = Clock::now();
+        writePng(frames.path(pairName(f)), pair);
+        if (f == 0) {
+            firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
+            firstPngSeconds = secondsSince(t1);
+        }
         poses[f] = json{{"frame", f},
-                        {"file", name},
+                        {"file", pairName(f)},
                         {"centerline_index", indices[f]},
-                        {"arc_mm", indices[f] * step},
+                        {"arc_mm", double(indices[f]) * clStep},
                         {"centerline_point_mm", vec3Json(p.positionMm)},
                         {"radius_mm", p.radiusMm},
                         {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
-        reportProgress(progress, double(++done) / indices.size(), "fly-over frame pairs");
+    };
+    const auto tFrames = Clock::now();
+    renderPair(0);
+    const double firstPairSeconds = secondsSince(tStart);
+    std::atomic<std::size_t> done{1};
+    tbb::parallel_for(std::size_t(1), indices.size(), [&](std::size_t f) {
+        renderPair(f);
+        reportProgress(progress, 0.3 * double(++done) / double(indices.size()), "fly-over frame pairs");
     });
-    const double renderSeconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    writeJson((tmpDir / "poses.json").string(),
+    const double framesSeconds = secondsSince(tFrames);
+
+    // --- fly-through pairs (forward | backward) at the same positions.
+    StagedFolder flythrough(run.dir, "flythrough");
+    if (rp.flythroughFrames) {
+        std::vector<json> ftPoses(indices.size());
+        tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
+            const CenterlinePoint& p = cl.points[indices[f]];
+            const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
+            const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
+            writePng(flythrough.path(pairName(f)), sideBySide(renderView(scene, fwd, ro), renderView(scene, back, ro)));
+            ftPoses[f] = json{{"frame", f},
+                              {"file", pairName(f)},
+                              {"centerline_index", indices[f]},
+                              {"arc_mm", double(indices[f]) * clStep},
+                              {"cameras", json::array({cameraJson(fwd), cameraJson(back)})}};
+        });
+        writeJson(flythrough.path("poses.json"),
+                  json{{"schema", "flyover.poses/1"},
+                       {"world_frame", WORLD_FRAME},
+                       {"layout", "pair images: forward (rectum -> cecum) left, backward right"},
+                       {"render", renderOptionsJson(ro)},
+                       {"frames", ftPoses}});
+    }
+    reportProgress(progress, 0.4, "fly-through frame pairs");
+
+    // --- the six overviews (thesis V.C), with the marker when asked for.
+    const auto tOverview = Clock::now();
+    StagedFolder overviews(run.dir, "overviews");
+    RenderOptions ov;
+    ov.widthPx = ov.heightPx = rp.overviewPx;
+    ov.ost = rp.ost;
+    ov.supersample = std::max(rp.supersample, 2);
+    ov.smoothShading = rp.smoothShading;
+    ov.depthCue = rp.depthCue;  // range 0: half the scene's diagonal
+    std::optional<OverviewMarker> marker;
+    if (rp.overviewMarkerMm >= 0) {
+        const auto i = std::min(cl.points.size() - 1, std::size_t(std::llround(rp.overviewMarkerMm / clStep)));
+        marker = OverviewMarker{cl.points[i].positionMm, std::max(cl.points[i].radiusMm, 1.0)};
+    }
+    json overviewCameras = json::object();
+    RgbImage anterior;
+    for (const CanonicalView& view : canonicalViews()) {
+        const Camera cam = overviewCamera(scene.boundsMin(), scene.boundsMax(), view.viewDir, view.up, 30.0);
+        RgbImage image = renderView(scene, cam, ov);
+        if (marker) drawMarker(image, cam, *marker);
+        writePng(overviews.path(std::string(view.name) + ".png"), image);
+        overviewCameras[view.name] = cameraJson(cam);
+        if (std::string(view.name) == "anterior") anterior = std::move(image);
+    }
+    json overviewInfo{{"schema", "flyover.overviews/1"},
+                      {"world_frame", WORLD_FRAME},
+                      {"render", renderOptionsJson(ov)},
+                      {"cameras", overviewCameras}};
+    if (marker)
+        overviewInfo["marker"] = json{{"arc_mm", rp.overviewMarkerMm},
+                                      {"position_mm", vec3Json(marker->positionMm)},
+                                      {"radius_mm", marker->radiusMm}};
+    writeJson(overviews.path("cameras.json"), overviewInfo);
+    writePng(run.path("overview.png"), anterior);
+    const double overviewSeconds = secondsSince(tOverview);
+    reportProgress(progress, 0.5, "overviews");
+
+    // --- the video of the whole fly-over, frames every videoStepMm, straight to ffmpeg.
+    json videoInfo = nullptr;
+    double videoSeconds = 0;
+    if (rp.video) {
+        const auto tVideo = Clock::now();
+        const std::vector<std::size_t> vIdx = pathIndices(cl, rp.videoStepMm);
+        const int pairWidth = 2 * rp.widthPx + 4;
+        std::vector<json> vPoses;
+        writeAtomically(frames.path("flyover.mp4"), [&](const std::string& tmp) {
+            FfmpegVideo video(ffmpeg, tmp, frames.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
+            RgbImage left, right;
+            for (std::size_t k = 0; k < vIdx.size(); ++k) {
+                const auto cams = flyoverCameras(cl.points[vIdx[k]], fp);
+                renderView(scene, cams[0], ro, left);
+                renderView(scene, cams[1], ro, right);
+                video.write(sideBySide(left, right));
+                vPoses.push_back(json{{"frame", k},
+                                      {"centerline_index", vIdx[k]},
+                                      {"arc_mm", double(vIdx[k]) * clStep},
+                                      {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}});
+                if (k % 32 == 0)
+                    reportProgress(progress, 0.5 + 0.3 * double(k + 1) / double(vIdx.size()), "video frames");
+            }
+            video.finish();
+        });
+        fs::remove(frames.path(".ffmpeg.log"));
+        videoSeconds = secondsSince(tVideo);
+        videoInfo = json{{"file", "flyover.mp4"},
+                         {"codec", "H.264 (libx264, yuv420p, crf 20)"},
+                         {"fps", rp.videoFps},
+                         {"step_mm", rp.videoStepMm},
+                         {"layout", "pair images: camera 0 left, camera 1 right"},
+                         {"frames", vPoses}};
+    }
+    writeJson(frames.path("poses.json"),
               json{{"schema", "flyover.poses/1"},
                    {"world_frame", WORLD_FRAME},
                    {"image_size_px", {rp.widthPx, rp.heightPx}},
                    {"layout", "pair images: camera 0 left, camera 1 right"},
                    {"ost", rp.ost},
-                   {"frames", poses}});
-    const fs::path frames = run.dir / "frames";
-    const fs::path old = run.dir / (".tmp-" + std::to_string(::getpid()) + "-frames-old");
-    fs::remove_all(old);
-    if (fs::exists(frames)) fs::rename(frames, old);
-    fs::rename(tmpDir, frames);
-    fs::remove_all(old);
+                   {"render", renderOptionsJson(ro)},
+                   {"frames", poses},
+                   {"video", videoInfo}});
+
+    // --- coverage of fly-over and fly-through, missed regions.
+    StagedFolder coverage(run.dir, "coverage");
+    json coverageSummary = nullptr;
+    double coverageSeconds = 0;
+    if (rp.coverage) {
+        const auto tCoverage = Clock::now();
+        CoverageParams cp;
+        cp.viewPx = rp.coveragePx;
+        cp.stepMm = rp.coverageStepMm;
+        cp.flyover = fp;
+        cp.ost = rp.ost;
+        cp.flythroughFovDeg = rp.flythroughFovDeg;
+        const CoverageResult cov = computeCoverage(scene, cl, cp);
+        writeJson(coverage.path("coverage.json"),
+                  json{{"schema", "flyover.coverage/1"},
+                       {"world_frame", WORLD_FRAME},
+                       {"total_area_mm2", cov.totalAreaMm2},
+                       {"triangles", scene.triangleCount()},
+                       {"sampling",
+                        {{"rule", "a triangle is seen when at least one primary ray of the method hits it; "
+                                  "fraction = area of seen triangles / total area"},
+                         {"view_px", cp.viewPx},
+                         {"step_mm", cp.stepMm},
+                         {"positions", cov.positions},
+                         {"rays", cov.rays}}},
+                       {"flyover",
+                        {{"fov_deg", fp.fovDeg},
+                         {"roll_deg", fp.rollDeg},
+                         {"clip_offset_fraction", fp.clipOffsetFraction},
+                         {"clip_offset_mm", fp.clipOffsetMm},
+                         {"ost", cp.ost},
+                         {"both_cameras", methodJson(cov.flyover, cp.minRegionMm2)}}},
+                       {"flythrough",
+                        {{"fov_deg", cp.flythroughFovDeg},
+                         {"one_way_forward", methodJson(cov.flythroughForward, cp.minRegionMm2)},
+                         {"one_way_backward", methodJson(cov.flythroughBackward, cp.minRegionMm2)},
+                         {"two_way", methodJson(cov.flythroughTwoWay, cp.minRegionMm2)}}},
+                       {"vertex_rule", "surface_seen.ply: a vertex is 1 when every triangle around it was seen"}});
+        writeSurfaceSeen(coverage.path("surface_seen.ply"), scene, cov);
+        coverageSeconds = secondsSince(tCoverage);
+        coverageSummary = json{{"flyover", cov.flyover.fraction},
+                               {"flythrough_one_way_forward", cov.flythroughForward.fraction},
+                               {"flythrough_one_way_backward", cov.flythroughBackward.fraction},
+                               {"flythrough_two_way", cov.flythroughTwoWay.fraction},
+                               {"flyover_missed_regions", cov.flyover.missed.size()}};
+    }
+    reportProgress(progress, 1.0, "render done");
+
+    frames.commit();
+    flythrough.commit();
+    overviews.commit();
+    coverage.commit();
 
     return json{{"frame_pairs", indices.size()},
                 {"triangles", scene.triangleCount()},
-                {"frame_pairs_seconds", renderSeconds},
-                {"overview_camera", cameraJson(overview)}};
+                {"first_pair_seconds", firstPairSeconds},
+                {"first_pair_breakdown_seconds",
+                 {{"read_surface", readSurfaceSeconds},
+                  {"build_scene", sceneSeconds},
+                  {"read_centerline", readCenterlineSeconds},
+                  {"render_pair", firstRenderSeconds},
+                  {"write_png", firstPngSeconds}}},
+                {"frame_pairs_seconds", framesSeconds},
+                {"overview_seconds", overviewSeconds},
+                {"video_seconds", videoSeconds},
+                {"coverage_seconds", coverageSeconds},
+                {"coverage", coverageSummary},
+                {"overview_camera", overviewCameras["anterior"]}};
 }
 
 } // namespace flyover

@@ -50,6 +50,15 @@ Camera frameFrom(const Vec3d& position, const Vec3d& forward, const Vec3d& upHin
 
 } // namespace
 
+Vec3d pixelDirection(const Camera& camera, int widthPx, int heightPx, double xPx, double yPx)
+{
+    const double tanHalf = std::tan(0.5 * radians(camera.fovDeg));
+    const double aspect = double(widthPx) / double(heightPx);
+    const double sx = (2.0 * xPx / widthPx - 1.0) * tanHalf * aspect;
+    const double sy = (1.0 - 2.0 * yPx / heightPx) * tanHalf;
+    return camera.forward + camera.right * sx + camera.up * sy;
+}
+
 Camera lookAt(const Vec3d& position, const Vec3d& target, const Vec3d& upHint, double fovDeg)
 {
     checkFov(fovDeg, "lookAt");
@@ -108,6 +117,19 @@ std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const Flyover
     return cams;
 }
 
+double cuttingLineRollDeg(const CenterlinePoint& point, const Vec3d& directionMm)
+{
+    const Vec3d t = normalize(point.tangent);
+    const Vec3d n0 = normalize(point.normal - t * dot(point.normal, t));
+    const Vec3d b = cross(t, n0);
+    // flyoverCameras rolls the normal to n0 cos(r) + b sin(r); dot with the direction is zero at
+    // r = atan2(-a, c) with a = n0 . dir, c = b . dir.
+    const double a = dot(n0, directionMm), c = dot(b, directionMm);
+    if (!(std::hypot(a, c) > 1e-9 * std::max(1.0, length(directionMm))))
+        throw InputError("cuttingLineRollDeg: the direction is parallel to the centerline tangent");
+    return std::atan2(-a, c) * 180.0 / PI;
+}
+
 Camera overviewCamera(const Vec3d& boxMinMm, const Vec3d& boxMaxMm, const Vec3d& viewDir,
                       const Vec3d& up, double fovDeg)
 {
@@ -120,12 +142,22 @@ Camera overviewCamera(const Vec3d& boxMinMm, const Vec3d& boxMaxMm, const Vec3d&
         throw ParameterError("overviewCamera: viewDir must be a finite non-zero vector");
     }
     const Vec3d centre = (boxMinMm + boxMaxMm) * 0.5;
-    // The bounding sphere fits the (vertical, and for aspect >= 1 also horizontal) field of
-    // view when its centre is R / sin(fov/2) away; the sphere contains the box.
-    const double radius = std::max(0.5 * distance(boxMinMm, boxMaxMm), 1e-6);
-    const double dist = radius / std::sin(0.5 * radians(fovDeg));
     const Vec3d dir = normalize(viewDir);
-    Camera c = frameFrom(centre - dir * dist, dir, up, fovDeg);
+    Camera c = frameFrom(centre, dir, up, fovDeg);
+    // Aimed at the box centre, as close as the eight corners allow: a corner at lateral offset
+    // a (along right or up) and depth offset z from the centre fits when a <= tan(fov/2) *
+    // (dist + z), with a 4% margin. (The image is taken square: the vertical fov is the limit.)
+    const double tanHalf = 0.96 * std::tan(0.5 * radians(fovDeg));
+    double dist = 0.0;
+    for (int k = 0; k < 8; ++k) {
+        const Vec3d corner{(k & 1) ? boxMaxMm.x : boxMinMm.x, (k & 2) ? boxMaxMm.y : boxMinMm.y,
+                           (k & 4) ? boxMaxMm.z : boxMinMm.z};
+        const Vec3d rel = corner - centre;
+        const double z = dot(rel, c.forward);
+        dist = std::max({dist, std::fabs(dot(rel, c.right)) / tanHalf - z, std::fabs(dot(rel, c.up)) / tanHalf - z,
+                         1e-6 - z});
+    }
+    c.position = centre - c.forward * dist;
     c.nearMm = 0.0;
     return c;
 }

@@ -23,6 +23,12 @@ struct Camera {
     double nearMm = 0.0;    ///< near clip plane depth (mm)
 };
 
+/// Direction of the ray through the image point (xPx, yPx) of a widthPx x heightPx image:
+/// (0, 0) is the top-left corner of the image, pixel (i, j) spans [i, i+1) x [j, j+1), so its
+/// centre is (i + 0.5, j + 0.5). `fovDeg` is the vertical field of view; the horizontal one
+/// follows from the aspect ratio. Scaled so that dot(dir, forward) == 1: t along it is depth.
+Vec3d pixelDirection(const Camera& camera, int widthPx, int heightPx, double xPx, double yPx);
+
 /// Builds a camera at `position` looking at `target` with approximate view-up `upHint`.
 Camera lookAt(const Vec3d& position, const Vec3d& target, const Vec3d& upHint, double fovDeg);
 
@@ -39,8 +45,15 @@ struct FlyoverParams {
 /// tangent runs horizontally (left to right unless flipped), near plane at d - offset.
 std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const FlyoverParams& params);
 
-/// A camera outside an axis-aligned box looking along `viewDir` with view-up `up`, at a
-/// distance that frames the whole box in the field of view.
+/// The roll (degrees, in (-180, 180]) at which both fly-over cameras of `point` look
+/// perpendicular to `directionMm`: a wall point in that direction from the centerline then lies
+/// where the two views meet (the cutting line of the classic fly-over's halves).
+/// @throw InputError when the direction is parallel to the tangent (it has no such roll).
+double cuttingLineRollDeg(const CenterlinePoint& point, const Vec3d& directionMm);
+
+/// A camera outside an axis-aligned box looking along `viewDir` (towards the box centre) with
+/// view-up `up`, as close as lets all eight corners project inside a square image with a 4%
+/// margin: the whole surface inside the box is framed, tightly for axis-aligned directions.
 Camera overviewCamera(const Vec3d& boxMinMm, const Vec3d& boxMaxMm, const Vec3d& viewDir,
                       const Vec3d& up, double fovDeg);
 

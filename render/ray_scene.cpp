@@ -3,7 +3,12 @@
 #include "render/ray_scene_impl.h"
 #include "volume/error.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
+#include <cmath>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -78,15 +83,76 @@ RayScene::Impl::~Impl()
     if (device) rtcReleaseDevice(device);
 }
 
-RayScene::RayScene(const TriMesh& mesh) : mImpl(std::make_unique<Impl>())
+namespace {
+
+std::vector<float> meshVertices(const TriMesh& mesh)
+{
+    std::vector<float> xyz(3 * mesh.n_vertices());
+    const TriMesh::Point* points = mesh.points();
+    for (std::size_t i = 0; i < mesh.n_vertices(); ++i)
+        for (int k = 0; k < 3; ++k) xyz[3 * i + std::size_t(k)] = points[i][k];
+    return xyz;
+}
+
+/// Triangle vertex indices in the order of the mesh's face-vertex circulator (which starts at
+/// the to-vertex of the face's halfedge), three per face.
+std::vector<uint32_t> meshTriangles(const TriMesh& mesh)
+{
+    if (mesh.n_faces() > std::size_t(std::numeric_limits<uint32_t>::max() / 3) ||
+        mesh.n_vertices() >= std::size_t(std::numeric_limits<uint32_t>::max()))
+        throw InputError("RayScene: mesh too large for 32-bit Embree indices");
+    std::vector<uint32_t> tris(3 * mesh.n_faces());
+    const bool hasStatus = mesh.has_face_status();
+    std::atomic<int> problem{0};  // 1: deleted face, 2: not a triangle
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.n_faces(), 4096), [&](const auto& range) {
+        for (std::size_t f = range.begin(); f != range.end(); ++f) {
+            const TriMesh::FaceHandle fh{int(f)};
+            if (hasStatus && mesh.status(fh).deleted()) {
+                problem = 1;
+                return;
+            }
+            const auto h0 = mesh.halfedge_handle(fh);
+            const auto h1 = mesh.next_halfedge_handle(h0);
+            const auto h2 = mesh.next_halfedge_handle(h1);
+            if (mesh.next_halfedge_handle(h2) != h0) {
+                problem = 2;
+                return;
+            }
+            tris[3 * f] = uint32_t(mesh.to_vertex_handle(h0).idx());
+            tris[3 * f + 1] = uint32_t(mesh.to_vertex_handle(h1).idx());
+            tris[3 * f + 2] = uint32_t(mesh.to_vertex_handle(h2).idx());
+        }
+    });
+    if (problem == 1) throw InputError("RayScene: mesh has deleted faces; call garbage_collection() first");
+    if (problem == 2) throw InputError("RayScene: mesh face that is not a triangle");
+    return tris;
+}
+
+} // namespace
+
+RayScene::RayScene(const TriMesh& mesh, const SceneOptions& options)
+    : RayScene(meshVertices(mesh), meshTriangles(mesh), options)
+{
+}
+
+RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices, const SceneOptions& options)
+    : mImpl(std::make_unique<Impl>())
 {
     Impl& im = *mImpl;
     const DenormalsFlushed flushed;
 
-    if (mesh.n_faces() > std::size_t(std::numeric_limits<uint32_t>::max() / 3) ||
-        mesh.n_vertices() >= std::size_t(std::numeric_limits<uint32_t>::max())) {
+    if (verticesXyz.size() % 3 != 0 || triangleIndices.size() % 3 != 0)
+        throw InputError("RayScene: vertex coordinates and triangle indices must come in threes");
+    const std::size_t nv = verticesXyz.size() / 3;
+    if (triangleIndices.size() / 3 > std::size_t(std::numeric_limits<uint32_t>::max() / 3) ||
+        nv >= std::size_t(std::numeric_limits<uint32_t>::max()))
         throw InputError("RayScene: mesh too large for 32-bit Embree indices");
-    }
+    for (const uint32_t i : triangleIndices)
+        if (i >= nv) {
+            std::ostringstream msg;
+            msg << "RayScene: triangle vertex index " << i << " out of range (" << nv << " vertices)";
+            throw InputError(msg.str());
+        }
 
     im.device = rtcNewDevice(nullptr);
     if (!im.device) {
@@ -100,19 +166,22 @@ RayScene::RayScene(const TriMesh& mesh) : mImpl(std::make_unique<Impl>())
     im.throwIfError("rtcNewScene");
     // ROBUST: without it rays slip between triangles sharing an edge (measured: 9% of rays
     // aimed at edge midpoints from inside a closed icosphere, ~1 in 10^6 random camera rays),
-    // and under OST a leak shows the background or a wall behind as a speckle. It costs
-    // ~10-15% of tracing speed. Rays aimed exactly at a vertex can still leak (~2%).
-    rtcSetSceneFlags(im.scene, RTCSceneFlags(RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION | RTC_SCENE_FLAG_ROBUST));
+    // and under OST a leak shows the background or a wall behind as a speckle. Its cost is
+    // measured by bench/render_bench. Rays aimed exactly at a vertex can still leak (~2%).
+    int flags = RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION;
+    if (options.robust) flags |= RTC_SCENE_FLAG_ROBUST;
+    rtcSetSceneFlags(im.scene, RTCSceneFlags(flags));
     rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_MEDIUM);
     im.throwIfError("scene setup");
 
-    // Copy the mesh into buffers we own and share with Embree (they live as long as the scene).
-    const std::size_t nv = mesh.n_vertices();
+    // Buffers we own and share with Embree (they live as long as the scene); one padding vertex.
     im.vertices.resize(nv + 1, Impl::Vertex{0.f, 0.f, 0.f});
     constexpr double INF = std::numeric_limits<double>::infinity();
     Vec3d lo{INF, INF, INF}, hi{-INF, -INF, -INF};
     for (std::size_t i = 0; i < nv; ++i) {
-        const TriMesh::Point& p = mesh.point(TriMesh::VertexHandle(int(i)));
+        const float* p = &verticesXyz[3 * i];
+        if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+            throw InputError("RayScene: vertex " + std::to_string(i) + " is not finite");
         im.vertices[i] = {p[0], p[1], p[2]};
         lo = {std::min(lo.x, double(p[0])), std::min(lo.y, double(p[1])), std::min(lo.z, double(p[2]))};
         hi = {std::max(hi.x, double(p[0])), std::max(hi.y, double(p[1])), std::max(hi.z, double(p[2]))};
@@ -120,22 +189,40 @@ RayScene::RayScene(const TriMesh& mesh) : mImpl(std::make_unique<Impl>())
     if (nv == 0) lo = hi = Vec3d{};
     im.boundsMin = lo;
     im.boundsMax = hi;
+    verticesXyz = {};
+    im.indices = std::move(triangleIndices);
+    im.triangles = uint32_t(im.indices.size() / 3);
 
-    const bool hasStatus = mesh.has_face_status();
-    im.indices.reserve(3 * mesh.n_faces());
-    for (const auto f : mesh.faces()) {
-        if (hasStatus && mesh.status(f).deleted()) {
-            throw InputError("RayScene: mesh has deleted faces; call garbage_collection() first");
+    // Vertex normals: sum of the unnormalised face normals (twice the face area times the unit
+    // normal) of the incident faces, then normalised; the orientation is the faces' own. Face
+    // normals in parallel; the scatter to vertices in order (deterministic sums).
+    std::vector<Impl::Vertex> faceNormals(im.triangles);
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, im.triangles, 8192), [&](const auto& range) {
+        for (uint32_t f = range.begin(); f != range.end(); ++f) {
+            const uint32_t* t = &im.indices[3 * std::size_t(f)];
+            const Impl::Vertex& a = im.vertices[t[0]];
+            const Impl::Vertex& b = im.vertices[t[1]];
+            const Impl::Vertex& c = im.vertices[t[2]];
+            const float ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+            const float vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
+            faceNormals[f] = {uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};
         }
-        int k = 0;
-        for (const auto v : mesh.fv_range(f)) {
-            if (k == 3) throw InputError("RayScene: mesh face with more than 3 vertices");
-            im.indices.push_back(uint32_t(v.idx()));
-            ++k;
+    });
+    im.vertexNormals.assign(nv + 1, Impl::Vertex{0.f, 0.f, 0.f});
+    for (uint32_t f = 0; f < im.triangles; ++f) {
+        const Impl::Vertex& n = faceNormals[f];
+        for (int k = 0; k < 3; ++k) {
+            Impl::Vertex& acc = im.vertexNormals[im.indices[3 * std::size_t(f) + std::size_t(k)]];
+            acc.x += n.x;
+            acc.y += n.y;
+            acc.z += n.z;
         }
-        if (k != 3) throw InputError("RayScene: mesh face with fewer than 3 vertices");
     }
-    im.triangles = uint32_t(mesh.n_faces());
+    for (std::size_t i = 0; i < nv; ++i) {
+        Impl::Vertex& n = im.vertexNormals[i];
+        const float len = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+        n = len > 0.f ? Impl::Vertex{n.x / len, n.y / len, n.z / len} : Impl::Vertex{0.f, 0.f, 0.f};
+    }
 
     if (im.triangles > 0) {
         RTCGeometry geom = rtcNewGeometry(im.device, RTC_GEOMETRY_TYPE_TRIANGLE);
@@ -188,6 +275,8 @@ RayHit RayScene::intersect(const Vec3d& origin, const Vec3d& dir, double tnear, 
         result.hit = true;
         result.t = rh.ray.tfar;
         result.primId = rh.hit.primID;
+        result.u = rh.hit.u;
+        result.v = rh.hit.v;
         result.normal = normalize(Vec3d{rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z});
     }
     return result;
@@ -196,5 +285,40 @@ RayHit RayScene::intersect(const Vec3d& origin, const Vec3d& dir, double tnear, 
 Vec3d RayScene::boundsMin() const { return mImpl->boundsMin; }
 Vec3d RayScene::boundsMax() const { return mImpl->boundsMax; }
 uint32_t RayScene::triangleCount() const { return mImpl->triangles; }
+uint32_t RayScene::vertexCount() const { return uint32_t(mImpl->vertices.size() - 1); }
+
+Vec3d RayScene::vertex(uint32_t i) const
+{
+    if (i >= vertexCount()) throw ParameterError("RayScene::vertex: index " + std::to_string(i) + " out of range");
+    const Impl::Vertex& v = mImpl->vertices[i];
+    return {v.x, v.y, v.z};
+}
+
+std::array<uint32_t, 3> RayScene::triangle(uint32_t f) const
+{
+    if (f >= mImpl->triangles)
+        throw ParameterError("RayScene::triangle: index " + std::to_string(f) + " out of range");
+    const uint32_t* t = &mImpl->indices[3 * std::size_t(f)];
+    return {t[0], t[1], t[2]};
+}
+
+Vec3d RayScene::shadingNormal(uint32_t primId, double u, double v, bool smooth) const
+{
+    const Impl& im = *mImpl;
+    if (primId >= im.triangles) {
+        std::ostringstream msg;
+        msg << "RayScene::shadingNormal: triangle " << primId << " out of range (" << im.triangles
+            << " triangles)";
+        throw ParameterError(msg.str());
+    }
+    const uint32_t* t = &im.indices[3 * std::size_t(primId)];
+    auto vec = [](const Impl::Vertex& p) { return Vec3d{p.x, p.y, p.z}; };
+    if (!smooth) {
+        const Vec3d a = vec(im.vertices[t[0]]);
+        return normalize(cross(vec(im.vertices[t[1]]) - a, vec(im.vertices[t[2]]) - a));
+    }
+    return normalize(vec(im.vertexNormals[t[0]]) * (1.0 - u - v) + vec(im.vertexNormals[t[1]]) * u +
+                     vec(im.vertexNormals[t[2]]) * v);
+}
 
 } // namespace flyover

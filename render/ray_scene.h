@@ -7,8 +7,10 @@
 #include "surface/mesh_types.h"
 #include "volume/vec3.h"
 
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 namespace flyover {
 
@@ -16,13 +18,29 @@ struct RayHit {
     bool hit = false;
     double t = 0;          ///< ray parameter of the hit (in units of |dir|)
     uint32_t primId = 0;   ///< triangle index (face index of the mesh)
+    double u = 0, v = 0;   ///< barycentrics of the hit: weights of the face's 2nd and 3rd vertex
     Vec3d normal;          ///< unit geometric normal of the hit face (as wound)
+};
+
+struct SceneOptions {
+    /// Embree's robust mode: watertight ray/triangle tests, so rays through shared edges do not
+    /// slip between triangles (a leak shows as a background speckle under OST). Costs about
+    /// 10% of tracing speed (bench/render_bench measures it); keep it on for images.
+    bool robust = true;
 };
 
 class RayScene {
 public:
+    /// Copies the mesh into Embree buffers, builds the BVH (MEDIUM quality) and computes
+    /// per-vertex normals for smooth shading (area-weighted face normals, same orientation as
+    /// the faces: into the lumen).
     /// @throw std::runtime_error with Embree's message when the device or scene fails.
-    explicit RayScene(const TriMesh& mesh);
+    /// @throw InputError for faces that are not triangles or deleted faces.
+    explicit RayScene(const TriMesh& mesh, const SceneOptions& options = {});
+    /// The same from plain arrays (x, y, z per vertex; three vertex indices per triangle, wound
+    /// as the mesh's faces): for callers that read a mesh file without building its topology.
+    /// @throw InputError for an index out of range or a non-finite vertex.
+    RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices, const SceneOptions& options = {});
     ~RayScene();
     RayScene(const RayScene&) = delete;
     RayScene& operator=(const RayScene&) = delete;
@@ -34,6 +52,14 @@ public:
     Vec3d boundsMin() const;
     Vec3d boundsMax() const;
     uint32_t triangleCount() const;
+    uint32_t vertexCount() const;
+    /// Vertex i (mm) and the three vertex indices of triangle f, as given to the scene.
+    Vec3d vertex(uint32_t i) const;
+    std::array<uint32_t, 3> triangle(uint32_t f) const;
+
+    /// Unit shading normal at a hit: the vertex normals interpolated with (u, v) (smooth), or
+    /// the geometric normal of the face when `smooth` is false.
+    Vec3d shadingNormal(uint32_t primId, double u, double v, bool smooth = true) const;
 
     struct Impl;
     const Impl& impl() const { return *mImpl; }

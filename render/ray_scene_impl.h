@@ -37,6 +37,9 @@ struct RayScene::Impl {
     /// n + 1 vertices: Embree reads up to 16 bytes past the last vertex of a shared buffer.
     std::vector<Vertex> vertices;
     std::vector<uint32_t> indices;  ///< 3 per triangle; triangle i is mesh face i
+    /// Unit vertex normals for smooth shading, same layout as `vertices` (zero for a vertex
+    /// whose faces all have zero area).
+    std::vector<Vertex> vertexNormals;
     uint32_t triangles = 0;
     Vec3d boundsMin, boundsMax;
 

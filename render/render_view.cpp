@@ -4,6 +4,7 @@
 #include "volume/error.h"
 
 #include <tbb/blocked_range2d.h>
+#include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 #include <tbb/partitioner.h>
 
@@ -22,13 +23,15 @@ constexpr int PACKET = 4;  ///< 4 x 4 pixel tiles = one 16-wide ray packet
 constexpr int LANES = PACKET * PACKET;
 constexpr int TILES_PER_TASK = 8;  ///< a task renders up to 8 x 8 tiles (32 x 32 pixels)
 constexpr double GAMMA = 2.2;
+constexpr uint32_t NO_HIT = std::numeric_limits<uint32_t>::max();
+constexpr float INF_F = std::numeric_limits<float>::infinity();
 
 /// Shading constants. Colours are given as displayed (gamma-encoded) and shaded in linear.
 constexpr std::array<double, 3> TISSUE_DISPLAY = {0.93, 0.62, 0.55};
 constexpr std::array<uint8_t, 3> BACKGROUND = {20, 20, 28};
 constexpr std::array<uint8_t, 3> SEPARATOR = {6, 6, 8};
-constexpr double AMBIENT = 0.15;
-constexpr double DIFFUSE = 0.85;
+constexpr float AMBIENT = 0.15f;
+constexpr float DIFFUSE = 0.85f;
 
 double toLinear(double display) { return std::pow(display, GAMMA); }
 
@@ -40,38 +43,36 @@ class DisplayEncoder {
 public:
     DisplayEncoder()
     {
-        for (int b = 0; b < 255; ++b) mUpper[std::size_t(b)] = toLinear((b + 0.5) / 255.0);
+        for (int b = 0; b < 255; ++b) mUpper[std::size_t(b)] = float(toLinear((b + 0.5) / 255.0));
         for (std::size_t i = 0; i < BINS; ++i) {
-            const double x = double(i) / double(BINS);
+            const float x = float(i) / float(BINS);
             mStart[i] = uint8_t(std::upper_bound(mUpper.begin(), mUpper.end(), x) - mUpper.begin());
         }
     }
-    uint8_t operator()(double linear) const
+    uint8_t operator()(float linear) const
     {
-        if (!(linear > 0.0)) return 0;
-        if (linear >= 1.0) return 255;
-        std::size_t b = mStart[std::size_t(linear * double(BINS))];
+        if (!(linear > 0.0f)) return 0;
+        if (linear >= 1.0f) return 255;
+        std::size_t b = mStart[std::size_t(linear * float(BINS))];
         while (b < mUpper.size() && linear >= mUpper[b]) ++b;
         return uint8_t(b);
     }
 
 private:
     static constexpr std::size_t BINS = 4096;
-    std::array<double, 255> mUpper;  ///< exclusive upper bound of byte b's interval
+    std::array<float, 255> mUpper;  ///< exclusive upper bound of byte b's interval
     std::array<uint8_t, BINS> mStart;
 };
 
-void validate(const Camera& camera, const RenderOptions& options)
+void validate(const Camera& camera, int width, int height, int supersample, double depthCueRangeMm)
 {
     std::ostringstream msg;
-    if (!(options.widthPx > 0 && options.heightPx > 0) || options.widthPx > 65536 ||
-        options.heightPx > 65536) {
-        msg << "RenderOptions: widthPx and heightPx must be in 1..65536, got " << options.widthPx
-            << " x " << options.heightPx;
-    } else if (!(options.supersample >= 1 && options.supersample <= 16)) {
-        msg << "RenderOptions.supersample must be in 1..16, got " << options.supersample;
-    } else if (!(options.depthCueRangeMm >= 0.0) || !std::isfinite(options.depthCueRangeMm)) {
-        msg << "RenderOptions.depthCueRangeMm must be >= 0, got " << options.depthCueRangeMm;
+    if (!(width > 0 && height > 0) || width > 65536 || height > 65536) {
+        msg << "RenderOptions: widthPx and heightPx must be in 1..65536, got " << width << " x " << height;
+    } else if (!(supersample >= 1 && supersample <= 16)) {
+        msg << "RenderOptions.supersample must be in 1..16, got " << supersample;
+    } else if (!(depthCueRangeMm >= 0.0) || !std::isfinite(depthCueRangeMm)) {
+        msg << "RenderOptions.depthCueRangeMm must be >= 0, got " << depthCueRangeMm;
     } else if (!(camera.fovDeg > 0.0 && camera.fovDeg < 180.0)) {
         msg << "Camera.fovDeg must be in (0, 180) degrees, got " << camera.fovDeg;
     } else if (!(camera.nearMm >= 0.0) || !std::isfinite(camera.nearMm)) {
@@ -80,10 +81,246 @@ void validate(const Camera& camera, const RenderOptions& options)
                  std::fabs(length(camera.up) - 1.0) < 1e-6 &&
                  std::fabs(length(camera.right) - 1.0) < 1e-6)) {
         msg << "Camera: forward, up and right must be unit vectors";
+    } else if (!(std::isfinite(camera.position.x) && std::isfinite(camera.position.y) &&
+                 std::isfinite(camera.position.z))) {
+        msg << "Camera.position must be finite";
     } else {
         return;
     }
     throw ParameterError(msg.str());
+}
+
+/// Traces 16-wide packets with OST done by one of the exact methods of OstMethod. One per task:
+/// it keeps the Auto method's switch to the filter for the rest of the task.
+class PacketTracer {
+public:
+    PacketTracer(RTCScene scene, bool ost, OstMethod method) : mScene(scene), mOst(ost), mMethod(method)
+    {
+        initIntersectContext(mPlain, false, true);
+        initIntersectContext(mFilter, true, true);
+    }
+
+    void trace(int* valid, RTCRayHit16& packet)
+    {
+        if (!mOst) {
+            rtcIntersect16(valid, mScene, &mPlain, &packet);
+            return;
+        }
+        if (mMethod == OstMethod::Filter || mFilterOnly) {
+            rtcIntersect16(valid, mScene, &mFilter, &packet);
+            return;
+        }
+        rtcIntersect16(valid, mScene, &mPlain, &packet);
+        // A lane whose closest hit is a back face started outside the lumen: its OST answer is
+        // the closest front face beyond that hit. Tracing it again with the filter from just
+        // before that hit gives exactly what the filter alone would have given, because no face
+        // of any kind lies closer.
+        alignas(64) int again[LANES];
+        int lanes = 0, retraced = 0;
+        for (int i = 0; i < LANES; ++i) {
+            again[i] = 0;
+            if (!valid[i]) continue;
+            ++lanes;
+            if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+            // The filter's own test, in the same float arithmetic (ray_scene.cpp ostFilter).
+            const float d = packet.ray.dir_x[i] * packet.hit.Ng_x[i] + packet.ray.dir_y[i] * packet.hit.Ng_y[i] +
+                            packet.ray.dir_z[i] * packet.hit.Ng_z[i];
+            if (d > 0.0f) {
+                again[i] = -1;
+                packet.ray.tnear[i] = std::nextafter(packet.ray.tfar[i], 0.0f);
+                packet.ray.tfar[i] = INF_F;
+                packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                packet.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+                ++retraced;
+            }
+        }
+        if (retraced > 0) rtcIntersect16(again, mScene, &mFilter, &packet);
+        if (mMethod == OstMethod::Auto && 2 * retraced > lanes) mFilterOnly = true;
+    }
+
+private:
+    RTCScene mScene;
+    bool mOst;
+    OstMethod mMethod;
+    bool mFilterOnly = false;
+    RTCIntersectContext mPlain;
+    RTCIntersectContext mFilter;
+};
+
+/// Everything a tile task needs to generate the rays of one view.
+struct ViewRays {
+    float origin[3];
+    float corner[3], stepX[3], stepY[3];
+    float nearMm = 0.f;
+    int width = 0, height = 0;
+
+    ViewRays(const Camera& camera, int w, int h) : width(w), height(h)
+    {
+        // dir(x, y) = corner + stepX * x + stepY * y for image points (x, y) in pixels; equal to
+        // pixelDirection(camera, w, h, x, y): dot(dir, forward) == 1.
+        const Vec3d c = pixelDirection(camera, w, h, 0.0, 0.0);
+        const Vec3d sx = pixelDirection(camera, w, h, 1.0, 0.0) - c;
+        const Vec3d sy = pixelDirection(camera, w, h, 0.0, 1.0) - c;
+        for (int k = 0; k < 3; ++k) {
+            origin[k] = float(camera.position[k]);
+            corner[k] = float(c[k]);
+            stepX[k] = float(sx[k]);
+            stepY[k] = float(sy[k]);
+        }
+        nearMm = float(camera.nearMm);
+    }
+
+    /// Fills the packet for the 4 x 4 tile (tx, ty) at sub-pixel offset (ox, oy).
+    void fill(int tx, int ty, float ox, float oy, int* valid, RTCRayHit16& packet) const
+    {
+        for (int i = 0; i < LANES; ++i) {
+            const int px = tx * PACKET + i % PACKET;
+            const int py = ty * PACKET + i / PACKET;
+            valid[i] = (px < width && py < height) ? -1 : 0;
+            const float fx = float(px) + ox, fy = float(py) + oy;
+            packet.ray.org_x[i] = origin[0];
+            packet.ray.org_y[i] = origin[1];
+            packet.ray.org_z[i] = origin[2];
+            packet.ray.dir_x[i] = corner[0] + stepX[0] * fx + stepY[0] * fy;
+            packet.ray.dir_y[i] = corner[1] + stepX[1] * fx + stepY[1] * fy;
+            packet.ray.dir_z[i] = corner[2] + stepX[2] * fx + stepY[2] * fy;
+            packet.ray.tnear[i] = nearMm;
+            packet.ray.tfar[i] = INF_F;
+            packet.ray.time[i] = 0.f;
+            packet.ray.mask[i] = 0xFFFFFFFFu;
+            packet.ray.id[i] = unsigned(i);
+            packet.ray.flags[i] = 0;
+            packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+            packet.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+            packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+        }
+    }
+};
+
+/// Headlight diffuse shading of one hit: ambient + diffuse * |cos| between the ray and the
+/// shading normal (the light sits at the eye), divided by the depth cue.
+struct Shader {
+    const RayScene::Impl& im;
+    bool smooth;
+    float invCueRangeMm;  ///< 0: no depth cue
+    float cueStartMm;     ///< depth at which the depth cue starts
+
+    Shader(const RayScene::Impl& impl, bool smoothShading, float invCueRange, float cueStart)
+        : im(impl), smooth(smoothShading), invCueRangeMm(invCueRange), cueStartMm(cueStart)
+    {
+    }
+
+    /// Shade in [0, 1] of lane i, which must have hit.
+    float shade(const RTCRayHit16& packet, int i) const
+    {
+        float n[3];
+        normal(packet, i, n);
+        return shadeFrom(packet.ray.dir_x[i], packet.ray.dir_y[i], packet.ray.dir_z[i], n[0], n[1], n[2],
+                         packet.ray.tfar[i]);
+    }
+
+    /// Shades of all 16 lanes (misses get an arbitrary value): the gathers of the normals first,
+    /// then the arithmetic in a loop the compiler vectorises.
+    void shadePacket(const RTCRayHit16& packet, float* shades) const
+    {
+        alignas(64) float nx[LANES], ny[LANES], nz[LANES];
+        for (int i = 0; i < LANES; ++i) {
+            if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
+                nx[i] = ny[i] = nz[i] = 0.0f;
+                continue;
+            }
+            float n[3];
+            normal(packet, i, n);
+            nx[i] = n[0];
+            ny[i] = n[1];
+            nz[i] = n[2];
+        }
+        for (int i = 0; i < LANES; ++i)
+            shades[i] = shadeFrom(packet.ray.dir_x[i], packet.ray.dir_y[i], packet.ray.dir_z[i], nx[i], ny[i],
+                                  nz[i], packet.ray.tfar[i]);
+    }
+
+private:
+    void normal(const RTCRayHit16& packet, int i, float* n) const
+    {
+        if (smooth) {
+            const uint32_t* tri = &im.indices[3 * std::size_t(packet.hit.primID[i])];
+            const float u = packet.hit.u[i], v = packet.hit.v[i], w = 1.0f - u - v;
+            const auto& n0 = im.vertexNormals[tri[0]];
+            const auto& n1 = im.vertexNormals[tri[1]];
+            const auto& n2 = im.vertexNormals[tri[2]];
+            n[0] = w * n0.x + u * n1.x + v * n2.x;
+            n[1] = w * n0.y + u * n1.y + v * n2.y;
+            n[2] = w * n0.z + u * n1.z + v * n2.z;
+        } else {
+            n[0] = packet.hit.Ng_x[i];
+            n[1] = packet.hit.Ng_y[i];
+            n[2] = packet.hit.Ng_z[i];
+        }
+    }
+
+    float shadeFrom(float dx, float dy, float dz, float nx, float ny, float nz, float t) const
+    {
+        const float norms = (dx * dx + dy * dy + dz * dz) * (nx * nx + ny * ny + nz * nz);
+        // A zero normal (degenerate face, or a miss) gives cos = 0: |0| / sqrt(FLT_MIN) = 0.
+        const float cosine = std::fabs(dx * nx + dy * ny + dz * nz) / std::sqrt(std::max(norms, 1e-30f));
+        float s = AMBIENT + DIFFUSE * std::min(cosine, 1.0f);
+        if (invCueRangeMm > 0.0f) s /= 1.0f + std::max(0.0f, t - cueStartMm) * invCueRangeMm;
+        return s;
+    }
+};
+
+/// Tissue colour as a function of the shade, in linear and as display bytes.
+class ColourTables {
+public:
+    static constexpr int STEPS = 4096;  ///< shade resolution of the byte table: < 0.4 byte error
+
+    ColourTables()
+    {
+        for (int c = 0; c < 3; ++c) {
+            mTissue[std::size_t(c)] = float(toLinear(TISSUE_DISPLAY[std::size_t(c)]));
+            mBackground[std::size_t(c)] = float(toLinear(BACKGROUND[std::size_t(c)] / 255.0));
+        }
+        for (int q = 0; q <= STEPS; ++q)
+            for (int c = 0; c < 3; ++c)
+                mBytes[std::size_t(q)][std::size_t(c)] = mEncode(mTissue[std::size_t(c)] * float(q) / float(STEPS));
+    }
+    /// Display bytes of tissue lit with `shade` in [0, 1].
+    const uint8_t* tissueBytes(float shade) const
+    {
+        const int q = int(std::min(1.0f, std::max(0.0f, shade)) * float(STEPS) + 0.5f);
+        return mBytes[std::size_t(q)].data();
+    }
+    std::array<float, 3> tissueLinear(float shade) const
+    {
+        return {mTissue[0] * shade, mTissue[1] * shade, mTissue[2] * shade};
+    }
+    const std::array<float, 3>& backgroundLinear() const { return mBackground; }
+    uint8_t encode(float linear) const { return mEncode(linear); }
+
+private:
+    DisplayEncoder mEncode;
+    std::array<float, 3> mTissue{}, mBackground{};
+    std::array<std::array<uint8_t, 3>, STEPS + 1> mBytes{};
+};
+
+void resetHits(HitImage& hits, int width, int height)
+{
+    hits.width = width;
+    hits.height = height;
+    hits.t.assign(std::size_t(width) * std::size_t(height), -1.0f);
+    hits.primId.assign(std::size_t(width) * std::size_t(height), NO_HIT);
+}
+
+/// Runs `body(range)` over the image's 4 x 4 tiles in tasks of at most 8 x 8 tiles.
+/// simple_partitioner: tasks never exceed the grain, and the split (hence the Auto method's
+/// per-task switch) does not depend on the number of threads.
+template <typename Body> void forEachTileRange(int width, int height, const Body& body)
+{
+    const int tilesX = (width + PACKET - 1) / PACKET;
+    const int tilesY = (height + PACKET - 1) / PACKET;
+    tbb::parallel_for(tbb::blocked_range2d<int>(0, tilesY, TILES_PER_TASK, 0, tilesX, TILES_PER_TASK), body,
+                      tbb::simple_partitioner());
 }
 
 } // namespace
@@ -91,120 +328,112 @@ void validate(const Camera& camera, const RenderOptions& options)
 RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options,
                     HitImage* hits)
 {
-    validate(camera, options);
+    RgbImage image;
+    renderView(scene, camera, options, image, hits);
+    return image;
+}
+
+void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
+                HitImage* hits)
+{
+    validate(camera, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
     const int width = options.widthPx;
     const int height = options.heightPx;
     const int ss = options.supersample;
-    const RTCScene rtcScene = scene.impl().scene;
+    const RayScene::Impl& im = scene.impl();
+    const ViewRays rays(camera, width, height);
+    static const ColourTables colours;
+    // The depth cue starts at the near plane or at the scene's nearest corner, whichever is
+    // farther: a camera far outside (overview) is not dimmed by the empty space in front.
+    double nearestCornerMm = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 8; ++k) {
+        const Vec3d lo = scene.boundsMin(), hi = scene.boundsMax();
+        const Vec3d corner{(k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z};
+        nearestCornerMm = std::min(nearestCornerMm, dot(corner - camera.position, camera.forward));
+    }
+    const double cueStartMm = std::max(camera.nearMm, nearestCornerMm);
+    const Shader shader(im, options.smoothShading,
+                        options.depthCue ? float(1.0 / (options.depthCueRangeMm > 0.0
+                                                            ? options.depthCueRangeMm
+                                                            : std::max(1e-6, 0.5 * distance(scene.boundsMin(),
+                                                                                            scene.boundsMax()))))
+                                         : 0.0f,
+                        float(cueStartMm));
 
-    const double tanHalf = std::tan(0.5 * camera.fovDeg * PI / 180.0);
-    const double aspect = double(width) / double(height);
-    // dir = forward + sx * tan(fov/2) * aspect * right + sy * tan(fov/2) * up, sx, sy in [-1, 1]:
-    // dot(dir, forward) == 1, so t is depth and tnear == nearMm is a near plane.
-    const Vec3d stepX = camera.right * (2.0 * tanHalf * aspect / width);
-    const Vec3d stepY = camera.up * (-2.0 * tanHalf / height);
-    const Vec3d corner = camera.forward - camera.right * (tanHalf * aspect) + camera.up * tanHalf;
-
-    const std::array<double, 3> tissue = {toLinear(TISSUE_DISPLAY[0]), toLinear(TISSUE_DISPLAY[1]),
-                                          toLinear(TISSUE_DISPLAY[2])};
-    const std::array<double, 3> background = {toLinear(BACKGROUND[0] / 255.0),
-                                              toLinear(BACKGROUND[1] / 255.0),
-                                              toLinear(BACKGROUND[2] / 255.0)};
-    static const DisplayEncoder toDisplay;
-    const double cueRangeMm = options.depthCueRangeMm > 0.0
-                                  ? options.depthCueRangeMm
-                                  : std::max(1e-6, 0.5 * distance(scene.boundsMin(), scene.boundsMax()));
-
-    RgbImage image;
     image.width = width;
     image.height = height;
-    image.rgb.assign(std::size_t(width) * std::size_t(height) * 3, 0);
-    if (hits) {
-        hits->width = width;
-        hits->height = height;
-        hits->t.assign(std::size_t(width) * std::size_t(height), -1.0f);
-        hits->primId.assign(std::size_t(width) * std::size_t(height), std::numeric_limits<uint32_t>::max());
-    }
+    image.rgb.resize(std::size_t(width) * std::size_t(height) * 3);  // every pixel is written below
+    if (hits) resetHits(*hits, width, height);
 
     // The centre ray of a pixel is one of the n x n samples when n is odd; otherwise it is
     // traced in an extra pass that only fills the hit image.
     const bool centreIsSample = (ss % 2) == 1;
     const int centreSample = ss / 2;
     const int passes = ss * ss + ((hits && !centreIsSample) ? 1 : 0);
-    const double weight = 1.0 / double(ss * ss);
+    const float weight = 1.0f / float(ss * ss);
 
-    const int tilesX = (width + PACKET - 1) / PACKET;
-    const int tilesY = (height + PACKET - 1) / PACKET;
-
-    auto renderTiles = [&](const tbb::blocked_range2d<int>& range) {
+    forEachTileRange(width, height, [&](const tbb::blocked_range2d<int>& range) {
         const DenormalsFlushed flushed;
-        RTCIntersectContext context;
-        initIntersectContext(context, options.ost, true);
+        PacketTracer tracer(im.scene, options.ost, options.ostMethod);
         RTCRayHit16 packet;
         alignas(64) int valid[LANES];
 
         for (int ty = range.rows().begin(); ty != range.rows().end(); ++ty) {
             for (int tx = range.cols().begin(); tx != range.cols().end(); ++tx) {
-                std::array<std::array<double, 3>, LANES> sum{};
+                if (ss == 1) {
+                    // One ray per pixel: straight from the shade to display bytes by table.
+                    rays.fill(tx, ty, 0.5f, 0.5f, valid, packet);
+                    tracer.trace(valid, packet);
+                    alignas(64) float shades[LANES];
+                    shader.shadePacket(packet, shades);
+                    for (int i = 0; i < LANES; ++i) {
+                        if (!valid[i]) continue;
+                        const std::size_t pix = std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
+                                                std::size_t(tx * PACKET + i % PACKET);
+                        uint8_t* out = &image.rgb[pix * 3];
+                        if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
+                            out[0] = BACKGROUND[0];
+                            out[1] = BACKGROUND[1];
+                            out[2] = BACKGROUND[2];
+                            continue;
+                        }
+                        if (hits) {
+                            hits->t[pix] = packet.ray.tfar[i];
+                            hits->primId[pix] = packet.hit.primID[i];
+                        }
+                        const uint8_t* c = colours.tissueBytes(shades[i]);
+                        out[0] = c[0];
+                        out[1] = c[1];
+                        out[2] = c[2];
+                    }
+                    continue;
+                }
+                std::array<std::array<float, 3>, LANES> sum{};
                 for (int pass = 0; pass < passes; ++pass) {
                     const bool centreOnly = pass == ss * ss;
                     const int sa = centreOnly ? 0 : pass % ss;
                     const int sb = centreOnly ? 0 : pass / ss;
-                    const double ox = centreOnly ? 0.5 : (sa + 0.5) / ss;
-                    const double oy = centreOnly ? 0.5 : (sb + 0.5) / ss;
+                    const float ox = centreOnly ? 0.5f : (float(sa) + 0.5f) / float(ss);
+                    const float oy = centreOnly ? 0.5f : (float(sb) + 0.5f) / float(ss);
                     const bool recordHits =
                         hits && (centreOnly || (centreIsSample && sa == centreSample && sb == centreSample));
 
-                    for (int i = 0; i < LANES; ++i) {
-                        const int px = tx * PACKET + i % PACKET;
-                        const int py = ty * PACKET + i / PACKET;
-                        valid[i] = (px < width && py < height) ? -1 : 0;
-                        const Vec3d dir = corner + stepX * (px + ox) + stepY * (py + oy);
-                        packet.ray.org_x[i] = float(camera.position.x);
-                        packet.ray.org_y[i] = float(camera.position.y);
-                        packet.ray.org_z[i] = float(camera.position.z);
-                        packet.ray.dir_x[i] = float(dir.x);
-                        packet.ray.dir_y[i] = float(dir.y);
-                        packet.ray.dir_z[i] = float(dir.z);
-                        packet.ray.tnear[i] = float(camera.nearMm);
-                        packet.ray.tfar[i] = std::numeric_limits<float>::infinity();
-                        packet.ray.time[i] = 0.f;
-                        packet.ray.mask[i] = 0xFFFFFFFFu;
-                        packet.ray.id[i] = unsigned(i);
-                        packet.ray.flags[i] = 0;
-                        packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-                        packet.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
-                        packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-                    }
-                    rtcIntersect16(valid, rtcScene, &context, &packet);
+                    rays.fill(tx, ty, ox, oy, valid, packet);
+                    tracer.trace(valid, packet);
 
                     for (int i = 0; i < LANES; ++i) {
                         if (!valid[i]) continue;
                         const bool isHit = packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
                         if (recordHits && isHit) {
-                            const std::size_t pix =
-                                std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
-                                std::size_t(tx * PACKET + i % PACKET);
+                            const std::size_t pix = std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
+                                                    std::size_t(tx * PACKET + i % PACKET);
                             hits->t[pix] = packet.ray.tfar[i];
                             hits->primId[pix] = packet.hit.primID[i];
                         }
                         if (centreOnly) continue;
-                        if (!isHit) {
-                            for (int c = 0; c < 3; ++c) sum[i][c] += background[c];
-                            continue;
-                        }
-                        const Vec3d dir{packet.ray.dir_x[i], packet.ray.dir_y[i], packet.ray.dir_z[i]};
-                        const Vec3d ng{packet.hit.Ng_x[i], packet.hit.Ng_y[i], packet.hit.Ng_z[i]};
-                        // Headlight: the light sits at the eye, so |cos| between ray and normal
-                        // (one square root and one division: this loop runs per ray).
-                        const double norms = std::sqrt(dot(dir, dir) * dot(ng, ng));
-                        const double cosine = norms > 0.0 ? std::fabs(dot(dir, ng)) / norms : 0.0;
-                        double shade = AMBIENT + DIFFUSE * cosine;
-                        if (options.depthCue) {
-                            const double depth = std::max(0.0, double(packet.ray.tfar[i]) - camera.nearMm);
-                            shade /= 1.0 + depth / cueRangeMm;
-                        }
-                        for (int c = 0; c < 3; ++c) sum[i][c] += tissue[c] * shade;
+                        const std::array<float, 3> lin =
+                            isHit ? colours.tissueLinear(shader.shade(packet, i)) : colours.backgroundLinear();
+                        for (int c = 0; c < 3; ++c) sum[std::size_t(i)][std::size_t(c)] += lin[std::size_t(c)];
                     }
                 }
                 for (int i = 0; i < LANES; ++i) {
@@ -212,17 +441,101 @@ RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOpt
                     const int py = ty * PACKET + i / PACKET;
                     if (px >= width || py >= height) continue;
                     uint8_t* out = &image.rgb[(std::size_t(py) * std::size_t(width) + std::size_t(px)) * 3];
-                    for (int c = 0; c < 3; ++c) out[c] = toDisplay(sum[i][c] * weight);
+                    for (int c = 0; c < 3; ++c)
+                        out[c] = colours.encode(sum[std::size_t(i)][std::size_t(c)] * weight);
                 }
             }
         }
-    };
+    });
+}
 
-    // simple_partitioner: every task gets at most TILES_PER_TASK x TILES_PER_TASK tiles, and the
-    // result per pixel does not depend on how the image was split.
-    tbb::parallel_for(tbb::blocked_range2d<int>(0, tilesY, TILES_PER_TASK, 0, tilesX, TILES_PER_TASK),
-                      renderTiles, tbb::simple_partitioner());
-    return image;
+void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits)
+{
+    validate(camera, options.widthPx, options.heightPx, 1, options.depthCueRangeMm);
+    const int width = options.widthPx;
+    const int height = options.heightPx;
+    const ViewRays rays(camera, width, height);
+    resetHits(hits, width, height);
+    forEachTileRange(width, height, [&](const tbb::blocked_range2d<int>& range) {
+        const DenormalsFlushed flushed;
+        PacketTracer tracer(scene.impl().scene, options.ost, options.ostMethod);
+        RTCRayHit16 packet;
+        alignas(64) int valid[LANES];
+        for (int ty = range.rows().begin(); ty != range.rows().end(); ++ty) {
+            for (int tx = range.cols().begin(); tx != range.cols().end(); ++tx) {
+                rays.fill(tx, ty, 0.5f, 0.5f, valid, packet);
+                tracer.trace(valid, packet);
+                for (int i = 0; i < LANES; ++i) {
+                    if (!valid[i] || packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+                    const std::size_t pix = std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
+                                            std::size_t(tx * PACKET + i % PACKET);
+                    hits.t[pix] = packet.ray.tfar[i];
+                    hits.primId[pix] = packet.hit.primID[i];
+                }
+            }
+        }
+    });
+}
+
+uint64_t traceBare(const RayScene& scene, const Camera& camera, int widthPx, int heightPx)
+{
+    validate(camera, widthPx, heightPx, 1, 0.0);
+    const ViewRays rays(camera, widthPx, heightPx);
+    tbb::combinable<uint64_t> hitCount([] { return uint64_t(0); });
+    forEachTileRange(widthPx, heightPx, [&](const tbb::blocked_range2d<int>& range) {
+        const DenormalsFlushed flushed;
+        RTCIntersectContext context;
+        initIntersectContext(context, false, true);
+        RTCRayHit16 packet;
+        alignas(64) int valid[LANES];
+        uint64_t n = 0;
+        for (int ty = range.rows().begin(); ty != range.rows().end(); ++ty) {
+            for (int tx = range.cols().begin(); tx != range.cols().end(); ++tx) {
+                rays.fill(tx, ty, 0.5f, 0.5f, valid, packet);
+                rtcIntersect16(valid, scene.impl().scene, &context, &packet);
+                for (int i = 0; i < LANES; ++i)
+                    n += (valid[i] && packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) ? 1 : 0;
+            }
+        }
+        hitCount.local() += n;
+    });
+    return hitCount.combine([](uint64_t a, uint64_t b) { return a + b; });
+}
+
+Vec3d hitPointMm(const Camera& camera, const HitImage& hits, int x, int y)
+{
+    if (!(x >= 0 && y >= 0 && x < hits.width && y < hits.height) ||
+        hits.t.size() != std::size_t(hits.width) * std::size_t(hits.height)) {
+        std::ostringstream msg;
+        msg << "hitPointMm: pixel (" << x << ", " << y << ") outside the " << hits.width << " x " << hits.height
+            << " hit image";
+        throw ParameterError(msg.str());
+    }
+    const float t = hits.t[std::size_t(y) * std::size_t(hits.width) + std::size_t(x)];
+    if (!(t >= 0.0f)) {
+        std::ostringstream msg;
+        msg << "hitPointMm: pixel (" << x << ", " << y << ") has no hit";
+        throw ParameterError(msg.str());
+    }
+    return camera.position + pixelDirection(camera, hits.width, hits.height, x + 0.5, y + 0.5) * double(t);
+}
+
+int countHitsWithin(const Camera& camera, const HitImage& hits, const Vec3d& centreMm, double radiusMm)
+{
+    if (hits.t.size() != std::size_t(hits.width) * std::size_t(hits.height))
+        throw ParameterError("countHitsWithin: the hit image's buffer does not match its size");
+    const double r2 = radiusMm * radiusMm;
+    int count = 0;
+    for (int y = 0; y < hits.height; ++y)
+        for (int x = 0; x < hits.width; ++x) {
+            const float t = hits.t[std::size_t(y) * std::size_t(hits.width) + std::size_t(x)];
+            if (!(t >= 0.0f)) continue;
+            const Vec3d p =
+                camera.position + pixelDirection(camera, hits.width, hits.height, x + 0.5, y + 0.5) * double(t);
+            const Vec3d d = p - centreMm;
+            count += dot(d, d) <= r2 ? 1 : 0;
+        }
+    return count;
 }
 
 RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)

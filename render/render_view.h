@@ -1,7 +1,9 @@
 /// @file render_view.h
-/// @brief Renders one view of a RayScene from a Camera: headlight diffuse shading, OST or
-///        plain, near clip plane per ray, optional supersampling. Callable per frame with
-///        any pose (for the later interactive viewer); hit positions are kept on request.
+/// @brief Renders one view of a RayScene from a Camera: headlight diffuse shading with smooth
+///        (interpolated vertex) normals, OST or plain, near clip plane per ray, optional depth
+///        cue and supersampling. Callable per frame with any pose (for the interactive viewer);
+///        per-pixel hits (depth, triangle) are kept on request so a pixel maps to a world point.
+///        Does no file I/O.
 #pragma once
 
 #include "render/camera.h"
@@ -12,15 +14,36 @@
 
 namespace flyover {
 
+/// How one-sided transparency discards back faces. Every method returns, per ray, the closest
+/// hit on a face whose front (the lumen side) faces the ray, within [near, infinity); they
+/// differ only in speed. bench/render_bench measures them.
+enum class OstMethod {
+    /// Per 16-ray packet: trace without a filter, then trace again, with the filter and from
+    /// the first hit on, only the lanes whose first hit was a back face (rays that started
+    /// outside the lumen). A task that meets a packet where most lanes need the second trace
+    /// (a view from outside, e.g. the overview) filters the rest of its packets directly.
+    Auto,
+    /// Embree's context intersection filter on every candidate hit (one trace).
+    Filter,
+    /// Always the two-pass scheme of Auto, never switching to the filter.
+    Retrace,
+};
+
 struct RenderOptions {
-    int widthPx = 512;
-    int heightPx = 512;
+    int widthPx = 512;        ///< image width (pixels, 1..65536)
+    int heightPx = 512;       ///< image height (pixels, 1..65536)
     bool ost = true;          ///< discard back faces (one-sided transparency)
-    int supersample = 1;      ///< n x n rays per pixel
-    bool depthCue = false;    ///< darken with depth
-    /// Depth beyond the near plane at which depthCue halves the brightness (mm); 0 = half the
+    int supersample = 1;      ///< n x n rays per pixel (1..16), averaged in linear colour
+    /// Darken with depth: brightness / (1 + depth / depthCueRangeMm), depth counted from the near
+    /// plane or from the scene's nearest bounding-box corner, whichever is farther.
+    bool depthCue = false;
+    /// Depth at which depthCue halves the brightness (mm); 0 = half the
     /// diagonal of the scene's bounding box.
     double depthCueRangeMm = 0.0;
+    /// Shade with vertex normals interpolated across each triangle (true) or with the flat
+    /// face normal (false). Visibility (the OST test) always uses the face's own normal.
+    bool smoothShading = true;
+    OstMethod ostMethod = OstMethod::Auto;
 };
 
 struct RgbImage {
@@ -35,8 +58,31 @@ struct HitImage {
     std::vector<uint32_t> primId;  ///< hit triangle, or UINT32_MAX for a miss
 };
 
+/// @throw ParameterError for sizes, supersampling or a camera out of range.
 RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options,
                     HitImage* hits = nullptr);
+
+/// The same into `image`, reusing its buffer (no allocation when the size is unchanged): for
+/// loops over many frames.
+void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
+                HitImage* hits = nullptr);
+
+/// Only the hit image of the pixel-centre rays (no shading, no supersampling): the same rays
+/// and the same OST and near-plane rules as renderView. For coverage and picking.
+void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits);
+
+/// The bare-throughput reference for benchmarks: the pixel-centre rays of renderView (same
+/// origins, directions, near plane and 16-wide coherent packets), traced once without any
+/// filter, shading or output. @return the number of rays that hit.
+uint64_t traceBare(const RayScene& scene, const Camera& camera, int widthPx, int heightPx);
+
+/// World position (mm) of the hit at pixel (x, y) of `hits` seen from `camera`, which must be
+/// the camera that produced it. @throw ParameterError when the pixel is outside or missed.
+Vec3d hitPointMm(const Camera& camera, const HitImage& hits, int x, int y);
+
+/// Number of pixels of `hits` (seen from `camera`) whose hit point lies within `radiusMm` of
+/// `centreMm`: how much of a known object (e.g. a polyp) a view shows.
+int countHitsWithin(const Camera& camera, const HitImage& hits, const Vec3d& centreMm, double radiusMm);
 
 /// Places two images side by side (same height) with a `gapPx` dark separator.
 RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx = 4);

@@ -299,6 +299,41 @@ TEST(OverviewCamera, AllBoxCornersProjectInsideTheImage)
     }
 }
 
+TEST(PixelDirection, CornersCentreAndDepthScale)
+{
+    const Camera c = lookAt({1, 2, 3}, {1, 12, 3}, {0, 0, 1}, 60.0);
+    const double t = std::tan(PI / 6.0);
+    // Centre of a 200 x 100 image: the optical axis; corners at +-aspect*tan, +-tan.
+    EXPECT_NEAR(distance(pixelDirection(c, 200, 100, 100, 50), c.forward), 0.0, 1e-12);
+    EXPECT_NEAR(distance(pixelDirection(c, 200, 100, 0, 0), c.forward - c.right * (2 * t) + c.up * t), 0.0, 1e-12);
+    EXPECT_NEAR(distance(pixelDirection(c, 200, 100, 200, 100), c.forward + c.right * (2 * t) - c.up * t), 0.0, 1e-12);
+    std::mt19937 rng(8);
+    std::uniform_real_distribution<double> u(0.0, 100.0);
+    for (int i = 0; i < 100; ++i) EXPECT_NEAR(dot(pixelDirection(c, 100, 80, u(rng), u(rng)), c.forward), 1.0, 1e-12);
+}
+
+TEST(FlyoverCameras, CuttingLineRollPutsADirectionWhereTheViewsMeet)
+{
+    std::mt19937 rng(4242);
+    for (int i = 0; i < 300; ++i) {
+        const CenterlinePoint p = randomPoint(rng);
+        Vec3d dir = randomUnit(rng);
+        if (length(cross(dir, p.tangent)) < 0.05) continue;
+        FlyoverParams params;
+        params.rollDeg = cuttingLineRollDeg(p, dir);
+        EXPECT_GT(params.rollDeg, -180.0 - 1e-9);
+        EXPECT_LE(params.rollDeg, 180.0 + 1e-9);
+        const auto cams = flyoverCameras(p, params);
+        for (int k = 0; k < 2; ++k)
+            EXPECT_NEAR(dot(cams[std::size_t(k)].forward, dir), 0.0, 1e-9) << "seed 4242 #" << i;
+    }
+    CenterlinePoint p;
+    p.tangent = {0, 0, 1};
+    p.normal = {1, 0, 0};
+    p.radiusMm = 5;
+    EXPECT_THROW(cuttingLineRollDeg(p, {0, 0, 3}), InputError);
+}
+
 TEST(FlythroughCamera, LooksAlongTangentWithNormalUp)
 {
     CenterlinePoint p;

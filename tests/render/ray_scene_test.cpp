@@ -6,6 +6,7 @@
 #include "render/ray_scene.h"
 
 #include "test_meshes.h"
+#include "volume/error.h"
 
 #include <gtest/gtest.h>
 
@@ -199,6 +200,70 @@ TEST(RayScene, OutwardSphereIsInvisibleFromInsideWithOst)
     const RayHit h = scene.intersect({0, 0, 20}, {0, 0, -1}, 0.0, INF, true);
     ASSERT_TRUE(h.hit);
     EXPECT_NEAR(h.t, 15.0, 0.01);
+}
+
+TEST(RayScene, ArraysGiveTheSameSceneAsTheMesh)
+{
+    const TriMesh mesh = makeIcosphere({1, 2, 3}, 7.0, 3, true);
+    std::vector<float> xyz;
+    for (const auto v : mesh.vertices())
+        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
+    std::vector<uint32_t> tris;
+    for (const auto f : mesh.faces())
+        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    const RayScene fromMesh(mesh), fromArrays(xyz, tris);
+    ASSERT_EQ(fromMesh.triangleCount(), fromArrays.triangleCount());
+    ASSERT_EQ(fromMesh.vertexCount(), fromArrays.vertexCount());
+    // The mesh path keeps the face-vertex circulator's order (winding and u, v as the mesh).
+    for (uint32_t f = 0; f < fromMesh.triangleCount(); ++f)
+        EXPECT_EQ(fromMesh.triangle(f), fromArrays.triangle(f)) << "triangle " << f;
+    std::mt19937 rng(3);
+    std::normal_distribution<double> g(0.0, 1.0);
+    for (int i = 0; i < 500; ++i) {
+        const Vec3d dir = normalize(Vec3d{g(rng), g(rng), g(rng)});
+        const Vec3d eye = Vec3d{1, 2, 3} - dir * 30.0;
+        const RayHit a = fromMesh.intersect(eye, dir, 0.0, INF, true);
+        const RayHit b = fromArrays.intersect(eye, dir, 0.0, INF, true);
+        ASSERT_EQ(a.hit, b.hit);
+        EXPECT_EQ(a.t, b.t);
+        EXPECT_EQ(a.primId, b.primId);
+    }
+    EXPECT_THROW(RayScene({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 3}), InputError);
+    EXPECT_THROW(RayScene({0, 0, 0, 1, 0}, {}), InputError);
+}
+
+TEST(RayScene, SmoothNormalsOfASphereAreRadialAndInward)
+{
+    // Vertex normals of an inward icosphere point to the centre; interpolated ones too, to within
+    // the facet angle.
+    const Vec3d centre{-2, 5, 1};
+    const TriMesh mesh = makeIcosphere(centre, 10.0, 3, true);
+    const RayScene scene(mesh);
+    std::mt19937 rng(5);
+    std::normal_distribution<double> g(0.0, 1.0);
+    double maxSmoothRad = 0, maxFlatRad = 0;
+    for (int i = 0; i < 1000; ++i) {
+        const Vec3d dir = normalize(Vec3d{g(rng), g(rng), g(rng)});
+        const RayHit h = scene.intersect(centre, dir, 0.0, INF, true);
+        ASSERT_TRUE(h.hit);
+        const Vec3d hitPoint = centre + dir * h.t;
+        const Vec3d smooth = scene.shadingNormal(h.primId, h.u, h.v, true);
+        const Vec3d flat = scene.shadingNormal(h.primId, h.u, h.v, false);
+        const Vec3d radialIn = normalize(centre - hitPoint);
+        EXPECT_NEAR(length(smooth), 1.0, 1e-6);
+        EXPECT_NEAR(distance(flat, h.normal), 0.0, 1e-5);
+        maxSmoothRad = std::max(maxSmoothRad, std::acos(std::min(1.0, dot(smooth, radialIn))));
+        maxFlatRad = std::max(maxFlatRad, std::acos(std::min(1.0, dot(flat, radialIn))));
+    }
+    // Level 3: edges span ~0.1 rad. Face normals are off the radial direction by up to about half
+    // of that. Vertex normals are area-weighted averages of face normals, which on the uneven
+    // triangles of a subdivided icosahedron sit up to ~0.01 rad off radial; interpolating them
+    // adds the second-order error (~0.002).
+    RecordProperty("maxSmoothRad", std::to_string(maxSmoothRad));
+    RecordProperty("maxFlatRad", std::to_string(maxFlatRad));
+    EXPECT_LT(maxSmoothRad, 0.015);
+    EXPECT_GT(maxFlatRad, 3.0 * maxSmoothRad);
+    EXPECT_THROW(scene.shadingNormal(scene.triangleCount(), 0, 0), ParameterError);
 }
 
 TEST(RayScene, EmptyMeshNeverHits)

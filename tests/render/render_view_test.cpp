@@ -142,6 +142,8 @@ TEST(RenderView, OstEqualsPlainRenderOfTheFacesFacingTheEye)
         const Vec3d target = (full.boundsMin() + full.boundsMax()) * 0.5;
         const Camera cam = lookAt(c.eye, target, {0, 0, 1}, 50.0);
         RenderOptions options = smallOptions(64, 64, true);
+        // Flat shading: the half mesh's border vertices would get other smooth normals.
+        options.smoothShading = false;
         options.depthCue = true;  // the near and far walls of a sphere differ only in depth
         options.depthCueRangeMm = 20.0;
 
@@ -249,6 +251,147 @@ TEST(RenderView, RejectsBadOptions)
     bad = cam;
     bad.fovDeg = 180;
     EXPECT_THROW(renderView(scene, bad, smallOptions(10, 10, true)), ParameterError);
+}
+
+TEST(RenderView, OstMethodsGiveTheSameHits)
+{
+    // The two-pass scheme (trace plain, retrace back-face lanes with the filter) is exact: it
+    // returns what the filter alone returns, from outside, from inside, and with near planes
+    // that start rays inside or outside the lumen.
+    struct Case {
+        std::string name;
+        TriMesh mesh;
+        Vec3d eye, target;
+        double nearMm;
+    };
+    const Case cases[] = {
+        {"sphere from outside", makeIcosphere(CENTRE, R, 5, true), CENTRE + Vec3d{14, 21, 17}, CENTRE, 0.0},
+        {"sphere, near plane inside", makeIcosphere(CENTRE, R, 5, true), CENTRE + Vec3d{0, 0, 25}, CENTRE, 20.0},
+        {"sphere from inside", makeIcosphere(CENTRE, R, 5, true), CENTRE + Vec3d{1, 2, 3}, CENTRE + Vec3d{0, 5, 0}, 0.0},
+        {"torus from outside", test::makeTorus(CENTRE, 20.0, 6.0, 96, 32, true), CENTRE + Vec3d{5, -50, 40}, CENTRE, 0.0},
+        {"torus, near plane crossing", test::makeTorus(CENTRE, 20.0, 6.0, 96, 32, true), CENTRE + Vec3d{20, 0, 12},
+         CENTRE + Vec3d{20, 0, 0}, 9.0},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        const RayScene scene(c.mesh);
+        Camera cam = lookAt(c.eye, c.target, {0, 1, 0}, 70.0);
+        cam.nearMm = c.nearMm;
+        HitImage reference;
+        RenderOptions o = smallOptions(61, 47, true);
+        o.ostMethod = OstMethod::Filter;
+        traceHits(scene, cam, o, reference);
+        ASSERT_GT(hitCount(reference), 0);
+        for (const OstMethod m : {OstMethod::Auto, OstMethod::Retrace}) {
+            o.ostMethod = m;
+            HitImage hits;
+            traceHits(scene, cam, o, hits);
+            EXPECT_EQ(hits.t, reference.t) << "method " << int(m);
+            EXPECT_EQ(hits.primId, reference.primId) << "method " << int(m);
+        }
+    }
+}
+
+TEST(RenderView, TraceHitsAndTraceBareAgreeWithRenderView)
+{
+    const TriMesh mesh = makeIcosphere(CENTRE, R, 4, true);
+    const RayScene scene(mesh);
+    const Camera cam = lookAt(CENTRE + Vec3d{3, -28, 9}, CENTRE, {0, 0, 1}, 50.0);
+    const RenderOptions o = smallOptions(53, 41, true);
+    HitImage fromRender, fromTrace;
+    renderView(scene, cam, o, &fromRender);
+    traceHits(scene, cam, o, fromTrace);
+    EXPECT_EQ(fromRender.t, fromTrace.t);
+    EXPECT_EQ(fromRender.primId, fromTrace.primId);
+    // The bare trace has no filter, but from outside a closed surface the same rays hit.
+    EXPECT_EQ(traceBare(scene, cam, 53, 41), uint64_t(hitCount(fromTrace)));
+    // Rendering into a reused image gives the same pixels.
+    RgbImage reused = renderView(scene, lookAt({0, 0, 50}, CENTRE, {0, 1, 0}, 30.0), o);
+    renderView(scene, cam, o, reused);
+    EXPECT_EQ(reused.rgb, renderView(scene, cam, o).rgb);
+}
+
+TEST(RenderView, HitPointsLieOnTheSurface)
+{
+    const TriMesh mesh = makeIcosphere(CENTRE, R, 6, true);
+    const RayScene scene(mesh);
+    Camera cam = lookAt(CENTRE + Vec3d{-12, 30, 5}, CENTRE, {0, 0, 1}, 60.0);
+    HitImage hits;
+    traceHits(scene, cam, smallOptions(40, 30, true), hits);
+    int checked = 0;
+    for (int y = 0; y < hits.height; ++y)
+        for (int x = 0; x < hits.width; ++x) {
+            if (hits.t[std::size_t(y * hits.width + x)] < 0) {
+                EXPECT_THROW(hitPointMm(cam, hits, x, y), ParameterError);
+                continue;
+            }
+            const Vec3d p = hitPointMm(cam, hits, x, y);
+            EXPECT_NEAR(distance(p, CENTRE), R, 0.005 * R) << "pixel " << x << ", " << y;
+            // OST: the far side, i.e. beyond the silhouette circle of tangent points, which lies
+            // R^2/d in front of the centre for an eye at distance d.
+            const double silhouette = -R * R / distance(cam.position, CENTRE);
+            EXPECT_GT(dot(p - CENTRE, cam.forward), silhouette - 0.05) << "pixel " << x << ", " << y;
+            ++checked;
+        }
+    EXPECT_GT(checked, 200);
+    EXPECT_EQ(countHitsWithin(cam, hits, CENTRE, R * 1.01), checked);
+    EXPECT_EQ(countHitsWithin(cam, hits, CENTRE, R * 0.9), 0);
+    EXPECT_THROW(hitPointMm(cam, hits, 40, 0), ParameterError);
+}
+
+/// Largest colour step between horizontally adjacent pixels that both show the surface.
+int maxStep(const RgbImage& img, const HitImage& hits)
+{
+    int m = 0;
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 1; x < img.width; ++x) {
+            const std::size_t a = std::size_t(y * img.width + x - 1), b = a + 1;
+            if (hits.t[a] < 0 || hits.t[b] < 0) continue;
+            for (int c = 0; c < 3; ++c) m = std::max(m, std::abs(int(img.rgb[3 * a + std::size_t(c)]) - int(img.rgb[3 * b + std::size_t(c)])));
+        }
+    return m;
+}
+
+TEST(RenderView, SmoothShadingHasNoFacetEdges)
+{
+    // A coarse sphere (320 faces) seen from inside: flat shading jumps at every edge, smooth
+    // shading varies gradually.
+    const TriMesh mesh = makeIcosphere(CENTRE, R, 2, true);
+    const RayScene scene(mesh);
+    const Camera cam = lookAt(CENTRE + Vec3d{0, 0, 6}, CENTRE + Vec3d{0, 3, 0}, {0, 0, 1}, 70.0);
+    RenderOptions o = smallOptions(96, 96, true);
+    HitImage hits;
+    const RgbImage smooth = renderView(scene, cam, o, &hits);
+    o.smoothShading = false;
+    const RgbImage flat = renderView(scene, cam, o);
+    const int smoothStep = maxStep(smooth, hits), flatStep = maxStep(flat, hits);
+    RecordProperty("smoothStep", smoothStep);
+    RecordProperty("flatStep", flatStep);
+    EXPECT_LE(smoothStep, 4);
+    EXPECT_GE(flatStep, 3 * smoothStep + 6);
+}
+
+TEST(RenderView, DepthCueDarkensWithDepthFromTheNearPlane)
+{
+    // A wall facing the camera: brightness / (1 + depth / range), depth from the near plane. A
+    // small triangle outside the view, near the camera, puts the scene's box in front of the
+    // near plane, so the cue starts at the near plane.
+    const TriMesh wall = test::buildMesh({{-100, -100, 0}, {100, -100, 0}, {100, 100, 0}, {-100, 100, 0},
+                                          {90, 90, 35}, {91, 90, 35}, {90, 91, 35}},
+                                         {{0, 1, 2}, {0, 2, 3}, {4, 5, 6}}, false);
+    const RayScene scene(wall);
+    Camera cam = lookAt({0, 0, 40}, {0, 0, 0}, {0, 1, 0}, 20.0);
+    RenderOptions o = smallOptions(9, 9, true);
+    const RgbImage plain = renderView(scene, cam, o);
+    o.depthCue = true;
+    o.depthCueRangeMm = 20.0;
+    cam.nearMm = 20.0;  // depth 20 beyond the near plane: half the brightness in linear
+    const RgbImage cued = renderView(scene, cam, o);
+    const std::size_t centre = (4 * 9 + 4) * 3;
+    for (int c = 0; c < 3; ++c) {
+        const double lin = std::pow(plain.rgb[centre + std::size_t(c)] / 255.0, 2.2);
+        EXPECT_NEAR(cued.rgb[centre + std::size_t(c)], 255.0 * std::pow(0.5 * lin, 1 / 2.2), 1.5) << "channel " << c;
+    }
 }
 
 TEST(SideBySide, PlacesImagesWithADarkSeparator)

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "surface/mesh_types.h"
+#include "volume/centerline_types.h"
 #include "volume/vec3.h"
 
 #include <array>
@@ -123,6 +124,63 @@ inline TriMesh makeTorus(const Vec3d& centre, double majorR, double minorR, int 
         }
     return buildMesh(points, tris, inward);
 }
+
+/// Surface of revolution about the z axis: profile radius rho[i] at height z[i], `segments`
+/// around, open at both ends. `inward` winds faces so that normals point to the axis (a lumen).
+inline TriMesh makeLathe(const std::vector<double>& z, const std::vector<double>& rho, int segments, bool inward)
+{
+    std::vector<Vec3d> points;
+    for (std::size_t i = 0; i < z.size(); ++i)
+        for (int j = 0; j < segments; ++j) {
+            const double a = 2.0 * PI * j / segments;
+            points.push_back({rho[i] * std::cos(a), rho[i] * std::sin(a), z[i]});
+        }
+    std::vector<std::array<int, 3>> tris;
+    auto id = [&](std::size_t i, int j) { return int(i) * segments + (j + segments) % segments; };
+    for (std::size_t i = 0; i + 1 < z.size(); ++i)
+        for (int j = 0; j < segments; ++j) {
+            // Outward for increasing z: d/d(angle) x d/dz points away from the axis.
+            tris.push_back({id(i, j), id(i, j + 1), id(i + 1, j + 1)});
+            tris.push_back({id(i, j), id(i + 1, j + 1), id(i + 1, j)});
+        }
+    return buildMesh(points, tris, inward);
+}
+
+/// A straight lumen along z from 0 to `length` (mm) of radius `radius`, with one annular fold
+/// (a ridge that narrows the lumen to radius - foldDepth) centred at zFold, `foldWidth` wide.
+struct FoldedTube {
+    double radius = 10.0, length = 120.0, zFold = 60.0, foldDepth = 5.0, foldWidth = 3.0;
+    double rho(double z) const
+    {
+        const double u = (z - zFold) / (0.5 * foldWidth);
+        return std::fabs(u) < 1.0 ? radius - foldDepth * 0.5 * (1.0 + std::cos(PI * u)) : radius;
+    }
+    TriMesh mesh(double dzMm = 0.25, int segments = 128) const
+    {
+        std::vector<double> z, r;
+        for (double v = 0; v <= length + 1e-9; v += dzMm) {
+            z.push_back(v);
+            r.push_back(rho(v));
+        }
+        return test::makeLathe(z, r, segments, /*inward=*/true);
+    }
+    /// Centerline along the axis, 1 mm steps, radius = distance to the nearest wall.
+    Centerline centerline(double margin = 10.0) const
+    {
+        Centerline c;
+        c.stepMm = 1.0;
+        for (double v = margin; v <= length - margin + 1e-9; v += 1.0) {
+            CenterlinePoint p;
+            p.positionMm = {0, 0, v};
+            double d = radius;
+            for (double w = 0; w <= length; w += 0.1) d = std::min(d, std::hypot(rho(w), w - v));
+            p.radiusMm = d;
+            c.points.push_back(p);
+        }
+        computeTangentsAndNormals(c);
+        return c;
+    }
+};
 
 /// A copy of `mesh` with only the faces for which keep(corners) is true (all vertices kept).
 inline TriMesh filterFaces(const TriMesh& mesh, const std::function<bool(const std::array<Vec3d, 3>&)>& keep)

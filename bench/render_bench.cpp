@@ -1,0 +1,481 @@
+// render_bench: the fly-over renderer measured on a phantom.
+//
+//   render_bench [--mode speed|coverage|sweep] [--study DIR [--truth FILE]] [--size full|medium|small]
+//                [--seed N] [--px 512] [--threads 2] [--runs 5] [--positions 60]
+//
+// speed     frame pairs/s and Mrays/s of the fly-over next to the bare Embree throughput
+//           (16-wide coherent packets, no filter, no shading) for the same rays, for each OST
+//           method, with and without Embree's robust mode; PNG encoding; scene build; and, with
+//           --study, the time from the cached surface and centerline to the first saved pair
+//           (the render stage itself, through the pipeline).
+// coverage  coverage fractions against the coverage rays' resolution and step (convergence).
+// sweep     the clip offset sweep: coverage, polyp visibility (also on the cutting line) and
+//           occlusion by other loops of colon for each offset (needs the truth polyps).
+//
+// Without --study the phantom is generated and taken through ingest, segment, centerline and
+// mesh in memory (about a minute for the full size); with --study the study's surface.ply and
+// centerline.json are read (and --truth names the phantom's truth JSON for the polyps).
+// Timings are medians over --runs runs, interleaved so that load on a shared machine hits
+// every variant alike; "CPU-normalised" figures divide the work by the process CPU time per
+// thread, which is what the figures would be on otherwise idle cores.
+
+// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back (its
+// VectorT default constructor leaves components uninitialised on purpose); silence it for the
+// third-party headers only.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include "data/phantom.h"
+#include "pipeline/artifact_io.h"
+#include "pipeline/phantom_io.h"
+#include "pipeline/study.h"
+#include "render/camera.h"
+#include "render/coverage.h"
+#include "render/ray_scene.h"
+#include "render/render_view.h"
+#include "surface/extract_surface.h"
+#include "volume/centerline.h"
+#include "volume/ingest.h"
+#include "volume/segment.h"
+
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <string>
+#include <unistd.h>
+#include <vector>
+#pragma GCC diagnostic pop
+
+namespace fs = std::filesystem;
+using namespace flyover;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// CPU seconds used by the whole process so far (all threads).
+double processCpuSeconds()
+{
+    timespec ts{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+/// Wall and CPU seconds of one piece of work.
+struct Timing {
+    double wall = 0, cpu = 0;
+};
+Timing measure(const std::function<void()>& work)
+{
+    const double c0 = processCpuSeconds();
+    const auto t0 = Clock::now();
+    work();
+    return {secondsSince(t0), processCpuSeconds() - c0};
+}
+
+double median(std::vector<double> v)
+{
+    std::sort(v.begin(), v.end());
+    const std::size_t n = v.size();
+    return n == 0 ? 0.0 : (n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
+}
+
+struct Args {
+    std::string mode = "speed";
+    std::string study, truth;
+    std::string size = "full";
+    uint64_t seed = 1;
+    int px = 512;
+    int threads = 2;
+    int runs = 5;
+    int positions = 60;
+};
+
+Args parseArgs(int argc, char** argv)
+{
+    Args a;
+    for (int i = 1; i < argc; ++i) {
+        const std::string k = argv[i];
+        auto value = [&]() -> std::string {
+            if (i + 1 >= argc) throw std::runtime_error(k + " needs a value");
+            return argv[++i];
+        };
+        if (k == "--mode") a.mode = value();
+        else if (k == "--study") a.study = value();
+        else if (k == "--truth") a.truth = value();
+        else if (k == "--size") a.size = value();
+        else if (k == "--seed") a.seed = std::stoull(value());
+        else if (k == "--px") a.px = std::stoi(value());
+        else if (k == "--threads") a.threads = std::stoi(value());
+        else if (k == "--runs") a.runs = std::stoi(value());
+        else if (k == "--positions") a.positions = std::stoi(value());
+        else throw std::runtime_error("unknown option " + k + " (see the comment at the top of render_bench.cpp)");
+    }
+    if (a.mode != "speed" && a.mode != "coverage" && a.mode != "sweep")
+        throw std::runtime_error("--mode must be speed, coverage or sweep");
+    if (!(a.runs >= 1 && a.threads >= 1 && a.px >= 8 && a.positions >= 1))
+        throw std::runtime_error("--runs, --threads, --positions must be >= 1 and --px >= 8");
+    return a;
+}
+
+struct Subject {
+    TriMesh mesh;
+    Centerline centerline;
+    std::vector<PhantomPolyp> polyps;
+};
+
+Subject load(const Args& a)
+{
+    Subject s;
+    if (!a.study.empty()) {
+        s.mesh = readMesh((fs::path(a.study) / "surface.ply").string());
+        const std::string clPath = (fs::path(a.study) / "centerline.json").string();
+        s.centerline = centerlineFromJson(readJson(clPath), clPath);
+        if (!a.truth.empty()) s.polyps = phantomTruthFromJson(readJson(a.truth), a.truth).polyps;
+        return s;
+    }
+    const auto t0 = Clock::now();
+    PhantomParams pp;
+    pp.size = parsePhantomSize(a.size);
+    pp.seed = a.seed;
+    const Phantom phantom = makePhantom(pp);
+    Image3<float> image;
+    image.geometry = phantom.ct.geometry;
+    image.voxels.assign(phantom.ct.voxels.begin(), phantom.ct.voxels.end());
+    const auto hu = ingestImage(image, IngestParams{});
+    const LumenSegmentation lumen = segmentLumen(*hu, SegmentParams{});
+    s.centerline = extractCenterline(*lumen.sdf, CenterlineParams{});
+    s.mesh = extractSurface(*lumen.sdf, MeshParams{});
+    s.polyps = phantom.truth.polyps;
+    std::printf("generated the %s phantom (seed %llu), its surface and centerline in %.1f s\n", a.size.c_str(),
+                static_cast<unsigned long long>(a.seed), secondsSince(t0));
+    return s;
+}
+
+/// Fly-over camera pairs at `count` positions spread evenly along the centerline.
+std::vector<std::array<Camera, 2>> flyoverPath(const Centerline& cl, int count, const FlyoverParams& fp)
+{
+    std::vector<std::array<Camera, 2>> cams;
+    const std::size_t n = cl.points.size();
+    for (int k = 0; k < count; ++k) {
+        const std::size_t i = std::min(n - 1, std::size_t((double(k) + 0.5) / count * double(n)));
+        cams.push_back(flyoverCameras(cl.points[i], fp));
+    }
+    return cams;
+}
+
+// ------------------------------------------------------------------------------------ speed
+
+void benchThroughput(const Args& a, const Subject& s)
+{
+    const auto path = flyoverPath(s.centerline, a.positions, FlyoverParams{});
+    const double rays = 2.0 * a.px * a.px * double(path.size());
+    const double pairs = double(path.size());
+    std::printf("\nfly-over at %zu positions spread along the centerline, default cameras (fov 90, clip offset "
+                "0.5 D), %d x %d per view, one pair after the other (each view parallel over tiles)\n",
+                path.size(), a.px, a.px);
+
+    for (const bool robust : {true, false}) {
+        SceneOptions so;
+        so.robust = robust;
+        const RayScene scene(s.mesh, so);
+        struct Variant {
+            const char* name;
+            bool bare;
+            OstMethod method;
+            bool ost;
+            bool smooth;
+            std::vector<double> wall, cpu;
+        };
+        std::vector<Variant> variants = {
+            {"bare Embree (16-wide coherent, no filter/shading)", true, OstMethod::Auto, false, false, {}, {}},
+            {"fly-over OST auto, smooth  [default]", false, OstMethod::Auto, true, true, {}, {}},
+            {"fly-over OST filter only, smooth", false, OstMethod::Filter, true, true, {}, {}},
+            {"fly-over OST retrace only, smooth", false, OstMethod::Retrace, true, true, {}, {}},
+            {"fly-over OST auto, flat", false, OstMethod::Auto, true, false, {}, {}},
+            {"fly-over plain (--no-ost), smooth", false, OstMethod::Auto, false, true, {}, {}}};
+        for (int r = 0; r < a.runs; ++r) {
+            for (Variant& v : variants) {
+                RenderOptions ro;
+                ro.widthPx = ro.heightPx = a.px;
+                ro.ost = v.ost;
+                ro.ostMethod = v.method;
+                ro.smoothShading = v.smooth;
+                ro.depthCue = true;
+                ro.depthCueRangeMm = 60.0;
+                RgbImage left, right;
+                uint64_t hits = 0;
+                const Timing t = measure([&] {
+                    for (const auto& pair : path) {
+                        if (v.bare) {
+                            for (const Camera& c : pair) hits += traceBare(scene, c, a.px, a.px);
+                        } else {
+                            renderView(scene, pair[0], ro, left);
+                            renderView(scene, pair[1], ro, right);
+                        }
+                    }
+                });
+                if (v.bare && hits == 0) std::printf("  (no ray hit: check the input)\n");
+                v.wall.push_back(t.wall);
+                v.cpu.push_back(t.cpu);
+            }
+        }
+        std::printf("\nscene: %u triangles, Embree robust mode %s\n", scene.triangleCount(), robust ? "on" : "off");
+        std::printf("  %-52s %8s %8s %8s | %-s\n", "median of runs", "Mrays/s", "pairs/s", "of bare",
+                    "CPU-normalised: Mrays/s  pairs/s  of bare");
+        const double bareWall = median(variants[0].wall), bareCpu = median(variants[0].cpu);
+        for (const Variant& v : variants) {
+            const double w = median(v.wall), c = median(v.cpu) / a.threads;
+            std::printf("  %-52s %8.1f %8.1f %7.0f%% | %14.1f %8.1f %7.0f%%\n", v.name, rays / w * 1e-6, pairs / w,
+                        100.0 * bareWall / w, rays / c * 1e-6, pairs / c, 100.0 * bareCpu / median(v.cpu));
+        }
+    }
+}
+
+void benchSceneAndPng(const Args& a, const Subject& s)
+{
+    // Scene build from plain arrays (what the render stage does with a cached surface.ply).
+    std::vector<float> xyz;
+    for (const auto v : s.mesh.vertices())
+        for (int k = 0; k < 3; ++k) xyz.push_back(s.mesh.point(v)[k]);
+    std::vector<uint32_t> tris;
+    for (const auto f : s.mesh.faces())
+        for (const auto v : s.mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    std::vector<double> wall, cpu;
+    for (int r = 0; r < a.runs; ++r) {
+        const Timing t = measure([&] { const RayScene scene(xyz, tris); });
+        wall.push_back(t.wall);
+        cpu.push_back(t.cpu);
+    }
+    std::printf("\nscene build from arrays (copy, vertex normals, BVH MEDIUM, robust): %.3f s wall, %.3f s CPU "
+                "(%.3f s on %d idle cores)\n",
+                median(wall), median(cpu), median(cpu) / a.threads, a.threads);
+
+    const RayScene scene(s.mesh);
+    const auto path = flyoverPath(s.centerline, std::min(a.positions, 24), FlyoverParams{});
+    RenderOptions ro;
+    ro.widthPx = ro.heightPx = a.px;
+    std::vector<RgbImage> images;
+    for (const auto& pair : path) images.push_back(sideBySide(renderView(scene, pair[0], ro), renderView(scene, pair[1], ro)));
+    const fs::path dir = fs::temp_directory_path() / ("render_bench_png_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    std::vector<double> one, all;
+    for (int r = 0; r < a.runs; ++r) {
+        one.push_back(measure([&] {
+                          for (std::size_t i = 0; i < images.size(); ++i)
+                              writePng((dir / ("a" + std::to_string(i) + ".png")).string(), images[i]);
+                      }).wall);
+        all.push_back(measure([&] {
+                          tbb::parallel_for(std::size_t(0), images.size(), [&](std::size_t i) {
+                              writePng((dir / ("b" + std::to_string(i) + ".png")).string(), images[i]);
+                          });
+                      }).wall);
+    }
+    fs::remove_all(dir);
+    std::printf("PNG encode + atomic write of %d x %d pair images: %.1f pairs/s on one thread, %.1f pairs/s on %d\n",
+                images.front().width, images.front().height, double(images.size()) / median(one),
+                double(images.size()) / median(all), a.threads);
+}
+
+/// The render stage itself on a cached study: surface.ply and centerline.json on disk, render
+/// forced. Video, coverage and fly-through frames off (they come after the first pair anyway).
+void benchFirstPair(const Args& a)
+{
+    const nlohmann::json manifest = readJson((fs::path(a.study) / "manifest.json").string());
+    RunOptions o;
+    o.ctPath = manifest.at("input").get<std::string>();
+    o.studyDir = a.study;
+    o.forceStage = "render";
+    o.params.render.video = false;
+    o.params.render.coverage = false;
+    o.params.render.flythroughFrames = false;
+    o.params.render.frameStepMm = 400;
+    o.params.render.widthPx = o.params.render.heightPx = a.px;
+    std::vector<double> total;
+    std::map<std::string, std::vector<double>> parts;
+    for (int r = 0; r < a.runs; ++r) {
+        const nlohmann::json m = runPipeline(o);
+        for (const auto& st : m.at("stages"))
+            if (st.at("stage") == "render") {
+                total.push_back(st.at("report").at("first_pair_seconds").get<double>());
+                for (const auto& [k, v] : st.at("report").at("first_pair_breakdown_seconds").items())
+                    parts[k].push_back(v.get<double>());
+            }
+    }
+    std::printf("\ntime from the cached surface and centerline to the first saved pair (render stage, %d x %d "
+                "per view): %.3f s median of %d (",
+                a.px, a.px, median(total), a.runs);
+    const char* sep = "";
+    for (const auto& [k, v] : parts) {
+        std::printf("%s%s %.3f", sep, k.c_str(), median(v));
+        sep = ", ";
+    }
+    std::printf(")\n");
+}
+
+// --------------------------------------------------------------------------------- coverage
+
+void benchCoverage(const Subject& s)
+{
+    const RayScene scene(s.mesh);
+    std::printf("\ncoverage against the coverage rays' resolution and step (%u triangles)\n", scene.triangleCount());
+    std::printf("  %9s %7s %8s | %9s %10s %10s %9s | %8s %7s\n", "rule", "view_px", "step_mm", "fly-over", "FT forward",
+                "FT backward", "FT 2-way", "rays (M)", "seconds");
+    for (const bool footprint : {true, false})
+    for (const double step : {1.0, 2.0, 4.0})
+        for (const int px : {32, 48, 64, 96, 144, 192, 288, 384}) {
+            if (step > 1.0 && px != 64 && px != 96) continue;
+            if (!footprint && px < 96) continue;
+            CoverageParams cp;
+            cp.viewPx = px;
+            cp.stepMm = step;
+            cp.footprint = footprint;
+            CoverageResult c;
+            const Timing t = measure([&] { c = computeCoverage(scene, s.centerline, cp); });
+            std::printf("  %s %7d %8.1f | %8.3f%% %9.3f%% %10.3f%% %8.3f%% | %8.1f %7.1f\n",
+                        footprint ? "footprint" : "hit only ", px, step,
+                        100 * c.flyover.fraction, 100 * c.flythroughForward.fraction,
+                        100 * c.flythroughBackward.fraction, 100 * c.flythroughTwoWay.fraction, double(c.rays) * 1e-6,
+                        t.wall);
+        }
+}
+
+// ------------------------------------------------------------------------------------ sweep
+
+struct PolypView {
+    int bestPixels = 0;      ///< most polyp pixels in one view of the run near the polyp
+    int cuttingPixels[2] = {0, 0};  ///< both views, rolled so the polyp lies on the cutting line
+};
+
+void benchSweep(const Args& a, const Subject& s)
+{
+    if (s.polyps.empty()) throw std::runtime_error("--mode sweep needs the truth polyps (--truth FILE, or no --study)");
+    const RayScene scene(s.mesh);
+    const Centerline& cl = s.centerline;
+    const CenterlineLocator locator(cl);
+    const TriangleGeometry geo = triangleGeometry(scene);
+    // Arc position of every triangle (its nearest centerline point): a hit on a triangle whose
+    // arc is far from the camera's is a hit on another loop of colon.
+    std::vector<uint32_t> triangleArc(geo.centroidMm.size());
+    tbb::parallel_for(std::size_t(0), geo.centroidMm.size(),
+                      [&](std::size_t f) { triangleArc[f] = uint32_t(locator.nearest(geo.centroidMm[f])); });
+    const double OTHER_LOOP_ARC_MM = 100.0;
+    const int POLYP_PX = 256;
+    const double POLYP_MARGIN_MM = 1.0;
+    const double POLYP_WINDOW_MM = 40.0;
+
+    std::printf("\nclip offset sweep: fov 90 (h = D), roll 0 unless stated; offset = fraction * D(p), near plane "
+                "at h - offset (fraction 0: on the centerline; 1: at the camera)\n");
+    std::printf("coverage: fly-over, both cameras, 128 px every 1 mm. occlusion: pixels of fly-over views every "
+                "2 mm at 128 px whose triangle's nearest centerline point is > %.0f mm of arc away from the "
+                "camera's. polyps (%zu): pixels within r + %.0f mm of the centre, %d px views; best over the "
+                "views within +-%.0f mm of the polyp; 'cut' = at the polyp's nearest point, roll putting it on "
+                "the cutting line, better of the two views.\n",
+                OTHER_LOOP_ARC_MM, s.polyps.size(), POLYP_MARGIN_MM, POLYP_PX, POLYP_WINDOW_MM);
+    std::printf("  %8s | %9s | %10s %12s | %16s %18s\n", "fraction", "coverage", "other-loop", "frames >1%",
+                "polyp px (min)", "cut polyp px (min)");
+
+    for (const double fraction : {0.0, 0.1, 0.25, 0.4, 0.5, 0.75, 1.0}) {
+        FlyoverParams fp;
+        fp.clipOffsetFraction = fraction;
+        CoverageParams cp;
+        cp.viewPx = 128;
+        cp.flyover = fp;
+        cp.flythrough = false;
+        const CoverageResult cov = computeCoverage(scene, cl, cp);
+
+        RenderOptions ro;
+        ro.widthPx = ro.heightPx = 128;
+        HitImage hits;
+        uint64_t hitPixels = 0, otherPixels = 0;
+        std::size_t frames = 0, occludedFrames = 0;
+        for (std::size_t i = 0; i < cl.points.size(); i += 2) {
+            uint64_t hitHere = 0, otherHere = 0;
+            for (const Camera& c : flyoverCameras(cl.points[i], fp)) {
+                traceHits(scene, c, ro, hits);
+                for (const uint32_t id : hits.primId) {
+                    if (id >= triangleArc.size()) continue;
+                    ++hitHere;
+                    const double arcGap = std::fabs(double(triangleArc[id]) - double(i)) * cl.stepMm;
+                    otherHere += arcGap > OTHER_LOOP_ARC_MM ? 1 : 0;
+                }
+            }
+            hitPixels += hitHere;
+            otherPixels += otherHere;
+            ++frames;
+            occludedFrames += (otherHere * 100 > hitHere) ? 1 : 0;
+        }
+
+        RenderOptions po;
+        po.widthPx = po.heightPx = POLYP_PX;
+        std::vector<PolypView> pv(s.polyps.size());
+        std::string perPolyp;
+        for (std::size_t k = 0; k < s.polyps.size(); ++k) {
+            const PhantomPolyp& polyp = s.polyps[k];
+            const double r = polyp.radiusMm + POLYP_MARGIN_MM;
+            const std::size_t ip = locator.nearest(polyp.centerMm);
+            const auto window = std::size_t(POLYP_WINDOW_MM / cl.stepMm);
+            for (std::size_t i = ip > window ? ip - window : 0; i <= std::min(cl.points.size() - 1, ip + window); ++i)
+                for (const Camera& c : flyoverCameras(cl.points[i], fp)) {
+                    traceHits(scene, c, po, hits);
+                    pv[k].bestPixels = std::max(pv[k].bestPixels, countHitsWithin(c, hits, polyp.centerMm, r));
+                }
+            FlyoverParams rolled = fp;
+            rolled.rollDeg = cuttingLineRollDeg(cl.points[ip], polyp.outwardDir);
+            const auto cams = flyoverCameras(cl.points[ip], rolled);
+            for (int v = 0; v < 2; ++v) {
+                traceHits(scene, cams[std::size_t(v)], po, hits);
+                pv[k].cuttingPixels[v] = countHitsWithin(cams[std::size_t(v)], hits, polyp.centerMm, r);
+            }
+            char buf[64];
+            std::snprintf(buf, sizeof buf, "%s%.0f:%d/%d", k ? " " : "", polyp.radiusMm, pv[k].bestPixels,
+                          std::max(pv[k].cuttingPixels[0], pv[k].cuttingPixels[1]));
+            perPolyp += buf;
+        }
+        int minBest = 1 << 30, minCut = 1 << 30;
+        for (const PolypView& v : pv) {
+            minBest = std::min(minBest, v.bestPixels);
+            minCut = std::min(minCut, std::max(v.cuttingPixels[0], v.cuttingPixels[1]));
+        }
+        std::printf("  %8.2f | %8.3f%% | %9.3f%% %11.1f%% | %16d %18d   [r mm: best/cut] %s\n", fraction,
+                    100 * cov.flyover.fraction, 100.0 * double(otherPixels) / double(std::max<uint64_t>(1, hitPixels)),
+                    100.0 * double(occludedFrames) / double(frames), minBest, minCut, perPolyp.c_str());
+        std::fflush(stdout);
+    }
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    try {
+        const Args a = parseArgs(argc, argv);
+        const tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(a.threads));
+        std::printf("render_bench --mode %s: %d threads, median of %d runs\n", a.mode.c_str(), a.threads, a.runs);
+        const Subject s = load(a);
+        std::printf("surface: %zu triangles; centerline: %zu points, %.0f mm; %zu truth polyps\n", s.mesh.n_faces(),
+                    s.centerline.points.size(), s.centerline.lengthMm(), s.polyps.size());
+        if (a.mode == "speed") {
+            benchThroughput(a, s);
+            benchSceneAndPng(a, s);
+            if (!a.study.empty()) benchFirstPair(a);
+        } else if (a.mode == "coverage") {
+            benchCoverage(s);
+        } else {
+            benchSweep(a, s);
+        }
+        return 0;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "render_bench: %s\n", e.what());
+        return 1;
+    }
+}

@@ -1,0 +1,289 @@
+#include "render/coverage.h"
+
+#include "render/ray_scene_impl.h"
+#include "render/render_view.h"
+#include "volume/error.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+namespace flyover {
+
+namespace {
+
+void validate(const CoverageParams& p)
+{
+    std::ostringstream msg;
+    if (!(p.viewPx >= 8 && p.viewPx <= 4096)) msg << "CoverageParams.viewPx must be in 8..4096, got " << p.viewPx;
+    else if (!(p.stepMm > 0.0) || !std::isfinite(p.stepMm)) msg << "CoverageParams.stepMm must be > 0, got " << p.stepMm;
+    else if (!(p.flythroughFovDeg > 0.0 && p.flythroughFovDeg < 180.0))
+        msg << "CoverageParams.flythroughFovDeg must be in (0, 180), got " << p.flythroughFovDeg;
+    else if (!(p.minRegionMm2 >= 0.0)) msg << "CoverageParams.minRegionMm2 must be >= 0, got " << p.minRegionMm2;
+    else return;
+    throw ParameterError(msg.str());
+}
+
+/// Seen area, fraction and missed regions of one method from its per-triangle marks.
+/// Triangles around each vertex (compressed rows), for the edge neighbours of a triangle.
+struct VertexTriangles {
+    std::vector<uint32_t> start;  ///< triangles of vertex v: list[start[v] .. start[v + 1])
+    std::vector<uint32_t> list;
+
+    explicit VertexTriangles(const RayScene::Impl& im)
+    {
+        const std::size_t nv = im.vertices.size() - 1;
+        start.assign(nv + 1, 0);
+        for (const uint32_t v : im.indices) ++start[v + 1];
+        for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+        list.resize(im.indices.size());
+        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+        for (std::size_t k = 0; k < im.indices.size(); ++k) list[fill[im.indices[k]]++] = uint32_t(k / 3);
+    }
+};
+
+void summarise(MethodCoverage& m, const RayScene::Impl& im, const VertexTriangles& vt, const TriangleGeometry& geo,
+               double totalArea,
+               const Centerline& line, const CenterlineLocator& locator, double minRegionMm2)
+{
+    const std::size_t nf = geo.areaMm2.size();
+    m.seenAreaMm2 = 0;
+    for (std::size_t f = 0; f < nf; ++f)
+        if (m.seen[f]) m.seenAreaMm2 += geo.areaMm2[f];
+    m.fraction = totalArea > 0 ? m.seenAreaMm2 / totalArea : 0.0;
+
+    // Edge-connected components of unseen triangles (iterative flood fill).
+    std::vector<uint8_t> visited(nf, 0);
+    std::vector<int> stack;
+    m.missed.clear();
+    m.missedInListedRegionsMm2 = 0;
+    for (std::size_t f0 = 0; f0 < nf; ++f0) {
+        if (m.seen[f0] || visited[f0]) continue;
+        MissedRegion r;
+        Vec3d weighted{0, 0, 0};
+        visited[f0] = 1;
+        stack.assign(1, int(f0));
+        while (!stack.empty()) {
+            const int f = stack.back();
+            stack.pop_back();
+            r.areaMm2 += geo.areaMm2[std::size_t(f)];
+            weighted += geo.centroidMm[std::size_t(f)] * geo.areaMm2[std::size_t(f)];
+            ++r.triangles;
+            // Edge neighbours: triangles sharing two vertices with f.
+            const uint32_t* t = &im.indices[3 * std::size_t(f)];
+            for (int e = 0; e < 3; ++e) {
+                const uint32_t a = t[e], b = t[(e + 1) % 3];
+                for (uint32_t k = vt.start[a]; k < vt.start[a + 1]; ++k) {
+                    const uint32_t g = vt.list[k];
+                    if (g == uint32_t(f) || m.seen[g] || visited[g]) continue;
+                    const uint32_t* u = &im.indices[3 * std::size_t(g)];
+                    if (u[0] == b || u[1] == b || u[2] == b) {
+                        visited[g] = 1;
+                        stack.push_back(int(g));
+                    }
+                }
+            }
+        }
+        if (r.areaMm2 < minRegionMm2 || !(r.areaMm2 > 0)) continue;
+        r.centroidMm = weighted / r.areaMm2;
+        r.nearestCenterlineIndex = locator.nearest(r.centroidMm);
+        r.arcMm = double(r.nearestCenterlineIndex) * line.stepMm;
+        r.distanceToCenterlineMm = distance(r.centroidMm, line.points[r.nearestCenterlineIndex].positionMm);
+        m.missedInListedRegionsMm2 += r.areaMm2;
+        m.missed.push_back(r);
+    }
+    std::sort(m.missed.begin(), m.missed.end(),
+              [](const MissedRegion& a, const MissedRegion& b) { return a.areaMm2 > b.areaMm2; });
+}
+
+} // namespace
+
+TriangleGeometry triangleGeometry(const RayScene& scene)
+{
+    const RayScene::Impl& im = scene.impl();
+    TriangleGeometry g;
+    g.areaMm2.resize(im.triangles);
+    g.centroidMm.resize(im.triangles);
+    for (uint32_t f = 0; f < im.triangles; ++f) {
+        Vec3d c[3];
+        for (int k = 0; k < 3; ++k) {
+            const auto& v = im.vertices[im.indices[3 * std::size_t(f) + std::size_t(k)]];
+            c[k] = {v.x, v.y, v.z};
+        }
+        g.areaMm2[f] = 0.5 * length(cross(c[1] - c[0], c[2] - c[0]));
+        g.centroidMm[f] = (c[0] + c[1] + c[2]) / 3.0;
+    }
+    return g;
+}
+
+CenterlineLocator::CenterlineLocator(const Centerline& centerline, double cellMm)
+    : mLine(centerline), mCell(cellMm)
+{
+    if (centerline.points.empty()) throw InputError("CenterlineLocator: the centerline is empty");
+    if (!(cellMm > 0)) throw ParameterError("CenterlineLocator: cellMm must be > 0");
+    constexpr double INF = std::numeric_limits<double>::infinity();
+    Vec3d lo{INF, INF, INF}, hi{-INF, -INF, -INF};
+    for (const auto& p : centerline.points)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], p.positionMm[a]);
+            hi[a] = std::max(hi[a], p.positionMm[a]);
+        }
+    mOrigin = lo;
+    for (int a = 0; a < 3; ++a) {
+        mDims[a] = int64_t(std::floor((hi[a] - lo[a]) / mCell)) + 1;
+        mMaxRing = std::max(mMaxRing, mDims[a]);
+    }
+    for (std::size_t i = 0; i < centerline.points.size(); ++i) {
+        const Vec3d& p = centerline.points[i].positionMm;
+        const int64_t c[3] = {int64_t((p.x - lo.x) / mCell), int64_t((p.y - lo.y) / mCell),
+                              int64_t((p.z - lo.z) / mCell)};
+        mCells[key(c[0], c[1], c[2])].push_back(i);
+    }
+}
+
+int64_t CenterlineLocator::key(int64_t i, int64_t j, int64_t k) const { return i + mDims[0] * (j + mDims[1] * k); }
+
+std::size_t CenterlineLocator::nearest(const Vec3d& q) const
+{
+    // Rings of cells around the query's cell, nearest first: after ring r every point not yet
+    // seen lies in a cell at least r cells away, hence at least r * cell from the query.
+    int64_t qc[3];
+    for (int a = 0; a < 3; ++a) qc[a] = int64_t(std::floor((q[a] - mOrigin[a]) / mCell));
+    // A query far outside the grid starts at the first ring that reaches the grid.
+    int64_t start = 0;
+    for (int a = 0; a < 3; ++a)
+        start = std::max(start, std::max(-qc[a], qc[a] - (mDims[a] - 1)));
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t bestIndex = 0;
+    const int64_t lastRing = start + mMaxRing;
+    for (int64_t r = start; r <= lastRing; ++r) {
+        const int64_t i0 = std::max<int64_t>(0, qc[0] - r), i1 = std::min(mDims[0] - 1, qc[0] + r);
+        const int64_t j0 = std::max<int64_t>(0, qc[1] - r), j1 = std::min(mDims[1] - 1, qc[1] + r);
+        const int64_t k0 = std::max<int64_t>(0, qc[2] - r), k1 = std::min(mDims[2] - 1, qc[2] + r);
+        for (int64_t k = k0; k <= k1; ++k)
+            for (int64_t j = j0; j <= j1; ++j)
+                for (int64_t i = i0; i <= i1; ++i) {
+                    const int64_t ring =
+                        std::max({std::abs(i - qc[0]), std::abs(j - qc[1]), std::abs(k - qc[2])});
+                    if (ring != r) continue;
+                    const auto it = mCells.find(key(i, j, k));
+                    if (it == mCells.end()) continue;
+                    for (const std::size_t idx : it->second) {
+                        const double d = distance(q, mLine.points[idx].positionMm);
+                        if (d < best || (d == best && idx < bestIndex)) {
+                            best = d;
+                            bestIndex = idx;
+                        }
+                    }
+                }
+        if (best <= double(r) * mCell) break;
+    }
+    return bestIndex;
+}
+
+CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerline, const CoverageParams& params,
+                               Progress* progress)
+{
+    validate(params);
+    if (centerline.points.empty()) throw InputError("computeCoverage: the centerline is empty");
+    const TriangleGeometry geo = triangleGeometry(scene);
+    const std::size_t nf = geo.areaMm2.size();
+
+    CoverageResult result;
+    for (const double a : geo.areaMm2) result.totalAreaMm2 += a;
+    for (MethodCoverage* m : {&result.flyover, &result.flythroughForward, &result.flythroughBackward})
+        m->seen.assign(nf, 0);
+
+    // Views every stepMm of arc length (at least every point's worth), always including the last.
+    const double clStep = centerline.stepMm > 0 ? centerline.stepMm : 1.0;
+    const std::size_t stride = std::max<std::size_t>(1, std::size_t(std::llround(params.stepMm / clStep)));
+    std::vector<std::size_t> positions;
+    for (std::size_t i = 0; i < centerline.points.size(); i += stride) positions.push_back(i);
+    if (positions.back() != centerline.points.size() - 1) positions.push_back(centerline.points.size() - 1);
+    result.positions = positions.size();
+
+    RenderOptions ro;
+    ro.widthPx = ro.heightPx = params.viewPx;
+    HitImage hits;
+    const RayScene::Impl& im = scene.impl();
+    const VertexTriangles vt(im);
+    std::vector<uint32_t> stamp(nf, 0);  // BFS visit marks, one stamp value per ray
+    uint32_t currentStamp = 0;
+    std::vector<uint32_t> queue;
+    auto vertexOf = [&](uint32_t f, int k) {
+        const auto& v = im.vertices[im.indices[3 * std::size_t(f) + std::size_t(k)]];
+        return Vec3d{v.x, v.y, v.z};
+    };
+    auto mark = [&](const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
+        ro.ost = ost;
+        traceHits(scene, camera, ro, hits);
+        result.rays += uint64_t(params.viewPx) * uint64_t(params.viewPx);
+        // Lateral distance between neighbouring rays at depth 1 (dot(dir, forward) == 1).
+        const double spacingAtUnitDepth = 2.0 * std::tan(0.5 * camera.fovDeg * 3.14159265358979323846 / 180.0) /
+                                          double(params.viewPx);
+        for (int y = 0; y < hits.height; ++y)
+            for (int x = 0; x < hits.width; ++x) {
+                const std::size_t pix = std::size_t(y) * std::size_t(hits.width) + std::size_t(x);
+                const uint32_t id = hits.primId[pix];
+                if (id >= nf) continue;
+                seen[id] = 1;
+                if (!params.footprint) continue;
+                // The ray's footprint: the surface within half the ray spacing of the hit,
+                // stretched by 1/cos of the incidence (capped at 4x), walked over edge
+                // neighbours that face the camera.
+                const Vec3d dir = pixelDirection(camera, hits.width, hits.height, x + 0.5, y + 0.5);
+                const Vec3d hit = camera.position + dir * double(hits.t[pix]);
+                const Vec3d ng = normalize(cross(vertexOf(id, 1) - vertexOf(id, 0), vertexOf(id, 2) - vertexOf(id, 0)));
+                const double cosine = std::fabs(dot(normalize(dir), ng));
+                const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
+                const double r2 = radius * radius;
+                ++currentStamp;
+                stamp[id] = currentStamp;
+                queue.assign(1, id);
+                for (std::size_t q = 0; q < queue.size(); ++q) {
+                    const uint32_t* t = &im.indices[3 * std::size_t(queue[q])];
+                    for (int e = 0; e < 3; ++e) {
+                        const uint32_t a = t[e], b = t[(e + 1) % 3];
+                        for (uint32_t k = vt.start[a]; k < vt.start[a + 1]; ++k) {
+                            const uint32_t g = vt.list[k];
+                            if (stamp[g] == currentStamp) continue;
+                            const uint32_t* u = &im.indices[3 * std::size_t(g)];
+                            if (u[0] != b && u[1] != b && u[2] != b) continue;
+                            stamp[g] = currentStamp;
+                            const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
+                            const Vec3d n = cross(c1 - c0, c2 - c0);
+                            const bool facing = ost ? dot(c0 - camera.position, n) < 0.0 : true;
+                            const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
+                            const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
+                            if (!facing || !near) continue;
+                            seen[g] = 1;
+                            queue.push_back(g);
+                        }
+                    }
+                }
+            }
+    };
+    for (std::size_t k = 0; k < positions.size(); ++k) {
+        const CenterlinePoint& p = centerline.points[positions[k]];
+        for (const Camera& c : flyoverCameras(p, params.flyover)) mark(c, params.ost, result.flyover.seen);
+        // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
+        if (params.flythrough) {
+            mark(flythroughCamera(p, true, params.flythroughFovDeg), params.ost, result.flythroughForward.seen);
+            mark(flythroughCamera(p, false, params.flythroughFovDeg), params.ost, result.flythroughBackward.seen);
+        }
+        if (k % 16 == 0) reportProgress(progress, 0.95 * double(k + 1) / double(positions.size()), "coverage rays");
+    }
+    result.flythroughTwoWay.seen.resize(nf);
+    for (std::size_t f = 0; f < nf; ++f)
+        result.flythroughTwoWay.seen[f] = uint8_t(result.flythroughForward.seen[f] | result.flythroughBackward.seen[f]);
+
+    const CenterlineLocator locator(centerline);
+    for (MethodCoverage* m :
+         {&result.flyover, &result.flythroughForward, &result.flythroughBackward, &result.flythroughTwoWay})
+        summarise(*m, scene.impl(), vt, geo, result.totalAreaMm2, centerline, locator, params.minRegionMm2);
+    reportProgress(progress, 1.0, "coverage");
+    return result;
+}
+
+} // namespace flyover

@@ -1,0 +1,102 @@
+/// @file coverage.h
+/// @brief How much of the lumen surface a navigation method shows. Primary rays of every view
+///        along the centerline mark the triangles they hit; coverage is the area of the
+///        triangles hit at least once over the total area, for the fly-over (both cameras) and
+///        the fly-through (forward, backward, and the two together). Edge-connected triangles
+///        never hit form the missed regions, reported with area, centroid and the nearest
+///        centerline point. No file I/O.
+///
+/// Sampling: a triangle smaller than a ray's footprint on the surface can be missed between
+/// rays although it is in view, which makes counting only the triangles hit pessimistic, and
+/// it converges slowly with the resolution (bench/render_bench --mode coverage). A pixel
+/// integrates over its footprint, so each ray also marks the triangles within its footprint:
+/// those within half the ray spacing at the hit's depth of the hit point (stretched by 1/cos of
+/// the incidence, at most 4x), reached from the hit triangle over shared edges and facing the
+/// camera. The walk over the mesh, not through space, keeps a fold's hidden side unmarked.
+#pragma once
+
+#include "render/camera.h"
+#include "render/ray_scene.h"
+#include "volume/centerline_types.h"
+#include "volume/progress.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+namespace flyover {
+
+struct CoverageParams {
+    int viewPx = 192;               ///< coverage rays per view: viewPx x viewPx (pixels, 8..4096)
+    double stepMm = 1.0;            ///< distance between views along the centerline (mm, > 0)
+    FlyoverParams flyover;          ///< the fly-over cameras (fov, roll, clip offset) as rendered
+    bool ost = true;                ///< one-sided transparency for the fly-over rays
+    double flythroughFovDeg = 90.0; ///< field of view of the fly-through cameras (degrees)
+    bool flythrough = true;         ///< also the fly-through (false: its results stay empty)
+    /// Count, with each ray's triangle, the triangles within its footprint (see the file
+    /// comment); false: only the triangle each ray hits.
+    bool footprint = true;
+    double minRegionMm2 = 10.0;     ///< missed regions smaller than this are not listed (mm^2)
+};
+
+/// A connected set of triangles that no ray of a method hit.
+struct MissedRegion {
+    double areaMm2 = 0;
+    Vec3d centroidMm;                   ///< area-weighted mean of the triangle centroids
+    std::size_t triangles = 0;
+    std::size_t nearestCenterlineIndex = 0;
+    double arcMm = 0;                   ///< arc length of that centerline point (index * step)
+    double distanceToCenterlineMm = 0;  ///< from the centroid to that point
+};
+
+struct MethodCoverage {
+    std::vector<uint8_t> seen;  ///< per triangle: 1 when hit by at least one ray
+    double seenAreaMm2 = 0;
+    double fraction = 0;        ///< seenAreaMm2 / total area
+    std::vector<MissedRegion> missed;  ///< regions >= minRegionMm2, largest first
+    double missedInListedRegionsMm2 = 0;
+};
+
+struct CoverageResult {
+    double totalAreaMm2 = 0;
+    std::size_t positions = 0;  ///< centerline points with views
+    uint64_t rays = 0;          ///< all rays traced
+    MethodCoverage flyover;            ///< both fly-over cameras
+    MethodCoverage flythroughForward;  ///< one-way fly-through, rectum -> cecum
+    MethodCoverage flythroughBackward; ///< one-way fly-through, cecum -> rectum
+    MethodCoverage flythroughTwoWay;   ///< union of both directions
+};
+
+/// Per-triangle results are in the scene's triangle order (the mesh's face order).
+/// @throw ParameterError for parameters out of range; InputError for an empty centerline
+CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerline, const CoverageParams& params,
+                               Progress* progress = nullptr);
+
+/// Nearest centerline point of any world position, by a uniform grid over the points.
+/// @note Keeps a reference to the centerline: it must outlive the locator.
+class CenterlineLocator {
+public:
+    /// @throw InputError for an empty centerline
+    explicit CenterlineLocator(const Centerline& centerline, double cellMm = 16.0);
+    /// @return the index of the centerline point nearest to `pointMm`
+    std::size_t nearest(const Vec3d& pointMm) const;
+
+private:
+    int64_t key(int64_t i, int64_t j, int64_t k) const;
+    const Centerline& mLine;
+    double mCell;
+    Vec3d mOrigin;
+    int64_t mDims[3];
+    int64_t mMaxRing = 0;
+    std::unordered_map<int64_t, std::vector<std::size_t>> mCells;
+};
+
+/// Area (mm^2) and centroid of each triangle of a scene, in triangle order.
+struct TriangleGeometry {
+    std::vector<double> areaMm2;
+    std::vector<Vec3d> centroidMm;
+};
+TriangleGeometry triangleGeometry(const RayScene& scene);
+
+} // namespace flyover
