@@ -60,13 +60,22 @@ int main(int argc, char** argv)
         ->capture_default_str();
     phantomCmd->add_option("--seed", seed, "random seed (polyps, pockets, noise)")->capture_default_str();
     phantomCmd->add_option("--noise-hu", noiseHu, "Gaussian noise standard deviation (HU)")->capture_default_str();
+    bool phantomFluid = false, phantomCollapse = false;
+    phantomCmd->add_flag("--fluid", phantomFluid, "tagged fluid (+300..+600 HU) below flat air-fluid levels "
+                                                  "(supine: posterior); truth lumen = air + fluid");
+    phantomCmd->add_flag("--collapse", phantomCollapse, "one or two collapsed 20-40 mm stretches of the sigmoid "
+                                                        "(2 or 3 lumen pieces); the truth lists them");
 
     // flyover run
     auto* runCmd = app.add_subcommand("run", "run ingest -> segment -> centerline + mesh -> render into a study folder");
     RunOptions run;
     std::vector<std::string> assignments;
     std::string configPath;
-    runCmd->add_option("ct", run.ctPath, "CT scan: NIfTI, NRRD, MetaImage file or DICOM series folder")->required();
+    runCmd->add_option("ct", run.ctPath, "CT scan: NIfTI, NRRD, MetaImage file or DICOM series folder "
+                                         "(optional with --mask)");
+    auto* maskOpt = runCmd->add_option("--mask", run.maskPath, "lumen mask or label map (NIfTI, NRRD, MetaImage): the "
+                                                               "lumen is taken from it instead of the CT's air; "
+                                                               "alone, it is the whole input");
     runCmd->add_option("--study", run.studyDir, "study folder for artifacts and manifest.json")->required();
     runCmd->add_option("--config", configPath, "JSON file {\"stage\": {\"param\": value}} (see 'flyover params')");
     runCmd->add_option("--set", assignments, "stage.param=value (repeatable; see 'flyover params')");
@@ -75,6 +84,38 @@ int main(int argc, char** argv)
     runCmd->add_flag("--wait", run.waitForLock, "wait for another run on the same study instead of refusing");
     runCmd->add_option("--cache-max-gb", run.cacheMaxGb, "cap on the study's cache; least recently used results are evicted")
         ->capture_default_str();
+    // Ingest shortcuts (same as --set ingest.*; they win over --config and --set).
+    std::string seriesUid;
+    double voxelMm = -1;
+    bool allowGaps = false;
+    auto* seriesOpt = runCmd->add_option("--series", seriesUid, "DICOM folder: read the series with this Series Instance UID "
+                                                                "(default: the one with the most slices)");
+    auto* voxelOpt = runCmd->add_option("--voxel-mm", voxelMm, "isotropic voxel size of the HU grid in mm "
+                                                               "(default: the smallest input spacing)")
+                         ->check(CLI::PositiveNumber);
+    runCmd->add_flag("--allow-gaps", allowGaps, "DICOM: accept missing slices or uneven slice steps (with a warning), "
+                                                "interpolating at the true slice positions");
+    // Segment shortcuts (same as --set segment.*; they win over --config and --set).
+    std::string seedMm, cleanse;
+    int maskLabel = 0;
+    auto* seedOpt = runCmd->add_option("--seed-mm", seedMm, "x,y,z (LPS mm): the colon is the air component "
+                                                            "containing this point (default: the largest)");
+    auto* cleanseOpt = runCmd->add_option("--cleanse", cleanse, "on|off: join tagged fluid under air-fluid levels "
+                                                                "to the lumen (default on)")
+                           ->check(CLI::IsMember({"on", "off"}));
+    auto* labelOpt = runCmd->add_option("--label", maskLabel, "with --mask: the label that is lumen "
+                                                              "(default 0: every non-zero voxel)")
+                         ->check(CLI::NonNegativeNumber);
+    labelOpt->needs(maskOpt);
+
+    // Centerline shortcuts (same as --set centerline.*; they win over --config and --set).
+    std::string rectumMm;
+    double stepMm = 1.0;
+    auto* rectumOpt = runCmd->add_option("--rectum-mm", rectumMm, "x,y,z (LPS mm): the path starts at the lumen end "
+                                                                  "nearest this point (default: the lowest end)");
+    auto* stepOpt = runCmd->add_option("--step-mm", stepMm, "arc-length step of the centerline (mm, default 1)")
+                        ->check(CLI::PositiveNumber);
+
     // flyover status / clean
     auto* statusCmd = app.add_subcommand("status", "list each stage of a study as fresh, stale or missing, and why");
     StatusOptions status;
@@ -93,6 +134,11 @@ int main(int argc, char** argv)
     std::string exportStudy, exportMeshPath;
     exportCmd->add_option("--study", exportStudy, "study folder")->required();
     exportCmd->add_option("--mesh", exportMeshPath, "lumen surface as .ply, .obj, .stl or .off (inward normals)");
+    std::string exportLumenPath, exportCenterlinePath;
+    exportCmd->add_option("--centerline", exportCenterlinePath, "centerline as a 3D Slicer markups curve (.mrk.json) or "
+                                                                "VTK polyline (.vtk), LPS mm, bridged points marked");
+    exportCmd->add_option("--lumen", exportLumenPath, "lumen mask (uint8, 1 inside) on the original scan's grid "
+                                                      "and geometry: .nii.gz, .nii, .nrrd or .mha");
 
     // flyover params
     auto* paramsCmd = app.add_subcommand("params", "list every stage parameter with its default");
@@ -133,6 +179,8 @@ int main(int argc, char** argv)
             pp.size = parsePhantomSize(sizeName);
             pp.seed = seed;
             pp.noiseHu = noiseHu;
+            pp.fluid = phantomFluid;
+            pp.collapse = phantomCollapse;
             if (!(noiseHu >= 0)) throw ParameterError("--noise-hu: must be >= 0");
             const auto t0 = std::chrono::steady_clock::now();
             const Phantom ph = makePhantom(pp);
@@ -145,6 +193,16 @@ int main(int argc, char** argv)
         if (*runCmd) {
             if (!configPath.empty()) applyParamsJson(run.params, readConfigFile(configPath), configPath);
             for (const auto& a : assignments) applyParamAssignment(run.params, a);
+            if (*seriesOpt) run.params.ingest.dicomSeries = seriesUid;
+            if (*voxelOpt) run.params.ingest.voxelMm = voxelMm;
+            if (allowGaps) run.params.ingest.allowGaps = true;
+            if (*seedOpt) applyParamsJson(run.params, {{"segment", {{"seed_mm", seedMm}}}}, "--seed-mm");
+            if (*cleanseOpt) run.params.segment.cleanse = cleanse == "on";
+            if (*labelOpt) run.params.segment.maskLabel = maskLabel;
+            if (*rectumOpt) applyParamsJson(run.params, {{"centerline", {{"rectum_mm", rectumMm}}}}, "--rectum-mm");
+            if (*stepOpt) run.params.centerline.stepMm = stepMm;
+            if (run.ctPath.empty() && run.maskPath.empty())
+                throw ParameterError("run: give a CT scan, --mask FILE, or both");
             run.log = &runLog;
             const auto t0 = std::chrono::steady_clock::now();
             const auto manifest = runPipeline(run);
@@ -171,7 +229,17 @@ int main(int argc, char** argv)
                 log("surface written to " + exportMeshPath);
                 any = true;
             }
-            if (!any) throw ParameterError("export: name at least one output (--mesh)");
+            if (!exportLumenPath.empty()) {
+                exportLumen(exportStudy, exportLumenPath);
+                log("lumen mask written to " + exportLumenPath);
+                any = true;
+            }
+            if (!exportCenterlinePath.empty()) {
+                exportCenterline(exportStudy, exportCenterlinePath);
+                log("centerline written to " + exportCenterlinePath);
+                any = true;
+            }
+            if (!any) throw ParameterError("export: name at least one output (--mesh, --lumen, --centerline)");
             return 0;
         }
         if (*cleanCmd) {

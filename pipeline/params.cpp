@@ -19,15 +19,23 @@ template <typename V> void visit(IngestParams& p, V&& v)
     v("voxel_mm", p.voxelMm, "isotropic voxel size in mm (0 = smallest input spacing)");
     v("outside_air_hu", p.outsideAirHu, "air outside the body is below this (HU)");
     v("background_hu", p.backgroundHu, "value of the inactive background (HU)");
+    v("dicom_series", p.dicomSeries, "DICOM folder: Series Instance UID to read (\"\" = the series with the most slices)");
+    v("allow_gaps", p.allowGaps, "DICOM: accept missing slices or uneven slice steps (warned; sampled at true positions)");
 }
 template <typename V> void visit(SegmentParams& p, V&& v)
 {
     v("air_threshold_hu", p.airThresholdHu, "air candidates are below this (HU)");
-    v("surface_iso_hu", p.surfaceIsoHu, "lumen surface at this partial-volume midpoint (HU)");
+    v("surface_iso_hu", p.surfaceIsoHu, "lumen surface against air: partial-volume midpoint of air and wall (HU)");
     v("min_component_ml", p.minComponentMl, "drop air components smaller than this (mL)");
     v("lung_min_mean_hu", p.lungMinMeanHu, "a component with mean HU above this is lung (HU)");
-    v("keep_fraction", p.keepFraction, "keep components >= this fraction of the largest");
+    v("keep_fraction", p.keepFraction, "keep components >= this fraction of the largest (or of the seeded one)");
     v("band_voxels", p.bandVoxels, "exterior narrow band of the level set (voxels)");
+    v("seed_mm", p.seedMm, "colon component: the one containing [x,y,z] LPS mm (or within 10 mm), or null = the largest");
+    v("cleanse", p.cleanse, "join tagged fluid under air-fluid levels to the lumen (electronic cleansing)");
+    v("fluid_threshold_hu", p.fluidThresholdHu, "tagged fluid is above this (HU)");
+    v("wall_hu", p.wallHu, "colon wall (HU): the surface in fluid lies midway between it and the fluid");
+    v("mask_label", p.maskLabel, "--mask: the label that is lumen (0 = every non-zero voxel)");
+    v("mask_smoothing_voxels", p.maskSmoothingVoxels, "--mask: constrained smoothing of the mask's staircase (mask voxels, 0 = none)");
 }
 template <typename V> void visit(CenterlineParams& p, V&& v)
 {
@@ -40,6 +48,15 @@ template <typename V> void visit(MeshParams& p, V&& v)
 {
     v("iso_value_mm", p.isoValueMm, "iso-value of the level set to mesh (mm)");
     v("adaptivity", p.adaptivity, "volumeToMesh adaptivity 0..1 (0 = uniform)");
+    v("smooth_method", p.smoothMethod, "taubin (non-shrinking lambda|mu mesh filter) or none");
+    v("smooth_iterations", p.smoothIterations, "Taubin lambda|mu iterations (0 = no smoothing)");
+    v("smooth_pass_band", p.smoothPassBand, "Taubin pass band k_PB in (0, 1); lower = smoother");
+    v("decimate_target_faces", p.decimateTargetFaces, "decimate to this many triangles (0 = no budget)");
+    v("decimate_fraction", p.decimateFraction, "decimate to this fraction of the triangles (1 = off)");
+    v("decimate_max_error_voxels", p.decimateMaxErrorVoxels,
+      "decimation bound: distance of any extracted vertex to the result (voxels; 0 = none)");
+    v("decimate_max_normal_deviation_deg", p.decimateMaxNormalDeviationDeg,
+      "decimation normal-flip guard: largest normal change per collapse (degrees)");
 }
 template <typename V> void visit(RenderParams& p, V&& v)
 {
@@ -53,7 +70,19 @@ template <typename V> void visit(RenderParams& p, V&& v)
     v("frame_step_mm", p.frameStepMm, "distance between saved frame pairs (mm)");
     v("supersample", p.supersample, "n x n rays per pixel");
     v("ost", p.ost, "one-sided transparency (false: plain rendering)");
+    v("smooth_shading", p.smoothShading, "shade with interpolated vertex normals (false: flat faces)");
+    v("depth_cue", p.depthCue, "darken with depth beyond the near plane");
+    v("depth_cue_mm", p.depthCueMm, "depth at which the depth cue halves the brightness (mm)");
     v("overview_px", p.overviewPx, "overview image size (pixels)");
+    v("overview_marker_mm", p.overviewMarkerMm, "overview marker at this arc length from the rectum (mm), < 0: none");
+    v("flythrough_frames", p.flythroughFrames, "also save fly-through pairs (forward | backward)");
+    v("flythrough_fov_deg", p.flythroughFovDeg, "field of view of the fly-through cameras (degrees)");
+    v("video", p.video, "MP4 of the whole fly-over in frames/ (needs the ffmpeg program)");
+    v("video_step_mm", p.videoStepMm, "distance between video frames along the centerline (mm)");
+    v("video_fps", p.videoFps, "video frame rate (frames per second)");
+    v("coverage", p.coverage, "coverage of fly-over and fly-through, missed regions (coverage/)");
+    v("coverage_px", p.coveragePx, "coverage rays per view: coverage_px x coverage_px");
+    v("coverage_step_mm", p.coverageStepMm, "distance between coverage views along the centerline (mm)");
 }
 
 template <typename F> void visitStage(PipelineParams& p, const std::string& stage, F&& f)
@@ -202,7 +231,7 @@ void validateParams(const PipelineParams& p)
     auto require = [](bool ok, const std::string& name, const std::string& what) {
         if (!ok) throw ParameterError(name + ": " + what);
     };
-    require(p.ingest.voxelMm >= 0, "ingest.voxel_mm", "must be >= 0");
+    require(p.ingest.voxelMm >= 0, "ingest.voxel_mm", "must be >= 0 (0 = smallest input spacing)");
     require(p.segment.airThresholdHu < p.segment.surfaceIsoHu, "segment.air_threshold_hu",
             "must be below segment.surface_iso_hu");
     require(p.segment.minComponentMl >= 0, "segment.min_component_ml", "must be >= 0");
@@ -210,10 +239,25 @@ void validateParams(const PipelineParams& p)
             "must be in [0, 1]");
     require(p.segment.bandVoxels >= 1 && p.segment.bandVoxels <= 10, "segment.band_voxels",
             "must be in [1, 10]");
+    require(p.segment.fluidThresholdHu > p.segment.wallHu, "segment.fluid_threshold_hu",
+            "must be above segment.wall_hu");
+    require(p.segment.maskLabel >= 0, "segment.mask_label", "must be >= 0 (0 = every non-zero voxel)");
+    require(p.segment.maskSmoothingVoxels >= 0 && p.segment.maskSmoothingVoxels <= 8,
+            "segment.mask_smoothing_voxels", "must be in [0, 8]");
     require(p.centerline.stepMm > 0, "centerline.step_mm", "must be > 0");
     require(p.centerline.wallPenalty >= 0, "centerline.wall_penalty", "must be >= 0");
     require(p.centerline.smoothingMm >= 0, "centerline.smoothing_mm", "must be >= 0");
     require(p.mesh.adaptivity >= 0 && p.mesh.adaptivity <= 1, "mesh.adaptivity", "must be in [0, 1]");
+    require(p.mesh.smoothMethod == "taubin" || p.mesh.smoothMethod == "none", "mesh.smooth_method",
+            "must be taubin or none");
+    require(p.mesh.smoothIterations >= 0, "mesh.smooth_iterations", "must be >= 0");
+    require(p.mesh.smoothPassBand > 0 && p.mesh.smoothPassBand < 1, "mesh.smooth_pass_band", "must be in (0, 1)");
+    require(p.mesh.decimateTargetFaces >= 0, "mesh.decimate_target_faces", "must be >= 0");
+    require(p.mesh.decimateFraction > 0 && p.mesh.decimateFraction <= 1, "mesh.decimate_fraction",
+            "must be in (0, 1]");
+    require(p.mesh.decimateMaxErrorVoxels >= 0, "mesh.decimate_max_error_voxels", "must be >= 0");
+    require(p.mesh.decimateMaxNormalDeviationDeg > 0 && p.mesh.decimateMaxNormalDeviationDeg <= 180,
+            "mesh.decimate_max_normal_deviation_deg", "must be in (0, 180]");
     require(p.render.widthPx >= 8 && p.render.widthPx <= 8192, "render.width_px", "must be in [8, 8192]");
     require(p.render.heightPx >= 8 && p.render.heightPx <= 8192, "render.height_px", "must be in [8, 8192]");
     require(p.render.fovDeg >= 10 && p.render.fovDeg <= 170, "render.fov_deg", "must be in [10, 170]");
@@ -224,6 +268,15 @@ void validateParams(const PipelineParams& p)
     require(p.render.supersample >= 1 && p.render.supersample <= 8, "render.supersample", "must be in [1, 8]");
     require(p.render.overviewPx >= 16 && p.render.overviewPx <= 8192, "render.overview_px",
             "must be in [16, 8192]");
+    require(p.render.clipOffsetMm >= 0 || p.render.clipOffsetMm == -1.0, "render.clip_offset_mm",
+            "must be >= 0, or -1 to use render.clip_offset_fraction");
+    require(p.render.depthCueMm > 0, "render.depth_cue_mm", "must be > 0");
+    require(p.render.flythroughFovDeg >= 10 && p.render.flythroughFovDeg <= 170, "render.flythrough_fov_deg",
+            "must be in [10, 170]");
+    require(p.render.videoStepMm > 0, "render.video_step_mm", "must be > 0");
+    require(p.render.videoFps >= 1 && p.render.videoFps <= 120, "render.video_fps", "must be in [1, 120]");
+    require(p.render.coveragePx >= 8 && p.render.coveragePx <= 4096, "render.coverage_px", "must be in [8, 4096]");
+    require(p.render.coverageStepMm > 0, "render.coverage_step_mm", "must be > 0");
 }
 
 std::string describeParams()

@@ -51,6 +51,11 @@ inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v
 // Stage bodies: each writes its artifacts (atomically) and returns its report.
 nlohmann::json runIngest(StudyRun& run, Progress* progress);
 nlohmann::json runSegment(StudyRun& run, Progress* progress);
+/// The segment stage when the study starts from an external mask (`flyover run --mask FILE
+/// [--label N]`, with or without a CT): the lumen is the mask's label, matched to the CT's grid
+/// when there is a CT (ct.vdb from ingest), else on the mask's own geometry. The report records
+/// the mask's geometry, which `flyover export --lumen` uses when the study has no CT.
+nlohmann::json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* progress);
 nlohmann::json runCenterline(StudyRun& run, Progress* progress);
 nlohmann::json runMesh(StudyRun& run, Progress* progress);
 nlohmann::json runRender(StudyRun& run, Progress* progress);

@@ -39,14 +39,21 @@ struct StageSpec {
     json (*body)(StudyRun&, Progress*);
 };
 
+/// The segment stage: from the CT's air, or from the external mask when the run has one.
+json runSegmentStage(StudyRun& run, Progress* progress)
+{
+    return run.opt.maskPath.empty() ? runSegment(run, progress)
+                                    : runSegmentFromMask(run, run.opt.maskPath, progress);
+}
+
 const std::vector<StageSpec>& stageSpecs()
 {
     static const std::vector<StageSpec> specs{
         {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest},
-        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegment},
+        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage},
         {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline},
         {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh},
-        {"render", {"centerline", "mesh"}, {"surface.ply", "centerline.json"}, {"overview.png", "frames"}, runRender},
+        {"render", {"centerline", "mesh"}, {"surface.ply", "centerline.json"}, {"overview.png", "frames", "flythrough", "overviews", "coverage"}, runRender},
     };
     return specs;
 }
@@ -63,6 +70,24 @@ const StageSpec& specOf(const std::string& name)
 /// Digest of the scan: its content (a DICOM folder: the names and contents of its files),
 /// never its modification time.
 std::string inputDigest(const std::string& ctPath) { return artifactDigest(ctPath); }
+
+/// The artifacts a stage reads in a study with or without a CT and a mask: with a mask the
+/// segment stage also reads the mask ("mask", its content digest), and without a CT only it.
+std::vector<std::string> stageInputs(const StageSpec& spec, bool hasCt, bool hasMask)
+{
+    if (spec.name != "segment" || !hasMask) return spec.inputs;
+    if (!hasCt) return {"mask"};
+    std::vector<std::string> in = spec.inputs;
+    in.push_back("mask");
+    return in;
+}
+
+/// A path recorded in a manifest ("" when absent or null).
+std::string recordedPath(const json& manifest, const char* key)
+{
+    return manifest.is_object() && manifest.contains(key) && manifest[key].is_string() ? manifest[key].get<std::string>()
+                                                                                         : std::string();
+}
 
 json readManifest(const fs::path& dir)
 {
@@ -122,8 +147,17 @@ nlohmann::json runPipeline(const RunOptions& options)
         for (const auto& s : stagesAffectedBy(options.forceStage)) forced.insert(s);
     if (!(options.cacheMaxGb > 0)) throw ParameterError("--cache-max-gb: must be > 0");
 
+    const bool hasCt = !options.ctPath.empty(), hasMask = !options.maskPath.empty();
+    if (!hasCt && !hasMask) throw ParameterError("run: no input: give a CT scan, --mask FILE, or both");
+    if (!hasCt) {
+        if (options.untilStage == "ingest") throw ParameterError("--until ingest: there is no CT scan to ingest");
+        wanted.erase("ingest");
+        forced.erase("ingest");
+    }
     std::error_code ec;
-    if (!fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
+    if (hasCt && !fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
+    if (hasMask && !fs::is_regular_file(options.maskPath, ec))
+        throw InputError(options.maskPath + ": --mask: no such file");
     fs::create_directories(options.studyDir, ec);
     if (ec) throw InputError(options.studyDir + ": cannot create the study folder: " + ec.message());
 
@@ -134,7 +168,9 @@ nlohmann::json runPipeline(const RunOptions& options)
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries
-    std::map<std::string, std::string> digests{{"input", inputDigest(options.ctPath)}};
+    std::map<std::string, std::string> digests;
+    if (hasCt) digests["input"] = inputDigest(options.ctPath);
+    if (hasMask) digests["mask"] = inputDigest(options.maskPath);
     std::map<std::string, json> entries;
     std::set<std::string> usedRecords;
 
@@ -143,7 +179,7 @@ nlohmann::json runPipeline(const RunOptions& options)
         std::map<std::string, std::string> inputs;
         {
             std::lock_guard<std::mutex> g(mutex);
-            for (const auto& a : spec.inputs) inputs[a] = digests.at(a);
+            for (const auto& a : stageInputs(spec, hasCt, hasMask)) inputs[a] = digests.at(a);
         }
         const json params = stageParamsToJson(options.params, spec.name);
         const int version = stageVersion(spec.name);
@@ -229,15 +265,17 @@ nlohmann::json runPipeline(const RunOptions& options)
     json stages = json::array();
     for (const auto& spec : stageSpecs()) {
         if (entries.count(spec.name)) stages.push_back(entries[spec.name]);
-        else if (!failure && !wanted.count(spec.name)) {
+        else if (!failure && !wanted.count(spec.name) && !(spec.name == "ingest" && !hasCt)) {
             json e = manifestEntry(previous, spec.name);
             if (!e.is_null()) stages.push_back(e);
         }
     }
     const json manifest{{"schema", "flyover.manifest/1"},
                         {"world_frame", WORLD_FRAME},
-                        {"input", fs::absolute(options.ctPath).string()},
-                        {"input_digest", digests["input"]},
+                        {"input", hasCt ? json(fs::absolute(options.ctPath).string()) : json(nullptr)},
+                        {"input_digest", hasCt ? json(digests["input"]) : json(nullptr)},
+                        {"mask", hasMask ? json(fs::absolute(options.maskPath).string()) : json(nullptr)},
+                        {"mask_digest", hasMask ? json(digests["mask"]) : json(nullptr)},
                         {"stages", stages}};
     writeJson(run.path("manifest.json"), manifest);
     if (failure) std::rethrow_exception(failure);
@@ -266,25 +304,33 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
                 }
             }
         }
-    const std::string ctPath = options.ctPath.empty() ? manifest.value("input", "") : options.ctPath;
+    const std::string ctPath = options.ctPath.empty() ? recordedPath(manifest, "input") : options.ctPath;
+    const std::string maskPath = options.maskPath.empty() ? recordedPath(manifest, "mask") : options.maskPath;
+    const bool hasCt = !ctPath.empty(), hasMask = !maskPath.empty();
     ArtifactStore store(options.studyDir);
 
     std::map<std::string, std::string> digests;
     std::vector<StageStatus> out;
-    if (fs::exists(ctPath)) digests["input"] = inputDigest(ctPath);
+    if (hasCt && fs::exists(ctPath)) digests["input"] = inputDigest(ctPath);
+    if (hasMask && fs::is_regular_file(maskPath)) digests["mask"] = inputDigest(maskPath);
     for (const auto& spec : stageSpecs()) {
         StageStatus st{spec.name, "", ""};
+        if (spec.name == "ingest" && !hasCt) {
+            out.push_back({spec.name, "unused", "no CT scan: the study starts from its mask"});
+            continue;
+        }
         const json last = manifestEntry(manifest, spec.name);
         std::map<std::string, std::string> inputs;
         std::string missingInput;
-        for (const auto& a : spec.inputs) {
+        for (const auto& a : stageInputs(spec, hasCt, hasMask)) {
             if (digests.count(a)) inputs[a] = digests[a];
             else if (missingInput.empty()) missingInput = a;
         }
         if (!missingInput.empty()) {
             st.state = last.is_null() ? "missing" : "stale";
-            st.reason = missingInput == "input" ? "the scan " + ctPath + " is missing"
-                                                : "its input " + missingInput + " will be recomputed";
+            st.reason = missingInput == "input"  ? "the scan " + ctPath + " is missing"
+                        : missingInput == "mask" ? "the mask " + maskPath + " is missing"
+                                                 : "its input " + missingInput + " will be recomputed";
             out.push_back(st);
             continue;
         }

@@ -32,7 +32,12 @@ struct StageError : std::runtime_error {
 };
 
 struct RunOptions {
-    std::string ctPath;           ///< the input scan (file or DICOM directory)
+    std::string ctPath;           ///< the input scan (file or DICOM directory); "" with a mask alone
+    /// An external lumen mask or label map (params.segment.mask_label picks the label): the
+    /// segment stage takes the lumen from it instead of from the CT's air. With a CT it is
+    /// matched to the CT's grid; without one (ctPath "") ingest is skipped and the lumen keeps
+    /// the mask's own geometry.
+    std::string maskPath;
     std::string studyDir;         ///< output folder (created if missing)
     PipelineParams params;
     std::string untilStage;       ///< run only this stage and what it needs ("" = all)
@@ -48,13 +53,14 @@ nlohmann::json runPipeline(const RunOptions& options);
 
 struct StageStatus {
     std::string stage;
-    std::string state;   ///< "fresh", "stale" or "missing"
+    std::string state;   ///< "fresh", "stale", "missing", or "unused" (ingest of a mask-only study)
     std::string reason;  ///< why, for stale and missing
 };
 
 struct StatusOptions {
     std::string studyDir;
     std::string ctPath;           ///< "" = the input recorded in the manifest
+    std::string maskPath;         ///< "" = the mask recorded in the manifest (if any)
     PipelineParams params;
     bool paramsGiven = false;     ///< false: compare with the parameters of the last run
 };

@@ -94,10 +94,11 @@ TEST_F(StudyTest, ParameterChangesRecomputeExactlyWhatDependsOnThem)
     const auto after = runPipeline(o);
     m = computedStages(after);
     EXPECT_TRUE(m["segment"]);
-    if (outputDigests(after)["segment"] == before.at("segment"))
+    if (outputDigests(after)["segment"] == before.at("segment")) {
         EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", true}, {"centerline", false},
                                                   {"mesh", false}, {"render", false}}))
             << "identical lumen, yet downstream recomputed: " << describe(m);
+    }
 }
 
 TEST_F(StudyTest, SwitchingAParameterBackReusesTheEarlierResult)

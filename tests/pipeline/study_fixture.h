@@ -49,6 +49,11 @@ protected:
         o.params.render.widthPx = o.params.render.heightPx = 96;
         o.params.render.frameStepMm = 150;
         o.params.render.overviewPx = 128;
+        // The costly extras of the render stage, cut down: their own tests cover them.
+        o.params.render.coveragePx = 32;
+        o.params.render.coverageStepMm = 20;
+        o.params.render.video = false;
+        o.params.render.videoStepMm = 50;
         return o;
     }
 
