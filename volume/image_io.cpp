@@ -32,6 +32,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -374,10 +375,18 @@ DataFile dataFileOf(itk::ImageIOBase& io, const std::string& path)
         const std::string name = meta->ElementDataFileName();
         f.bytes = voxels * io.GetComponentSize() * io.GetNumberOfComponents();
         f.compressed = meta->CompressedData();
-        if (lowerCase(name) == "local") f.path = path;  // offset: the header's length (unknown)
-        else if (name.find('%') == std::string::npos && lowerCase(name).rfind("list", 0) != 0 && !name.empty()) {
+        if (lowerCase(name) == "local") {
+            f.path = path;  // offset: the header's length (unknown)
+        } else if (name.find('%') == std::string::npos && lowerCase(name).rfind("list", 0) != 0 && !name.empty()) {
             f.path = fs::path(path).parent_path() / name;
             f.offset = static_cast<uint64_t>(std::max(0, meta->HeaderSize()));
+        } else {
+            // File lists and printf-style patterns: ITK 5.2's MetaIO reads past its buffers on
+            // malformed ones (found by fuzzing), and scans do not use them: refuse.
+            std::string shown;
+            for (char c : name.substr(0, 40)) shown += std::isprint(static_cast<unsigned char>(c)) ? c : '?';
+            throw InputError(path + ": ElementDataFile '" + shown + (name.size() > 40 ? "...'" : "'") +
+                             " is a file list or pattern, which is not supported (use LOCAL or one data file)");
         }
     }
     return f;

@@ -94,7 +94,8 @@ TEST_F(IngestCli, EveryBadScanGivesOneLineNamingItAndExitCode1)
                           Case{"same_nifti2.nii", "NIfTI-2 header"},
                           Case{"bad/gdcm_abort.dcm", "the image reader (ITK; GDCM for DICOM) crashed on its header"},
                           Case{"bad/gdcm_huge_length.dcm", "not a readable DICOM file"},
-                          Case{"bad/metaio_overflow.mha", "the MetaImage reader (ITK's MetaIO) crashed on its header"}}) {
+                          Case{"bad/metaio_overflow.mha", "the MetaImage reader (ITK's MetaIO) crashed on its header"},
+                          Case{"bad/data_file_pattern.mhd", "ElementDataFile 'slice%03d.raw 1 2 1' is a file list or pattern"}}) {
         const Result r = ingest(fixture(c.path));
         EXPECT_EQ(r.exitCode, 1) << c.path << "\n" << r.err;
         EXPECT_EQ(lineCount(r.err), 1) << c.path << "\n" << r.err;
