@@ -9,6 +9,7 @@
 // not of the phantom generator. Prints the median and range of the wall times of N runs, the
 // median CPU time (user + system: steadier than wall time on a shared machine), and each
 // child's resident memory after loading and at its peak.
+#include "bench/process_memory.h"
 #include "data/phantom.h"
 #include "volume/ingest.h"
 #include "volume/segment.h"
@@ -36,12 +37,8 @@ using namespace flyover;
 
 namespace {
 
-double peakRssMb()
-{
-    rusage usage{};
-    ::getrusage(RUSAGE_SELF, &usage);
-    return double(usage.ru_maxrss) / 1024.0;  // Linux: kilobytes
-}
+using bench::currentRssMb;
+using bench::peakRssMb;
 
 /// User + system CPU time of this process so far (s).
 double cpuSeconds()
@@ -50,15 +47,6 @@ double cpuSeconds()
     ::getrusage(RUSAGE_SELF, &usage);
     return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
            1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
-
-double currentRssMb()
-{
-    std::ifstream status("/proc/self/status");
-    std::string line;
-    while (std::getline(status, line))
-        if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-    return 0;
 }
 
 /// The plain pass: air candidates below -800 HU among the active voxels, then components.

@@ -13,6 +13,7 @@
 // that loads only the level set, so its peak resident memory is that of one mesh stage plus
 // the grid, not of the phantom generator. Prints the median and range of N runs: wall time
 // (and its parts), triangle count, resident memory after loading the grid and at its peak.
+#include "bench/process_memory.h"
 #include "data/phantom.h"
 #include "surface/lumen_surface.h"
 #include "volume/centerline.h"
@@ -41,21 +42,8 @@ using namespace flyover;
 
 namespace {
 
-double peakRssMb()
-{
-    rusage usage{};
-    ::getrusage(RUSAGE_SELF, &usage);
-    return double(usage.ru_maxrss) / 1024.0;  // Linux: kilobytes
-}
-
-double currentRssMb()
-{
-    std::ifstream status("/proc/self/status");
-    std::string line;
-    while (std::getline(status, line))
-        if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-    return 0;
-}
+using bench::currentRssMb;
+using bench::peakRssMb;
 
 /// One run's figures, as the child prints them on one line.
 struct Run {

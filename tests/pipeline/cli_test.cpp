@@ -1,6 +1,8 @@
 // The command line as a user meets it: help texts, and one clear line plus a non-zero exit for
 // every bad command line or missing input.
 
+#include "cli_runner.h"
+
 #include <gtest/gtest.h>
 
 #include <array>
@@ -14,36 +16,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-    int exitCode = -1;
-    std::string out;  // stdout
-    std::string err;  // stderr
-};
-
-Result runFlyover(const std::string& args)
-{
-    const fs::path errFile = fs::temp_directory_path() / ("flyover-cli-" + std::to_string(::getpid()) + ".err");
-    const std::string cmd = std::string(FLYOVER_BIN) + " " + args + " 2>" + errFile.string();
-    Result r;
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (!p) return r;
-    std::array<char, 4096> buf;
-    std::size_t n;
-    while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-    const int status = ::pclose(p);
-    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::ifstream in(errFile);
-    r.err.assign(std::istreambuf_iterator<char>(in), {});
-    fs::remove(errFile);
-    return r;
-}
-
-int lineCount(const std::string& s)
-{
-    int n = 0;
-    for (char c : s) n += c == '\n';
-    return n;
-}
+using Result = flyover::test::CliResult;
+using flyover::test::lineCount;
+using flyover::test::runFlyover;
 
 } // namespace
 

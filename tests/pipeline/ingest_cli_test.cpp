@@ -2,6 +2,8 @@
 // problem, exit code 1, and no grid in the study; the ingest options (--series, --voxel-mm,
 // --allow-gaps) reach the stage; the manifest records frame, memory and file size.
 
+#include "cli_runner.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -18,30 +20,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-    int exitCode = -1;
-    std::string err;
-};
-
-Result runFlyover(const std::string& args)
-{
-    const fs::path errFile = fs::temp_directory_path() / ("flyover-ingest-cli-" + std::to_string(::getpid()) + ".err");
-    const std::string cmd = std::string(FLYOVER_BIN) + " " + args + " >/dev/null 2>" + errFile.string();
-    Result r;
-    const int status = std::system(cmd.c_str());
-    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::ifstream in(errFile);
-    r.err.assign(std::istreambuf_iterator<char>(in), {});
-    fs::remove(errFile);
-    return r;
-}
-
-int lineCount(const std::string& s)
-{
-    int n = 0;
-    for (char c : s) n += c == '\n';
-    return n;
-}
+using Result = flyover::test::CliResult;
+using flyover::test::lineCount;
+using flyover::test::runFlyover;
 
 std::string fixture(const std::string& name) { return std::string(FLYOVER_SOURCE_DIR) + "/data/fixtures/" + name; }
 

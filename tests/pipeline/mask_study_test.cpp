@@ -3,6 +3,7 @@
 // phantom's true lumen mask, matched to the CT's grid). The mask's content is part of the
 // segment stage's key. Also: the centerline exports (.mrk.json, .vtk) and the --rectum-mm and
 // --step-mm shortcuts.
+#include "cli_runner.h"
 #include "pipeline/artifact_io.h"
 #include "pipeline/export.h"
 #include "study_fixture.h"
@@ -31,14 +32,9 @@ std::string realFixture(const std::string& name)
 
 int runCli(const std::string& args, std::string* err = nullptr)
 {
-    const fs::path errFile = fs::temp_directory_path() / ("flyover-mask-cli-" + std::to_string(::getpid()) + ".err");
-    const int status = std::system((std::string(FLYOVER_BIN) + " " + args + " >/dev/null 2>" + errFile.string()).c_str());
-    if (err) {
-        std::ifstream in(errFile);
-        err->assign(std::istreambuf_iterator<char>(in), {});
-    }
-    fs::remove(errFile);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    const CliResult r = runFlyover(args);
+    if (err) *err = r.err;
+    return r.exitCode;
 }
 
 class MaskStudy : public StudyTest {
