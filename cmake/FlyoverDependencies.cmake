@@ -31,6 +31,9 @@ target_link_libraries(flyover_xxhash INTERFACE "${XXHASH_LIBRARY}")
 add_library(flyover_itk INTERFACE)
 target_include_directories(flyover_itk SYSTEM INTERFACE ${ITK_INCLUDE_DIRS})
 target_link_libraries(flyover_itk INTERFACE ${ITK_LIBRARIES})
+# NIfTI-2: only nifticlib's header struct (libnifti2-dev), no library; see volume/image_io.cpp.
+find_path(NIFTI2_INCLUDE_DIR nifti/nifti2.h REQUIRED)
+target_include_directories(flyover_itk SYSTEM INTERFACE "${NIFTI2_INCLUDE_DIR}")
 
 # OpenMesh's config exports include dirs as non-system; wrap them as SYSTEM.
 add_library(flyover_openmesh INTERFACE)

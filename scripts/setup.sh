@@ -8,6 +8,7 @@ PACKAGES=(
   libopenvdb-dev libopenvdb-tools libboost-iostreams-dev zlib1g-dev
   libopenmesh-dev libembree-dev libtbb-dev
   libinsighttoolkit5-dev libgdcm-tools   # gdcm-tools: GDCM's CMake config names its binaries
+  libnifti2-dev                          # nifti2.h: the NIfTI-2 header struct (volume/image_io.cpp)
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev libpng-dev libtoml11-dev
   ffmpeg time

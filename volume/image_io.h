@@ -1,7 +1,8 @@
 /// @file image_io.h
-/// @brief Reading scans (NIfTI-1 (NIfTI-2 is refused with a message: ITK 5.2 reads NIfTI-1 only) .nii/.nii.gz/.hdr+.img, NRRD .nrrd/.nhdr, MetaImage
+/// @brief Reading scans (NIfTI-1 and NIfTI-2 .nii/.nii.gz/.hdr+.img, NRRD .nrrd/.nhdr, MetaImage
 ///        .mha/.mhd, DICOM series folders and single DICOM files) and writing dense images,
-///        all through ITK's IO (DICOM through ITK's GDCMImageIO, i.e. GDCM with OpenJPEG
+///        all through ITK's IO except NIfTI-2, whose header flyover reads (ITK 5.2 has
+///        no NIfTI-2 reader; see image_io.cpp) (DICOM through ITK's GDCMImageIO, i.e. GDCM with OpenJPEG
 ///        and CharLS: uncompressed, JPEG lossless/lossy, JPEG 2000, JPEG-LS, RLE).
 ///
 /// World geometry is LPS millimetres, as ITK reports it (NIfTI's RAS qform/sform is

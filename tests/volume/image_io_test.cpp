@@ -26,7 +26,7 @@ const std::vector<std::string>& sameVolumeFixtures()
 {
     static const std::vector<std::string> names{
         "same.nii.gz", "same.nii",     "same_scaled.nii", "same.nrrd",       "same.nhdr",        "same.mha",
-        "same_zlib.mha", "same.mhd",   "dicom/same",      "dicom/same_j2k",  "dicom/same_jpegll"};
+        "same_zlib.mha", "same.mhd",   "same_nifti2.nii", "dicom/same",      "dicom/same_j2k",  "dicom/same_jpegll"};
     return names;
 }
 
@@ -114,7 +114,7 @@ TEST(ImageIo, StreamsWhatCanBeReadByRegionAndNeverHoldsFloat)
 {
     struct Case { const char* name; bool streamed; };
     for (const Case& c : {Case{"same.nii", true}, Case{"same.nii.gz", true}, Case{"same.mha", true}, Case{"same.mhd", true},
-                          Case{"dicom/same", true}, Case{"same.nrrd", false}, Case{"same_zlib.mha", false}}) {
+                          Case{"same_nifti2.nii", true}, Case{"dicom/same", true}, Case{"same.nrrd", false}, Case{"same_zlib.mha", false}}) {
         auto source = openImage(fixture(c.name));
         const int64_t native = FX_NX * FX_NY * FX_NZ * 2;  // int16
         EXPECT_EQ(source->heldBytes(), c.streamed ? 0 : native) << c.name << ": " << source->description();
@@ -125,7 +125,7 @@ TEST(ImageIo, StreamsWhatCanBeReadByRegionAndNeverHoldsFloat)
 
 TEST(ImageIo, ReadsSlabsInAnyOrderWithTheSameValues)
 {
-    for (const char* name : {"same.nii", "same.nii.gz", "same.mha", "same.nrrd", "dicom/same_j2k"}) {
+    for (const char* name : {"same.nii", "same.nii.gz", "same.mha", "same.nrrd", "same_nifti2.nii", "dicom/same_j2k"}) {
         const Image3<float> whole = readImage(fixture(name));
         auto source = openImage(fixture(name));
         const std::size_t perSlice = FX_NX * FX_NY;
@@ -262,11 +262,12 @@ TEST(ImageIo, EveryBadInputNamesTheFileAndTheProblem)
         {"bad/inf.nrrd", "voxel (5,2,1) is inf"},
         {"bad/zero_spacing.mha", "voxel spacing along k (z) is 0 mm"},
         {"bad/negative_spacing.mha", "voxel spacing along j (y) is -1 mm"},
+        {"bad/truncated_nifti2.nii", "header/data size mismatch"},
+        {"bad/complex_nifti2.nii", "voxel type complex64 is not supported"},
         {"bad/dicom/missing_slice", "1 slice(s) missing between"},
         {"bad/dicom/uneven", "uneven slice spacing: 2 mm between"},
         {"bad/dicom/single_slice", "has a single slice"},
         {"bad/dicom/corrupt_slice", "pixel data is incomplete"},
-        {"same_nifti2.nii", "NIfTI-2 header"},
         {"bad/gdcm_abort.dcm", "the image reader (ITK; GDCM for DICOM) crashed on its header"},
         {"bad/gdcm_huge_length.dcm", "not a readable DICOM file"},
         {"bad/metaio_overflow.mha", "the MetaImage reader (ITK's MetaIO) crashed on its header"},

@@ -105,7 +105,7 @@ TEST(Ingest, SameVolumeInEveryFormatGivesIdenticalGrids)
     const Ingested ref = ingestFixture("same.nii");
     ASSERT_GT(ref.grid->activeVoxelCount(), 2000u);
     for (const char* name : {"same.nii.gz", "same_scaled.nii", "same.nrrd", "same.nhdr", "same.mha", "same_zlib.mha",
-                             "same.mhd", "dicom/same", "dicom/same_j2k", "dicom/same_jpegll"}) {
+                             "same.mhd", "same_nifti2.nii", "dicom/same", "dicom/same_j2k", "dicom/same_jpegll"}) {
         const Ingested got = ingestFixture(name);
         EXPECT_EQ(got.grid->activeVoxelCount(), ref.grid->activeVoxelCount()) << name;
         EXPECT_EQ(got.report.gridSize, ref.report.gridSize) << name;
