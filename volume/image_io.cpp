@@ -911,6 +911,50 @@ private:
     std::vector<char> mSlab;
 };
 
+// ------------------------------------------------------------------ MetaImage header text
+
+/// MetaIO (ITK 5.2) copies field names and values into fixed-size buffers, some of them
+/// globals outside any sanitizer's view: a malformed line can corrupt the reading process
+/// without crashing the header probe's child (found by fuzzing: a line with no '=' followed by
+/// a long one; the parent later died in fflush). So the header text is checked here first,
+/// without MetaIO: every line up to and including ElementDataFile is blank or
+/// "Name = value" (or "Name: value") with a name of letters, digits and '_' (at most 64) and
+/// printable text, at most 1024 characters per line, within the first 64 kB.
+void checkMetaImageHeaderText(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path + ": cannot open: " + std::strerror(errno));
+    std::string text(64 << 10, '\0');
+    in.read(text.data(), std::streamsize(text.size()));
+    text.resize(static_cast<std::size_t>(in.gcount()));
+    std::size_t pos = 0;
+    for (int line = 1; pos < text.size(); ++line) {
+        std::size_t end = text.find('\n', pos);
+        const bool complete = end != std::string::npos;
+        if (!complete) end = text.size();
+        std::string l = text.substr(pos, end - pos);
+        pos = end + 1;
+        if (!l.empty() && l.back() == '\r') l.pop_back();
+        auto bad = [&](const std::string& why) {
+            throw InputError(path + ": MetaImage header line " + std::to_string(line) + " " + why);
+        };
+        if (l.size() > 1024) bad("is longer than 1024 characters");
+        for (unsigned char c : l)
+            if (c != '\t' && (c < 32 || c > 126)) bad("holds a non-printable character");
+        const std::string t = trim(l);
+        if (t.empty()) continue;
+        std::size_t n = 0;
+        while (n < t.size() && (std::isalnum(static_cast<unsigned char>(t[n])) || t[n] == '_')) ++n;
+        if (n == 0 || !std::isalpha(static_cast<unsigned char>(t[0]))) bad("does not start with a field name");
+        if (n > 64) bad("has a field name longer than 64 characters");
+        const std::size_t sep = t.find_first_not_of(" \t", n);
+        if (sep == std::string::npos || (t[sep] != '=' && t[sep] != ':')) bad("is not 'Name = value'");
+        if (t.compare(0, n, "ElementDataFile") == 0) return;
+        if (!complete) break;
+    }
+    throw InputError(path + ": MetaImage header has no ElementDataFile field in its first 64 kB");
+}
+
 // ------------------------------------------------------------- crash-isolated header probes
 
 /// What a forked child did.
@@ -1098,6 +1142,7 @@ void readInformation(itk::ImageIOBase& io, const std::string& path, const std::s
 std::unique_ptr<ImageSource> openFile(const std::string& path, const ImageReadOptions& options)
 {
     if (fileBytes(path) == 0) throw InputError(path + ": the file is empty");
+    if (formatFromName(path) == "MetaImage") checkMetaImageHeaderText(path);
     const std::string probe = probeHeaderInChild(path);
     if (!probe.empty() && probe != "NOIO") throw InputError(path + ": " + probe);
     itk::ImageIOBase::Pointer io = probe == "NOIO" ? nullptr : createIo(path);

@@ -270,7 +270,8 @@ TEST(ImageIo, EveryBadInputNamesTheFileAndTheProblem)
         {"bad/dicom/corrupt_slice", "pixel data is incomplete"},
         {"bad/gdcm_abort.dcm", "the image reader (ITK; GDCM for DICOM) crashed on its header"},
         {"bad/gdcm_huge_length.dcm", "not a readable DICOM file"},
-        {"bad/metaio_overflow.mha", "the MetaImage reader (ITK's MetaIO) crashed on its header"},
+        {"bad/metaio_overflow.mha", "MetaImage header line 4 has a field name longer than 64 characters"},
+        {"bad/metaio_unnamed_line.mha", "MetaImage header line 10 holds a non-printable character"},
         {"real/LICENSE", "not a readable image"},
     };
     for (const auto& c : cases) {
@@ -350,4 +351,33 @@ TEST(ImageIo, WrittenImagesReadBackUnchanged)
         expectGeometryNear(back.geometry, img.geometry, ext);
         for (std::size_t n = 0; n < img.voxels.size(); ++n) ASSERT_EQ(back.voxels[n], float(img.voxels[n])) << ext;
     }
+}
+
+TEST(ImageIo, MalformedMetaImageHeaderTextIsRefusedBeforeMetaIoReadsIt)
+{
+    // MetaIO copies names and values into fixed buffers (fuzzing found memory corruption that
+    // the crash-isolated probe did not catch): the header text is checked first.
+    TempDir dir("metatext");
+    const std::string good = "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_SHORT\n";
+    struct Case { std::string name, header, expect; };
+    const std::vector<Case> cases{
+        {"no_separator.mha", "ObjectType = Image\nNDims 3\nElementDataFile = LOCAL\n", "line 2 is not 'Name = value'"},
+        {"long_line.mha", good + "Comment = " + std::string(1100, 'x') + "\nElementDataFile = LOCAL\n",
+         "line 5 is longer than 1024 characters"},
+        {"no_data_file.mhd", good, "has no ElementDataFile field"},
+        {"bad_start.mha", good + "= 3\nElementDataFile = LOCAL\n", "line 5 does not start with a field name"},
+    };
+    for (const Case& c : cases) {
+        const fs::path p = dir.path / c.name;
+        std::ofstream(p, std::ios::binary) << c.header << std::string(p.extension() == ".mha" ? 16 : 0, '\0');
+        const std::string msg = openError(p.string());
+        EXPECT_NE(msg.find(c.expect), std::string::npos) << c.name << ": expected \"" << c.expect << "\", got \"" << msg << "\"";
+        EXPECT_EQ(msg.rfind(p.string(), 0), 0u) << c.name << ": " << msg;
+    }
+    // A well-formed header with blank lines and ':' separators still reads.
+    const fs::path ok = dir.path / "ok.mha";
+    std::ofstream(ok, std::ios::binary) << "ObjectType = Image\n\nNDims: 3\nDimSize = 2 2 2\nElementSpacing = 1 1 1\n"
+                                           "ElementType = MET_SHORT\nElementDataFile = LOCAL\n"
+                                        << std::string(16, '\0');
+    EXPECT_EQ(openError(ok.string()), "");
 }
