@@ -30,6 +30,7 @@
 #include "pipeline/study.h"
 #include "render/camera.h"
 #include "render/coverage.h"
+#include "render/flyover_path.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"
 #include "surface/extract_surface.h"
@@ -162,13 +163,15 @@ Subject load(const Args& a)
 }
 
 /// Fly-over camera pairs at `count` positions spread evenly along the centerline.
-std::vector<std::array<Camera, 2>> flyoverPath(const Centerline& cl, int count, const FlyoverParams& fp)
+std::vector<std::array<Camera, 2>> flyoverPath(const RayScene& scene, const Centerline& cl, int count,
+                                               const FlyoverParams& fp)
 {
+    const std::vector<double> frame = flyoverFrameRadii(scene, cl, fp);
     std::vector<std::array<Camera, 2>> cams;
     const std::size_t n = cl.points.size();
     for (int k = 0; k < count; ++k) {
         const std::size_t i = std::min(n - 1, std::size_t((double(k) + 0.5) / count * double(n)));
-        cams.push_back(flyoverCameras(cl.points[i], fp));
+        cams.push_back(flyoverCameras(cl.points[i], fp, frame[i]));
     }
     return cams;
 }
@@ -177,7 +180,7 @@ std::vector<std::array<Camera, 2>> flyoverPath(const Centerline& cl, int count, 
 
 void benchThroughput(const Args& a, const Subject& s)
 {
-    const auto path = flyoverPath(s.centerline, a.positions, FlyoverParams{});
+    const auto path = flyoverPath(RayScene(s.mesh), s.centerline, a.positions, FlyoverParams{});
     const double rays = 2.0 * a.px * a.px * double(path.size());
     const double pairs = double(path.size());
     std::printf("\nfly-over at %zu positions spread along the centerline, default cameras (fov 90, clip offset "
@@ -261,7 +264,7 @@ void benchSceneAndPng(const Args& a, const Subject& s)
                 median(wall), median(cpu), median(cpu) / a.threads, a.threads);
 
     const RayScene scene(s.mesh);
-    const auto path = flyoverPath(s.centerline, std::min(a.positions, 24), FlyoverParams{});
+    const auto path = flyoverPath(scene, s.centerline, std::min(a.positions, 24), FlyoverParams{});
     RenderOptions ro;
     ro.widthPx = ro.heightPx = a.px;
     std::vector<RgbImage> images;
@@ -373,7 +376,7 @@ void benchSweep(const Args& a, const Subject& s)
     const double POLYP_MARGIN_MM = 1.0;
     const double POLYP_WINDOW_MM = 40.0;
 
-    std::printf("\nclip offset sweep: fov 90 (h = D), roll 0 unless stated; offset = fraction * D(p), near plane "
+    std::printf("\nclip offset sweep: fov 90 (h = R, the framed half-width), roll 0 unless stated; offset = fraction * D(p), near plane "
                 "at h - offset (fraction 0: on the centerline; 1: at the camera)\n");
     std::printf("coverage: fly-over, both cameras, 128 px every 1 mm. occlusion: pixels of fly-over views every "
                 "2 mm at 128 px whose triangle's nearest centerline point is > %.0f mm of arc away from the "
@@ -392,6 +395,7 @@ void benchSweep(const Args& a, const Subject& s)
         cp.flyover = fp;
         cp.flythrough = false;
         const CoverageResult cov = computeCoverage(scene, cl, cp);
+        const std::vector<double> frame = flyoverFrameRadii(scene, cl, fp);
 
         RenderOptions ro;
         ro.widthPx = ro.heightPx = 128;
@@ -400,7 +404,7 @@ void benchSweep(const Args& a, const Subject& s)
         std::size_t frames = 0, occludedFrames = 0;
         for (std::size_t i = 0; i < cl.points.size(); i += 2) {
             uint64_t hitHere = 0, otherHere = 0;
-            for (const Camera& c : flyoverCameras(cl.points[i], fp)) {
+            for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) {
                 traceHits(scene, c, ro, hits);
                 for (const uint32_t id : hits.primId) {
                     if (id >= triangleArc.size()) continue;
@@ -425,13 +429,13 @@ void benchSweep(const Args& a, const Subject& s)
             const std::size_t ip = locator.nearest(polyp.centerMm);
             const auto window = std::size_t(POLYP_WINDOW_MM / cl.stepMm);
             for (std::size_t i = ip > window ? ip - window : 0; i <= std::min(cl.points.size() - 1, ip + window); ++i)
-                for (const Camera& c : flyoverCameras(cl.points[i], fp)) {
+                for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) {
                     traceHits(scene, c, po, hits);
                     pv[k].bestPixels = std::max(pv[k].bestPixels, countHitsWithin(c, hits, polyp.centerMm, r));
                 }
             FlyoverParams rolled = fp;
             rolled.rollDeg = cuttingLineRollDeg(cl.points[ip], polyp.outwardDir);
-            const auto cams = flyoverCameras(cl.points[ip], rolled);
+            const auto cams = flyoverCameras(cl.points[ip], rolled, flyoverFrameRadii(scene, cl, rolled)[ip]);
             for (int v = 0; v < 2; ++v) {
                 traceHits(scene, cams[std::size_t(v)], po, hits);
                 pv[k].cuttingPixels[v] = countHitsWithin(cams[std::size_t(v)], hits, polyp.centerMm, r);

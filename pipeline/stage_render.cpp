@@ -14,6 +14,7 @@
 #include "pipeline/artifact_io.h"
 #include "render/camera.h"
 #include "render/coverage.h"
+#include "render/flyover_path.h"
 #include "render/overview.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"
@@ -456,6 +457,9 @@ json runRender(StudyRun& run, Progress* progress)
     const double readCenterlineSeconds = secondsSince(tCenterline);
 
     const FlyoverParams fp = flyoverParamsOf(rp);
+    const auto tFrameRadii = Clock::now();
+    const std::vector<double> frameRadii = flyoverFrameRadii(scene, cl, fp);
+    const double frameRadiiSeconds = secondsSince(tFrameRadii);
     const RenderOptions ro = frameOptionsOf(rp);
     const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
     const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
@@ -467,7 +471,7 @@ json runRender(StudyRun& run, Progress* progress)
     auto renderPair = [&](std::size_t f) {
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
-        const auto cams = flyoverCameras(p, fp);
+        const auto cams = flyoverCameras(p, fp, frameRadii[indices[f]]);
         const RgbImage pair = sideBySide(renderView(scene, cams[0], ro), renderView(scene, cams[1], ro));
         const auto t1 = Clock::now();
         writePng(frames.path(pairName(f)), pair);
@@ -481,6 +485,7 @@ json runRender(StudyRun& run, Progress* progress)
                         {"arc_mm", double(indices[f]) * clStep},
                         {"centerline_point_mm", vec3Json(p.positionMm)},
                         {"radius_mm", p.radiusMm},
+                        {"frame_radius_mm", frameRadii[indices[f]]},
                         {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
     };
     const auto tFrames = Clock::now();
@@ -566,7 +571,7 @@ json runRender(StudyRun& run, Progress* progress)
             FfmpegVideo video(ffmpeg, tmp, frames.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
             RgbImage left, right;
             for (std::size_t k = 0; k < vIdx.size(); ++k) {
-                const auto cams = flyoverCameras(cl.points[vIdx[k]], fp);
+                const auto cams = flyoverCameras(cl.points[vIdx[k]], fp, frameRadii[vIdx[k]]);
                 renderView(scene, cams[0], ro, left);
                 renderView(scene, cams[1], ro, right);
                 video.write(sideBySide(left, right));
@@ -658,6 +663,7 @@ json runRender(StudyRun& run, Progress* progress)
                  {{"read_surface", readSurfaceSeconds},
                   {"build_scene", sceneSeconds},
                   {"read_centerline", readCenterlineSeconds},
+                  {"frame_radii", frameRadiiSeconds},
                   {"render_pair", firstRenderSeconds},
                   {"write_png", firstPngSeconds}}},
                 {"frame_pairs_seconds", framesSeconds},

@@ -69,7 +69,21 @@ Camera lookAt(const Vec3d& position, const Vec3d& target, const Vec3d& upHint, d
     return frameFrom(position, forward, upHint, fovDeg);
 }
 
-std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const FlyoverParams& params)
+FlyoverAxes flyoverAxes(const CenterlinePoint& point, double rollDeg)
+{
+    const Vec3d t = normalize(point.tangent);
+    // Re-orthogonalise the normal against the tangent: centerline files may carry rounding.
+    const Vec3d n0 = normalize(point.normal - t * dot(point.normal, t));
+    if (!(length(t) > 0.5) || !(length(n0) > 0.5)) {
+        throw InputError("flyoverCameras: centerline point has a zero tangent or a normal parallel to it");
+    }
+    // Roll: rotate n about t (Rodrigues; n is perpendicular to t).
+    const double roll = radians(rollDeg);
+    const Vec3d n = normalize(n0 * std::cos(roll) + cross(t, n0) * std::sin(roll));
+    return FlyoverAxes{t, n, cross(t, n)};
+}
+
+std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const FlyoverParams& params, double frameRadiusMm)
 {
     checkFov(params.fovDeg, "FlyoverParams");
     if (!std::isfinite(params.rollDeg)) throw ParameterError("FlyoverParams.rollDeg must be finite");
@@ -83,18 +97,12 @@ std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const Flyover
             << point.radiusMm;
         throw InputError(msg.str());
     }
-    const Vec3d t = normalize(point.tangent);
-    // Re-orthogonalise the normal against the tangent: centerline files may carry rounding.
-    const Vec3d n0 = normalize(point.normal - t * dot(point.normal, t));
-    if (!(length(t) > 0.5) || !(length(n0) > 0.5)) {
-        throw InputError("flyoverCameras: centerline point has a zero tangent or a normal parallel to it");
-    }
+    if (!std::isfinite(frameRadiusMm)) throw InputError("flyoverCameras: frameRadiusMm must be finite");
+    const FlyoverAxes axes = flyoverAxes(point, params.rollDeg);
+    const Vec3d t = axes.t, n = axes.n;
 
-    // Roll: rotate n about t (Rodrigues; n is perpendicular to t).
-    const double roll = radians(params.rollDeg);
-    const Vec3d n = normalize(n0 * std::cos(roll) + cross(t, n0) * std::sin(roll));
-
-    const double h = point.radiusMm / std::tan(0.5 * radians(params.fovDeg));
+    const double frame = frameRadiusMm >= 0.0 ? frameRadiusMm : point.radiusMm;
+    const double h = frame / std::tan(0.5 * radians(params.fovDeg));
     const double offset =
         params.clipOffsetMm >= 0.0 ? params.clipOffsetMm : params.clipOffsetFraction * point.radiusMm;
     const double nearMm = std::max(0.0, h - offset);

@@ -41,9 +41,21 @@ struct FlyoverParams {
 };
 
 /// The two opposite fly-over cameras at a centerline point: positions p ± h·n with
-/// h = D/tan(fov/2), both looking at p, view-up perpendicular to tangent and normal so the
-/// tangent runs horizontally (left to right unless flipped), near plane at d - offset.
-std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const FlyoverParams& params);
+/// h = R/tan(fov/2), both looking at p, view-up perpendicular to tangent and normal so the
+/// tangent runs horizontally (left to right unless flipped), near plane at d - offset with
+/// offset = clipOffsetFraction · D(p) (or clipOffsetMm).
+/// R is `frameRadiusMm`: the half-width the views must frame at the centerline's depth (see
+/// flyoverFrameRadii() in render/flyover_path.h, which measures it on the surface); when it is
+/// negative, R = D(p), the point's distance to the wall (exact for a round tube).
+std::array<Camera, 2> flyoverCameras(const CenterlinePoint& point, const FlyoverParams& params,
+                                     double frameRadiusMm = -1.0);
+
+/// The frame vectors of the fly-over pair at `point`: unit tangent t, the rolled normal n
+/// (camera 1 looks along -n), and b = t x n, the image's vertical (lateral) axis.
+struct FlyoverAxes {
+    Vec3d t, n, b;
+};
+FlyoverAxes flyoverAxes(const CenterlinePoint& point, double rollDeg);
 
 /// The roll (degrees, in (-180, 180]) at which both fly-over cameras of `point` look
 /// perpendicular to `directionMm`: a wall point in that direction from the centerline then lies

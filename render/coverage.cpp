@@ -1,5 +1,7 @@
 #include "render/coverage.h"
 
+#include "render/flyover_path.h"
+
 #include "render/ray_scene_impl.h"
 #include "render/render_view.h"
 #include "volume/error.h"
@@ -264,9 +266,11 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                 }
             }
     };
+    const std::vector<double> frameRadii = flyoverFrameRadii(scene, centerline, params.flyover);
     for (std::size_t k = 0; k < positions.size(); ++k) {
         const CenterlinePoint& p = centerline.points[positions[k]];
-        for (const Camera& c : flyoverCameras(p, params.flyover)) mark(c, params.ost, result.flyover.seen);
+        for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
+            mark(c, params.ost, result.flyover.seen);
         // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
         if (params.flythrough) {
             mark(flythroughCamera(p, true, params.flythroughFovDeg), params.ost, result.flythroughForward.seen);

@@ -6,6 +6,7 @@
 #include "data/phantom.h"
 #include "pipeline/params.h"
 #include "render/coverage.h"
+#include "render/flyover_path.h"
 #include "render/render_view.h"
 #include "surface/extract_surface.h"
 #include "volume/centerline.h"
@@ -103,6 +104,7 @@ TEST_F(SmallPhantom, EveryPolypIsSeenInAFlyoverFrame)
     const Centerline& cl = data->centerline;
     const CenterlineLocator locator(cl);
     const FlyoverParams fp = defaultFlyover();
+    const std::vector<double> frame = flyoverFrameRadii(*data->scene, cl, fp);
     ASSERT_GE(data->truth.polyps.size(), 6u);
     for (const PhantomPolyp& polyp : data->truth.polyps) {
         // Frames every centerline point within 30 mm of the polyp's nearest point.
@@ -110,7 +112,7 @@ TEST_F(SmallPhantom, EveryPolypIsSeenInAFlyoverFrame)
         int best = 0;
         std::size_t bestAt = ip;
         for (std::size_t i = ip > 30 ? ip - 30 : 0; i <= std::min(cl.points.size() - 1, ip + 30); ++i)
-            for (const Camera& cam : flyoverCameras(cl.points[i], fp)) {
+            for (const Camera& cam : flyoverCameras(cl.points[i], fp, frame[i])) {
                 const int n = polypPixels(cam, 128, polyp);
                 if (n > best) best = n, bestAt = i;
             }
@@ -128,14 +130,15 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
     // At each polyp's nearest centerline point, roll the cameras so that both look perpendicular
     // to the polyp's outward direction: the polyp sits where the two views meet, at the edge of
     // both images, the worst place for it. Its protruding part (surface within r + 1 mm of its
-    // centre and at least r/4 nearer to the centerline than its centre) must still show in one
-    // of the two views, with the default near-plane offset and with the near plane exactly on
-    // the centerline.
+    // centre and at least r/4 nearer to the centerline than its centre) must show in one of the
+    // two views with the default near-plane offset; with the near plane exactly on the
+    // centerline it is split (far fewer pixels; see below).
     const Centerline& cl = data->centerline;
     const CenterlineLocator locator(cl);
     const int PX = 256;
     for (const PhantomPolyp& polyp : data->truth.polyps) {
-        const CenterlinePoint& p = cl.points[locator.nearest(polyp.centerMm)];
+        const std::size_t ip = locator.nearest(polyp.centerMm);
+        const CenterlinePoint& p = cl.points[ip];
         const Vec3d t = normalize(p.tangent);
         auto fromAxis = [&](const Vec3d& q) {
             const Vec3d d = q - p.positionMm;
@@ -162,7 +165,8 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
         fp.rollDeg = cuttingLineRollDeg(p, polyp.centerMm - p.positionMm);
         auto best = [&](const FlyoverParams& params) {
             int n = 0;
-            for (const Camera& cam : flyoverCameras(p, params)) n = std::max(n, protruding(cam));
+            const double frame = flyoverFrameRadii(*data->scene, cl, params)[ip];
+            for (const Camera& cam : flyoverCameras(p, params, frame)) n = std::max(n, protruding(cam));
             return n;
         };
         const int withDefault = best(fp);
@@ -177,7 +181,10 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
         std::printf("cutting-line polyp r=%.1f mm arc %.0f: %d px with the default offset, %d px at offset 0\n",
                     polyp.radiusMm, polyp.arcMm, withDefault, withoutOffset);
         EXPECT_GE(withDefault, 30);
-        EXPECT_GE(withoutOffset, 30);
+        // The thesis (V.B): with the near plane on the centerline the polyp is cut in two and
+        // each view shows only a part of it (an open ring at the image edge); with the plane
+        // nearer the camera one view shows it whole. Measured ratios 2.7..8.6 (seed 1).
+        EXPECT_GE(withDefault, 2 * withoutOffset) << "default offset " << withDefault << " px, offset 0 " << withoutOffset << " px";
     }
 }
 

@@ -1,0 +1,41 @@
+/// @file flyover_path.h
+/// @brief How far the fly-over cameras must stand back at each centerline point.
+///
+/// The thesis (V.B) places each camera at h = D(p)/tan(fov/2) and calls D "the distance of a
+/// given point to the centerline": for a round tube, the lumen radius, which the view then
+/// frames exactly at the centerline's depth. A real colon is not round: between haustral folds
+/// the wall bulges well beyond the distance from the centerline to the nearest wall (measured
+/// on the full phantom: missed pockets 18-28 mm from the centerline where D was 11-18 mm), and
+/// a pocket near the cutting line that lies outside both frusta is never seen. So R(p), the
+/// half-width each view frames, is measured on the surface: rays fanned from p in its cross-
+/// section plane find the wall; a wall point at lateral distance x (along the image's vertical
+/// axis b) and depth z beyond the centerline plane (for the camera that sees it with OST) is
+/// inside the frustum when x <= R + z·tan(fov/2), so R(p) = max over the fan of
+/// x - z·tan(fov/2), at least D(p), plus a 5% margin, capped at 2·D(p) + 5 mm (a ray down a
+/// neighbouring stretch at a sharp bend must not zoom the view out). R is then made smooth
+/// along the centerline (running maximum over ±8 mm, then a Gaussian of 4 mm), so the
+/// elevation changes gently and never spins or jumps. Bridged points (a collapse; p outside
+/// the lumen) take D(p) and their neighbours' values through the smoothing.
+#pragma once
+
+#include "render/camera.h"
+#include "render/ray_scene.h"
+#include "volume/centerline_types.h"
+
+#include <vector>
+
+namespace flyover {
+
+struct FrameRadiusOptions {
+    int fanRays = 72;            ///< rays per cross-section (every 5 degrees)
+    double marginFraction = 0.05;
+    double windowMm = 8.0;       ///< running maximum over ±windowMm of arc
+    double smoothMm = 4.0;       ///< Gaussian sigma after the maximum (mm of arc)
+};
+
+/// R(p) for every centerline point (mm), for flyoverCameras(point, params, R).
+/// @throw ParameterError for a fov outside (0, 180) or bad options.
+std::vector<double> flyoverFrameRadii(const RayScene& scene, const Centerline& centerline,
+                                      const FlyoverParams& params, const FrameRadiusOptions& options = {});
+
+} // namespace flyover
