@@ -6,7 +6,11 @@
 #include "render/render_view.h"
 #include "volume/error.h"
 
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -207,20 +211,34 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
 
     RenderOptions ro;
     ro.widthPx = ro.heightPx = params.viewPx;
-    HitImage hits;
     const RayScene::Impl& im = scene.impl();
     const VertexTriangles vt(im);
-    std::vector<uint32_t> stamp(nf, 0);  // BFS visit marks, one stamp value per ray
-    uint32_t currentStamp = 0;
-    std::vector<uint32_t> queue;
+    // Positions are marked in parallel; each worker has its own hit image, BFS state and seen
+    // flags (OR-ed at the end), so no two threads write the same byte.
+    struct Worker {
+        HitImage hits;
+        std::vector<uint32_t> stamp;  // BFS visit marks, one stamp value per ray
+        uint32_t currentStamp = 0;
+        std::vector<uint32_t> queue;
+        std::vector<uint8_t> seen[3];  // fly-over, fly-through forward, backward
+        uint64_t rays = 0;
+    };
+    tbb::enumerable_thread_specific<Worker> workers([nf] {
+        Worker w;
+        w.stamp.assign(nf, 0);
+        for (auto& s : w.seen) s.assign(nf, 0);
+        return w;
+    });
     auto vertexOf = [&](uint32_t f, int k) {
         const auto& v = im.vertices[im.indices[3 * std::size_t(f) + std::size_t(k)]];
         return Vec3d{v.x, v.y, v.z};
     };
-    auto mark = [&](const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
-        ro.ost = ost;
-        traceHits(scene, camera, ro, hits);
-        result.rays += uint64_t(params.viewPx) * uint64_t(params.viewPx);
+    auto mark = [&](Worker& w, const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
+        RenderOptions o = ro;
+        o.ost = ost;
+        HitImage& hits = w.hits;
+        traceHits(scene, camera, o, hits);
+        w.rays += uint64_t(params.viewPx) * uint64_t(params.viewPx);
         // Lateral distance between neighbouring rays at depth 1 (dot(dir, forward) == 1).
         const double spacingAtUnitDepth = 2.0 * std::tan(0.5 * camera.fovDeg * 3.14159265358979323846 / 180.0) /
                                           double(params.viewPx);
@@ -240,19 +258,19 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                 const double cosine = std::fabs(dot(normalize(dir), ng));
                 const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
                 const double r2 = radius * radius;
-                ++currentStamp;
-                stamp[id] = currentStamp;
-                queue.assign(1, id);
-                for (std::size_t q = 0; q < queue.size(); ++q) {
-                    const uint32_t* t = &im.indices[3 * std::size_t(queue[q])];
+                ++w.currentStamp;
+                w.stamp[id] = w.currentStamp;
+                w.queue.assign(1, id);
+                for (std::size_t q = 0; q < w.queue.size(); ++q) {
+                    const uint32_t* t = &im.indices[3 * std::size_t(w.queue[q])];
                     for (int e = 0; e < 3; ++e) {
                         const uint32_t a = t[e], b = t[(e + 1) % 3];
                         for (uint32_t k = vt.start[a]; k < vt.start[a + 1]; ++k) {
                             const uint32_t g = vt.list[k];
-                            if (stamp[g] == currentStamp) continue;
+                            if (w.stamp[g] == w.currentStamp) continue;
                             const uint32_t* u = &im.indices[3 * std::size_t(g)];
                             if (u[0] != b && u[1] != b && u[2] != b) continue;
-                            stamp[g] = currentStamp;
+                            w.stamp[g] = w.currentStamp;
                             const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
                             const Vec3d n = cross(c1 - c0, c2 - c0);
                             const bool facing = ost ? dot(c0 - camera.position, n) < 0.0 : true;
@@ -260,23 +278,32 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                             const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
                             if (!facing || !near) continue;
                             seen[g] = 1;
-                            queue.push_back(g);
+                            w.queue.push_back(g);
                         }
                     }
                 }
             }
     };
     const std::vector<double> frameRadii = flyoverFrameRadii(scene, centerline, params.flyover);
-    for (std::size_t k = 0; k < positions.size(); ++k) {
+    std::atomic<std::size_t> done{0};
+    tbb::parallel_for(std::size_t(0), positions.size(), [&](std::size_t k) {
+        Worker& w = workers.local();
         const CenterlinePoint& p = centerline.points[positions[k]];
         for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
-            mark(c, params.ost, result.flyover.seen);
+            mark(w, c, params.ost, w.seen[0]);
         // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
         if (params.flythrough) {
-            mark(flythroughCamera(p, true, params.flythroughFovDeg), params.ost, result.flythroughForward.seen);
-            mark(flythroughCamera(p, false, params.flythroughFovDeg), params.ost, result.flythroughBackward.seen);
+            mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);
+            mark(w, flythroughCamera(p, false, params.flythroughFovDeg), params.ost, w.seen[2]);
         }
-        if (k % 16 == 0) reportProgress(progress, 0.95 * double(k + 1) / double(positions.size()), "coverage rays");
+        const std::size_t n = ++done;
+        if (n % 16 == 0) reportProgress(progress, 0.95 * double(n) / double(positions.size()), "coverage rays");
+    });
+    MethodCoverage* methods[3] = {&result.flyover, &result.flythroughForward, &result.flythroughBackward};
+    for (const Worker& w : workers) {
+        result.rays += w.rays;
+        for (int m = 0; m < 3; ++m)
+            for (std::size_t f = 0; f < nf; ++f) methods[m]->seen[f] |= w.seen[m][f];
     }
     result.flythroughTwoWay.seen.resize(nf);
     for (std::size_t f = 0; f < nf; ++f)
