@@ -32,25 +32,28 @@ struct PhantomScene {
     std::unique_ptr<RayScene> scene;
 };
 
+/// A phantom taken through ingest, segment, centerline and mesh in memory.
+std::unique_ptr<PhantomScene> phantomScene(PhantomSize size, uint64_t seed)
+{
+    auto s = std::make_unique<PhantomScene>();
+    PhantomParams pp;
+    pp.size = size;
+    pp.seed = seed;
+    Phantom phantom = makePhantom(pp);
+    Image3<float> image;
+    image.geometry = phantom.ct.geometry;
+    image.voxels.assign(phantom.ct.voxels.begin(), phantom.ct.voxels.end());
+    s->truth = phantom.truth;
+    const auto hu = ingestImage(image, IngestParams{});
+    const LumenSegmentation lumen = segmentLumen(*hu, SegmentParams{});
+    s->centerline = extractCenterline(*lumen.sdf, CenterlineParams{});
+    s->scene = std::make_unique<RayScene>(extractSurface(*lumen.sdf, MeshParams{}));
+    return s;
+}
+
 class SmallPhantom : public ::testing::Test {
 protected:
-    static void SetUpTestSuite()
-    {
-        auto s = std::make_unique<PhantomScene>();
-        PhantomParams pp;
-        pp.size = PhantomSize::Small;
-        pp.seed = SEED;
-        Phantom phantom = makePhantom(pp);
-        Image3<float> image;
-        image.geometry = phantom.ct.geometry;
-        image.voxels.assign(phantom.ct.voxels.begin(), phantom.ct.voxels.end());
-        s->truth = phantom.truth;
-        const auto hu = ingestImage(image, IngestParams{});
-        const LumenSegmentation lumen = segmentLumen(*hu, SegmentParams{});
-        s->centerline = extractCenterline(*lumen.sdf, CenterlineParams{});
-        s->scene = std::make_unique<RayScene>(extractSurface(*lumen.sdf, MeshParams{}));
-        data = std::move(s);
-    }
+    static void SetUpTestSuite() { data = phantomScene(PhantomSize::Small, SEED); }
     static void TearDownTestSuite() { data.reset(); }
 
     /// The fly-over cameras the render stage uses by default.
@@ -191,17 +194,7 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
 /// The whole chain for one phantom; fly-over coverage with the render stage's defaults.
 CoverageResult defaultCoverage(PhantomSize size, uint64_t seed)
 {
-    PhantomParams pp;
-    pp.size = size;
-    pp.seed = seed;
-    const Phantom phantom = makePhantom(pp);
-    Image3<float> image;
-    image.geometry = phantom.ct.geometry;
-    image.voxels.assign(phantom.ct.voxels.begin(), phantom.ct.voxels.end());
-    const auto hu = ingestImage(image, IngestParams{});
-    const LumenSegmentation lumen = segmentLumen(*hu, SegmentParams{});
-    const Centerline cl = extractCenterline(*lumen.sdf, CenterlineParams{});
-    const RayScene scene(extractSurface(*lumen.sdf, MeshParams{}));
+    const auto s = phantomScene(size, seed);
     const RenderParams rp;
     CoverageParams cp;
     cp.viewPx = rp.coveragePx;
@@ -209,7 +202,7 @@ CoverageResult defaultCoverage(PhantomSize size, uint64_t seed)
     cp.flyover.fovDeg = rp.fovDeg;
     cp.flyover.clipOffsetFraction = rp.clipOffsetFraction;
     cp.flythrough = false;
-    return computeCoverage(scene, cl, cp);
+    return computeCoverage(*s->scene, s->centerline, cp);
 }
 
 TEST(PhantomCoverage, FlyoverCoversAtLeast99PercentOnOtherSeedsAndTheMediumPhantom)
