@@ -51,31 +51,48 @@ std::unique_ptr<PhantomScene> phantomScene(PhantomSize size, uint64_t seed)
     return s;
 }
 
+/// The fly-over cameras the render stage uses by default.
+FlyoverParams defaultFlyoverParams()
+{
+    const RenderParams rp;
+    FlyoverParams fp;
+    fp.fovDeg = rp.fovDeg;
+    fp.rollDeg = rp.rollDeg;
+    fp.clipOffsetFraction = rp.clipOffsetFraction;
+    fp.clipOffsetMm = rp.clipOffsetMm;
+    return fp;
+}
+
+int polypPixels(const RayScene& scene, const Camera& cam, int px, const PhantomPolyp& polyp)
+{
+    RenderOptions o;
+    o.widthPx = o.heightPx = px;
+    HitImage hits;
+    traceHits(scene, cam, o, hits);
+    return countHitsWithin(cam, hits, polyp.centerMm, polyp.radiusMm + POLYP_MARGIN_MM);
+}
+
+/// The most pixels of `polyp` in one 128 px fly-over view at the centerline points within
+/// 30 mm of its nearest one, with the render stage's cameras; `bestAt` gets that point.
+int bestPolypPixels(const PhantomScene& s, const FlyoverParams& fp, const std::vector<double>& frame,
+                    const CenterlineLocator& locator, const PhantomPolyp& polyp, std::size_t& bestAt)
+{
+    const Centerline& cl = s.centerline;
+    const std::size_t ip = locator.nearest(polyp.centerMm);
+    int best = 0;
+    bestAt = ip;
+    for (std::size_t i = ip > 30 ? ip - 30 : 0; i <= std::min(cl.points.size() - 1, ip + 30); ++i)
+        for (const Camera& cam : flyoverCameras(cl.points[i], fp, frame[i])) {
+            const int n = polypPixels(*s.scene, cam, 128, polyp);
+            if (n > best) best = n, bestAt = i;
+        }
+    return best;
+}
+
 class SmallPhantom : public ::testing::Test {
 protected:
     static void SetUpTestSuite() { data = phantomScene(PhantomSize::Small, SEED); }
     static void TearDownTestSuite() { data.reset(); }
-
-    /// The fly-over cameras the render stage uses by default.
-    static FlyoverParams defaultFlyover()
-    {
-        const RenderParams rp;
-        FlyoverParams fp;
-        fp.fovDeg = rp.fovDeg;
-        fp.rollDeg = rp.rollDeg;
-        fp.clipOffsetFraction = rp.clipOffsetFraction;
-        fp.clipOffsetMm = rp.clipOffsetMm;
-        return fp;
-    }
-
-    static int polypPixels(const Camera& cam, int px, const PhantomPolyp& polyp)
-    {
-        RenderOptions o;
-        o.widthPx = o.heightPx = px;
-        HitImage hits;
-        traceHits(*data->scene, cam, o, hits);
-        return countHitsWithin(cam, hits, polyp.centerMm, polyp.radiusMm + POLYP_MARGIN_MM);
-    }
 
     static inline std::unique_ptr<PhantomScene> data;
 };
@@ -86,7 +103,7 @@ TEST_F(SmallPhantom, FlyoverCoversAtLeast99PercentOfTheSurface)
     CoverageParams cp;
     cp.viewPx = rp.coveragePx;
     cp.stepMm = rp.coverageStepMm;
-    cp.flyover = defaultFlyover();
+    cp.flyover = defaultFlyoverParams();
     cp.flythroughFovDeg = rp.flythroughFovDeg;
     const CoverageResult c = computeCoverage(*data->scene, data->centerline, cp);
     RecordProperty("flyover", std::to_string(c.flyover.fraction));
@@ -106,19 +123,12 @@ TEST_F(SmallPhantom, EveryPolypIsSeenInAFlyoverFrame)
 {
     const Centerline& cl = data->centerline;
     const CenterlineLocator locator(cl);
-    const FlyoverParams fp = defaultFlyover();
+    const FlyoverParams fp = defaultFlyoverParams();
     const std::vector<double> frame = flyoverFrameRadii(*data->scene, cl, fp);
     ASSERT_GE(data->truth.polyps.size(), 6u);
     for (const PhantomPolyp& polyp : data->truth.polyps) {
-        // Frames every centerline point within 30 mm of the polyp's nearest point.
-        const std::size_t ip = locator.nearest(polyp.centerMm);
-        int best = 0;
-        std::size_t bestAt = ip;
-        for (std::size_t i = ip > 30 ? ip - 30 : 0; i <= std::min(cl.points.size() - 1, ip + 30); ++i)
-            for (const Camera& cam : flyoverCameras(cl.points[i], fp, frame[i])) {
-                const int n = polypPixels(cam, 128, polyp);
-                if (n > best) best = n, bestAt = i;
-            }
+        std::size_t bestAt = 0;
+        const int best = bestPolypPixels(*data, fp, frame, locator, polyp, bestAt);
         SCOPED_TRACE("polyp r=" + std::to_string(polyp.radiusMm) + " at arc " + std::to_string(polyp.arcMm) +
                      (polyp.betweenFolds ? " (between folds)" : "") + ", seed " + std::to_string(SEED));
         RecordProperty("polyp_" + std::to_string(int(polyp.arcMm)) + "_pixels", best);
@@ -164,7 +174,7 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
                 }
             return n;
         };
-        FlyoverParams fp = defaultFlyover();
+        FlyoverParams fp = defaultFlyoverParams();
         fp.rollDeg = cuttingLineRollDeg(p, polyp.centerMm - p.positionMm);
         auto best = [&](const FlyoverParams& params) {
             int n = 0;
@@ -192,24 +202,22 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
 }
 
 /// The whole chain for one phantom; fly-over coverage with the render stage's defaults.
-CoverageResult defaultCoverage(PhantomSize size, uint64_t seed)
+CoverageResult defaultCoverage(const PhantomScene& s)
 {
-    const auto s = phantomScene(size, seed);
     const RenderParams rp;
     CoverageParams cp;
     cp.viewPx = rp.coveragePx;
     cp.stepMm = rp.coverageStepMm;
-    cp.flyover.fovDeg = rp.fovDeg;
-    cp.flyover.clipOffsetFraction = rp.clipOffsetFraction;
+    cp.flyover = defaultFlyoverParams();
     cp.flythrough = false;
-    return computeCoverage(*s->scene, s->centerline, cp);
+    return computeCoverage(*s.scene, s.centerline, cp);
 }
 
 TEST(PhantomCoverage, FlyoverCoversAtLeast99PercentOnOtherSeedsAndTheMediumPhantom)
 {
     struct Case { PhantomSize size; uint64_t seed; };
     for (const Case c : {Case{PhantomSize::Small, 2}, Case{PhantomSize::Small, 3}, Case{PhantomSize::Medium, 4}}) {
-        const CoverageResult r = defaultCoverage(c.size, c.seed);
+        const CoverageResult r = defaultCoverage(*phantomScene(c.size, c.seed));
         std::printf("%s phantom seed %llu: fly-over coverage %.4f, %zu missed regions >= 10 mm^2\n",
                     phantomSizeName(c.size), static_cast<unsigned long long>(c.seed), r.flyover.fraction,
                     r.flyover.missed.size());
@@ -217,14 +225,28 @@ TEST(PhantomCoverage, FlyoverCoversAtLeast99PercentOnOtherSeedsAndTheMediumPhant
     }
 }
 
-TEST(PhantomCoverage, FlyoverCoversAtLeast99PercentOfTheFullPhantom)
+TEST(PhantomCoverage, FlyoverCoversAtLeast99PercentOfTheFullPhantomAndShowsEveryPolyp)
 {
     // Where h = D(p) missed 1.5% of the wall (haustral pockets beyond D near the cutting line);
-    // the framed half-width R(p) sees all but ~0.15%.
-    const CoverageResult r = defaultCoverage(PhantomSize::Full, 1);
+    // the framed half-width R(p) sees all but ~0.15%. The wider views make polyps smaller on
+    // screen: each must still be clearly in view.
+    const auto s = phantomScene(PhantomSize::Full, 1);
+    const CoverageResult r = defaultCoverage(*s);
     std::printf("full phantom seed 1: fly-over coverage %.4f, %zu missed regions >= 10 mm^2\n", r.flyover.fraction,
                 r.flyover.missed.size());
     EXPECT_GE(r.flyover.fraction, 0.99) << "full phantom, seed 1, 96 px every 3 mm";
+
+    const CenterlineLocator locator(s->centerline);
+    const FlyoverParams fp = defaultFlyoverParams();
+    const std::vector<double> frame = flyoverFrameRadii(*s->scene, s->centerline, fp);
+    ASSERT_GE(s->truth.polyps.size(), 6u);
+    for (const PhantomPolyp& polyp : s->truth.polyps) {
+        std::size_t bestAt = 0;
+        const int best = bestPolypPixels(*s, fp, frame, locator, polyp, bestAt);
+        std::printf("full phantom polyp r=%.1f mm at arc %.0f: %d px (128 px views)\n", polyp.radiusMm, polyp.arcMm, best);
+        EXPECT_GE(best, 30) << "full phantom seed 1, polyp r=" << polyp.radiusMm << " at arc " << polyp.arcMm
+                            << ", best frame at centerline index " << bestAt;
+    }
 }
 
 } // namespace
