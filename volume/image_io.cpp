@@ -802,6 +802,12 @@ public:
             if (h.dim[d] > 1)
                 throw InputError(path + ": image is " + std::to_string(nd) + "D (" + sizeList +
                                  "), e.g. a time series; a single 3D volume is needed");
+        // Dims up to 2^31 each: their product can overflow int64 (found by fuzzing). 2^56
+        // bytes is far beyond any file, and the data size is checked against the file below.
+        const long double totalBytes =
+            static_cast<long double>(h.dim[1]) * h.dim[2] * h.dim[3] * std::max<long double>(1, h.bitpix / 8);
+        if (totalBytes > static_cast<long double>(int64_t(1) << 56))
+            throw InputError(path + ": NIfTI-2 header describes " + sizeList + " voxels, more than any file holds");
         int bytes = 0;
         mType = nifti2ComponentType(h.datatype, bytes);
         if (bytes == 0)

@@ -379,6 +379,8 @@ TEST(Nifti2, BadHeadersGiveOneLineNamingTheFile)
         {"nan_spacing", "voxel spacing along k (z) is nan mm", [](nifti_2_header& h) { h.pixdim[3] = NAN; }, 0},
         {"offset_in_header", "vox_offset 100 lies inside the header", [](nifti_2_header& h) { h.vox_offset = 100; }, 0},
         {"huge", "header/data size mismatch", [](nifti_2_header& h) { h.dim[1] = h.dim[2] = h.dim[3] = 100000; }, 0},
+        // The product overflows int64 (found by fuzzing: UBSan in ImageGeometry::voxelCount).
+        {"overflow", "more than any file holds", [](nifti_2_header& h) { h.dim[1] = h.dim[2] = h.dim[3] = int64_t(1) << 31; }, 0},
         {"magic", "no valid magic", [](nifti_2_header& h) { std::memcpy(h.magic, "xyz\0", 4); }, 0},
         {"short_header", "NIfTI-2 header is truncated (300 of 540 bytes)", [](nifti_2_header&) {}, 300},
         {"sheared_no_qform", "sform has shear", [](nifti_2_header& h) {
