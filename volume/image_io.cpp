@@ -312,6 +312,12 @@ ImageGeometry checkHeader(itk::ImageIOBase& io, const std::string& path)
     if (componentBytes(io.GetComponentType()) == 0)
         throw InputError(path + ": voxel type " + itk::ImageIOBase::GetComponentTypeAsString(io.GetComponentType()) +
                          " is not supported (integers up to 64 bits, float and double are)");
+    // Sizes are unsigned 64-bit: a hostile header can make their product wrap around, and the
+    // data size check with it. 2^56 bytes is far beyond any file.
+    long double totalBytes = static_cast<long double>(componentBytes(io.GetComponentType()));
+    for (auto sz : sizes) totalBytes *= static_cast<long double>(sz);
+    if (totalBytes > static_cast<long double>(int64_t(1) << 56))
+        throw InputError(path + ": header describes " + sizeList + " voxels, more than any file holds");
     ImageGeometry g;
     for (int c = 0; c < 3; ++c) {
         g.size[c] = static_cast<int64_t>(sizes[c]);

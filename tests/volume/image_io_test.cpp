@@ -366,6 +366,9 @@ TEST(ImageIo, MalformedMetaImageHeaderTextIsRefusedBeforeMetaIoReadsIt)
          "line 5 is longer than 1024 characters"},
         {"no_data_file.mhd", good, "has no ElementDataFile field"},
         {"bad_start.mha", good + "= 3\nElementDataFile = LOCAL\n", "line 5 does not start with a field name"},
+        // 2^36 cubed overflows 64 bits: the size check must not wrap around.
+        {"overflow.mha", "ObjectType = Image\nNDims = 3\nDimSize = 68719476736 68719476736 68719476736\n"
+                         "ElementType = MET_SHORT\nElementDataFile = LOCAL\n", "more than any file holds"},
     };
     for (const Case& c : cases) {
         const fs::path p = dir.path / c.name;
