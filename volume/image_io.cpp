@@ -931,7 +931,8 @@ private:
 /// a long one; the parent later died in fflush). So the header text is checked here first,
 /// without MetaIO: every line up to and including ElementDataFile is blank or
 /// "Name = value" (or "Name: value") with a name of letters, digits and '_' (at most 64) and
-/// printable text, at most 1024 characters per line, within the first 64 kB.
+/// printable text, at most 1024 characters per line, within the first 64 kB; and the voxel
+/// data is binary (BinaryData absent or true).
 void checkMetaImageHeaderText(const std::string& path)
 {
     std::ifstream in(path, std::ios::binary);
@@ -961,7 +962,12 @@ void checkMetaImageHeaderText(const std::string& path)
         if (n > 64) bad("has a field name longer than 64 characters");
         const std::size_t sep = t.find_first_not_of(" \t", n);
         if (sep == std::string::npos || (t[sep] != '=' && t[sep] != ':')) bad("is not 'Name = value'");
-        if (t.compare(0, n, "ElementDataFile") == 0) return;
+        const std::string name = t.substr(0, n), value = trim(t.substr(sep + 1));
+        // ASCII voxel data (BinaryData false): MetaIO's region reader writes past the region's
+        // buffer (found by fuzzing: heap corruption). MetaIO takes T, t or 1 for true.
+        if (name == "BinaryData" && (value.empty() || std::string("Tt1").find(value[0]) == std::string::npos))
+            bad("says BinaryData = " + value.substr(0, 20) + ": ASCII voxel data is not supported");
+        if (name == "ElementDataFile") return;
         if (!complete) break;
     }
     throw InputError(path + ": MetaImage header has no ElementDataFile field in its first 64 kB");

@@ -77,7 +77,8 @@ TEST_F(IngestCli, EveryBadScanGivesOneLineNamingItAndExitCode1)
                           Case{"bad/gdcm_abort.dcm", "the image reader (ITK; GDCM for DICOM) crashed on its header"},
                           Case{"bad/gdcm_huge_length.dcm", "not a readable DICOM file"},
                           Case{"bad/metaio_overflow.mha", "MetaImage header line 4 has a field name longer than 64"},
-                          Case{"bad/metaio_unnamed_line.mha", "MetaImage header line 10 holds a non-printable character"},
+                          Case{"bad/metaio_ascii_overrun.mha", "BinaryData = *True: ASCII voxel data is not supported"},
+                          Case{"bad/metaio_ascii_overrun2.mha", "BinaryData = /True: ASCII voxel data is not supported"},
                           Case{"bad/data_file_pattern.mhd", "ElementDataFile 'slice%03d.raw 1 2 1' is a file list or pattern"}}) {
         const Result r = ingest(fixture(c.path));
         EXPECT_EQ(r.exitCode, 1) << c.path << "\n" << r.err;

@@ -271,7 +271,8 @@ TEST(ImageIo, EveryBadInputNamesTheFileAndTheProblem)
         {"bad/gdcm_abort.dcm", "the image reader (ITK; GDCM for DICOM) crashed on its header"},
         {"bad/gdcm_huge_length.dcm", "not a readable DICOM file"},
         {"bad/metaio_overflow.mha", "MetaImage header line 4 has a field name longer than 64 characters"},
-        {"bad/metaio_unnamed_line.mha", "MetaImage header line 10 holds a non-printable character"},
+        {"bad/metaio_ascii_overrun.mha", "MetaImage header line 3 says BinaryData = *True: ASCII voxel data is not supported"},
+        {"bad/metaio_ascii_overrun2.mha", "MetaImage header line 3 says BinaryData = /True: ASCII voxel data is not supported"},
         {"real/LICENSE", "not a readable image"},
     };
     for (const auto& c : cases) {
@@ -366,6 +367,13 @@ TEST(ImageIo, MalformedMetaImageHeaderTextIsRefusedBeforeMetaIoReadsIt)
          "line 5 is longer than 1024 characters"},
         {"no_data_file.mhd", good, "has no ElementDataFile field"},
         {"bad_start.mha", good + "= 3\nElementDataFile = LOCAL\n", "line 5 does not start with a field name"},
+        {"nul.mha", "ObjectType = Image\nNDims = 3\nDim" + std::string(1, '\0') + "Size = 2 2 2\nElementType = MET_SHORT\n"
+                    "ElementDataFile = LOCAL\n", "line 3 holds a non-printable character"},
+        // ASCII data: MetaIO's region reader overran the buffer (found by fuzzing, "/True").
+        {"ascii.mha", "ObjectType = Image\nNDims = 3\nBinaryData = /True\nDimSize = 2 2 2\nElementType = MET_SHORT\n"
+                      "ElementDataFile = LOCAL\n", "line 3 says BinaryData = /True: ASCII voxel data is not supported"},
+        {"ascii_false.mhd", "ObjectType = Image\nNDims = 3\nBinaryData = False\nDimSize = 2 2 2\nElementType = MET_SHORT\n"
+                            "ElementDataFile = LOCAL\n", "ASCII voxel data is not supported"},
         // 2^36 cubed overflows 64 bits: the size check must not wrap around.
         {"overflow.mha", "ObjectType = Image\nNDims = 3\nDimSize = 68719476736 68719476736 68719476736\n"
                          "ElementType = MET_SHORT\nElementDataFile = LOCAL\n", "more than any file holds"},
@@ -377,9 +385,9 @@ TEST(ImageIo, MalformedMetaImageHeaderTextIsRefusedBeforeMetaIoReadsIt)
         EXPECT_NE(msg.find(c.expect), std::string::npos) << c.name << ": expected \"" << c.expect << "\", got \"" << msg << "\"";
         EXPECT_EQ(msg.rfind(p.string(), 0), 0u) << c.name << ": " << msg;
     }
-    // A well-formed header with blank lines and ':' separators still reads.
+    // A well-formed header with blank lines, ':' separators and BinaryData = 1 still reads.
     const fs::path ok = dir.path / "ok.mha";
-    std::ofstream(ok, std::ios::binary) << "ObjectType = Image\n\nNDims: 3\nDimSize = 2 2 2\nElementSpacing = 1 1 1\n"
+    std::ofstream(ok, std::ios::binary) << "ObjectType = Image\n\nNDims: 3\nBinaryData = 1\nDimSize = 2 2 2\nElementSpacing = 1 1 1\n"
                                            "ElementType = MET_SHORT\nElementDataFile = LOCAL\n"
                                         << std::string(16, '\0');
     EXPECT_EQ(openError(ok.string()), "");
