@@ -12,6 +12,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -117,6 +118,28 @@ protected:
     std::vector<std::string> mWarnings;
     std::string mDescription;
     int64_t mHeldBytes = 0;
+};
+
+/// A dense float image in memory as an ImageSource (the image must outlive it).
+class MemoryImageSource final : public ImageSource {
+public:
+    explicit MemoryImageSource(const Image3<float>& image, const std::string& name = "image")
+        : mImage(image)
+    {
+        mName = name;
+        mGeometry = image.geometry;
+        mDescription = "dense float image in memory";
+        mHeldBytes = static_cast<int64_t>(image.voxels.size() * sizeof(float));
+    }
+    void readSlices(int64_t k0, int64_t k1, float* out) override
+    {
+        const std::size_t perSlice = static_cast<std::size_t>(mGeometry.size[0] * mGeometry.size[1]);
+        std::memcpy(out, mImage.voxels.data() + perSlice * static_cast<std::size_t>(k0),
+                    perSlice * static_cast<std::size_t>(k1 - k0) * sizeof(float));
+    }
+
+private:
+    const Image3<float>& mImage;
 };
 
 } // namespace flyover

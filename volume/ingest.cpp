@@ -22,28 +22,6 @@ constexpr int LEAF_DIM = static_cast<int>(LeafT::DIM);  // 8
 /// resampling to the input's own lattice copies values exactly despite rounding.
 constexpr double SNAP = 1e-6;
 
-/// Wraps a dense image as a source.
-class MemorySource final : public ImageSource {
-public:
-    explicit MemorySource(const Image3<float>& image) : mImage(image)
-    {
-        mName = "image";
-        mGeometry = image.geometry;
-        mDescription = "dense float image in memory";
-        mHeldBytes = static_cast<int64_t>(image.voxels.size() * sizeof(float));
-    }
-    void readSlices(int64_t k0, int64_t k1, float* out) override
-    {
-        const auto& s = mGeometry.size;
-        const std::size_t perSlice = static_cast<std::size_t>(s[0] * s[1]);
-        std::memcpy(out, mImage.voxels.data() + perSlice * static_cast<std::size_t>(k0),
-                    perSlice * static_cast<std::size_t>(k1 - k0) * sizeof(float));
-    }
-
-private:
-    const Image3<float>& mImage;
-};
-
 /// Where an output row or column falls in one input slice: lower index, fraction, and
 /// whether it lies inside the slice at all.
 struct AxisSample {
@@ -175,7 +153,7 @@ openvdb::FloatGrid::Ptr ingestImage(const Image3<float>& image, const IngestPara
 {
     if (image.geometry.voxelCount() <= 0 || static_cast<int64_t>(image.voxels.size()) != image.geometry.voxelCount())
         throw InputError("ingest: the image is empty or its buffer does not match its size");
-    MemorySource source(image);
+    MemoryImageSource source(image);
     return ingestImage(source, params, report, progress);
 }
 

@@ -42,26 +42,6 @@ constexpr float CONSTRAINT_TOLERANCE = 0.25f;
 /// How far from a constrained voxel centre (in output voxels) the smoothed surface must stay.
 constexpr float CONSTRAINT_MARGIN_VOXELS = 0.05f;
 
-/// A dense image in memory as an ImageSource.
-class DenseMaskSource final : public ImageSource {
-public:
-    explicit DenseMaskSource(const Image3<float>& image) : mImage(image)
-    {
-        mName = "mask image";
-        mGeometry = image.geometry;
-        mDescription = "dense mask in memory";
-    }
-    void readSlices(int64_t k0, int64_t k1, float* out) override
-    {
-        const std::size_t perSlice = static_cast<std::size_t>(mGeometry.size[0] * mGeometry.size[1]);
-        std::memcpy(out, mImage.voxels.data() + perSlice * static_cast<std::size_t>(k0),
-                    perSlice * static_cast<std::size_t>(k1 - k0) * sizeof(float));
-    }
-
-private:
-    const Image3<float>& mImage;
-};
-
 bool holdsLabel(float v, int label)
 {
     if (label == 0) return v > 0.5f;
@@ -388,7 +368,7 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
 LumenSegmentation segmentFromMask(const Image3<float>& mask, const SegmentParams& params,
                                   const FloatGrid* reference, Progress* progress, MaskSummary* summary)
 {
-    DenseMaskSource source(mask);
+    MemoryImageSource source(mask, "mask image");
     return segmentFromMask(source, params, reference, progress, summary);
 }
 
