@@ -3,6 +3,7 @@
 // mask, separations). Only the small size is generated; the anatomy alone is built for
 // many seeds where the voxels are not needed.
 #include "data/phantom.h"
+#include "truth_arc.h"
 #include "data/phantom_anatomy.h"
 #include "volume/error.h"
 
@@ -695,20 +696,7 @@ TEST(PhantomVariants, DefaultPhantomBytesUnchanged_GoldenRegression)
     EXPECT_EQ(smallPhantom().truth.fluidVolumeMl, 0.0);
 }
 
-/// Arc length (mm) of the truth centerline sample nearest to p (1 mm samples): a search
-/// every 8 samples, refined around the best one (parts of the colon that are not adjacent
-/// lie far further apart than 8 mm).
-double nearestArcMm(const PhantomTruth& t, const Vec3d& p)
-{
-    const std::vector<Vec3d>& c = t.centerlineMm;
-    std::size_t best = 0;
-    for (std::size_t i = 0; i < c.size(); i += 8)
-        if (distance(c[i], p) < distance(c[best], p)) best = i;
-    const std::size_t lo = best >= 8 ? best - 8 : 0, hi = std::min(c.size() - 1, best + 8);
-    for (std::size_t i = lo; i <= hi; ++i)
-        if (distance(c[i], p) < distance(c[best], p)) best = i;
-    return double(best);
-}
+using test::nearestArcMm;
 
 TEST(PhantomVariants, FluidLiesPosteriorOfFlatLevelsAndIsLumen)
 {
@@ -738,7 +726,7 @@ TEST(PhantomVariants, FluidLiesPosteriorOfFlatLevelsAndIsLumen)
                             interior = ph.truthLumen.at(i + di, j + dj, k + dk) != 0;
                 if (!interior) continue;
                 const Vec3d w = g.worldFromIndex({double(i), double(j), double(k)});
-                const double arc = nearestArcMm(ph.truth, w);
+                const double arc = nearestArcMm(ph.truth.centerlineMm, w);
                 for (const PhantomFluidPool& pool : ph.truth.fluidPools) {
                     if (arc < pool.arcStartMm || arc > pool.arcEndMm) continue;
                     const double hu = ph.ct.at(i, j, k);
@@ -786,7 +774,7 @@ TEST(PhantomVariants, CollapsedStretchesHaveNoLumen)
             for (int64_t j = 0; j < g.size[1]; ++j)
                 for (int64_t i = 0; i < g.size[0]; ++i) {
                     if (!ph.truthLumen.at(i, j, k)) continue;
-                    const double arc = nearestArcMm(ph.truth, g.worldFromIndex({double(i), double(j), double(k)}));
+                    const double arc = nearestArcMm(ph.truth.centerlineMm, g.worldFromIndex({double(i), double(j), double(k)}));
                     for (const PhantomCollapse& c : ph.truth.collapsed)
                         inCollapse += arc > c.arcStartMm + g.spacingMm.x && arc < c.arcEndMm - g.spacingMm.x;
                 }

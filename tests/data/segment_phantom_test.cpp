@@ -2,6 +2,7 @@
 // variants (data/phantom.h: clean, tagged fluid, collapsed colon, no colon), measured against
 // the phantom's truth lumen (air and fluid). Small size only (2.5 mm voxels), to keep CI fast.
 #include "data/phantom.h"
+#include "truth_arc.h"
 #include "data/phantom_anatomy.h"
 #include "volume/error.h"
 #include "volume/ingest.h"
@@ -94,20 +95,7 @@ std::string report(const LumenSegmentation& seg)
     return s.str();
 }
 
-/// Arc length (mm) of the truth centerline sample nearest to p (1 mm samples): a search
-/// every 8 samples, refined around the best one (parts of the colon that are not adjacent
-/// lie far further apart than 8 mm).
-double nearestArcMm(const std::vector<Vec3d>& centerline, const Vec3d& p)
-{
-    const std::vector<Vec3d>& c = centerline;
-    std::size_t best = 0;
-    for (std::size_t i = 0; i < c.size(); i += 8)
-        if (distance(c[i], p) < distance(c[best], p)) best = i;
-    const std::size_t lo = best >= 8 ? best - 8 : 0, hi = std::min(c.size() - 1, best + 8);
-    for (std::size_t i = lo; i <= hi; ++i)
-        if (distance(c[i], p) < distance(c[best], p)) best = i;
-    return double(best);
-}
+using test::nearestArcMm;
 
 /// Volumes (mL) of the truth lumen's pieces in arc order: each truth voxel belongs to the
 /// piece between the collapsed stretches that holds its nearest centerline point.
