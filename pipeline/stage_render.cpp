@@ -615,6 +615,7 @@ json runRender(StudyRun& run, Progress* progress)
         cp.flyover = fp;
         cp.ost = rp.ost;
         cp.flythroughFovDeg = rp.flythroughFovDeg;
+        cp.frameRadiiMm = frameRadii;  // the cameras of the frames and the video
         const CoverageResult cov = computeCoverage(scene, cl, cp);
         writeJson(coverage.path("coverage.json"),
                   json{{"schema", "flyover.coverage/1"},

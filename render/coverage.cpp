@@ -193,6 +193,9 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
 {
     validate(params);
     if (centerline.points.empty()) throw InputError("computeCoverage: the centerline is empty");
+    if (!params.frameRadiiMm.empty() && params.frameRadiiMm.size() != centerline.points.size())
+        throw ParameterError("CoverageParams.frameRadiiMm has " + std::to_string(params.frameRadiiMm.size()) +
+                             " values for " + std::to_string(centerline.points.size()) + " centerline points");
     const TriangleGeometry geo = triangleGeometry(scene);
     const std::size_t nf = geo.areaMm2.size();
 
@@ -284,7 +287,9 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                 }
             }
     };
-    const std::vector<double> frameRadii = flyoverFrameRadii(scene, centerline, params.flyover);
+    const std::vector<double> frameRadii = params.frameRadiiMm.empty()
+                                               ? flyoverFrameRadii(scene, centerline, params.flyover)
+                                               : params.frameRadiiMm;
     std::atomic<std::size_t> done{0};
     tbb::parallel_for(std::size_t(0), positions.size(), [&](std::size_t k) {
         Worker& w = workers.local();

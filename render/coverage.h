@@ -38,6 +38,9 @@ struct CoverageParams {
     /// comment); false: only the triangle each ray hits.
     bool footprint = true;
     double minRegionMm2 = 10.0;     ///< missed regions smaller than this are not listed (mm^2)
+    /// The fly-over cameras' framed half-widths, one per centerline point, when the caller has
+    /// them (flyoverFrameRadii() with the same `flyover`); empty: computed here.
+    std::vector<double> frameRadiiMm;
 };
 
 /// A connected set of triangles that no ray of a method hit.

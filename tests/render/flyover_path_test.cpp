@@ -121,6 +121,12 @@ TEST(FlyoverFrameRadii, CoverageOfAnEllipticLumen)
     for (const MissedRegion& r : c.flyover.missed)
         if (r.centroidMm.z > 25 && r.centroidMm.z < 75) missedInMiddle += r.areaMm2;
     EXPECT_EQ(missedInMiddle, 0.0);
+
+    // The radii a caller already has give the same result; a wrong count is refused.
+    p.frameRadiiMm = flyoverFrameRadii(scene, cl, p.flyover);
+    EXPECT_EQ(computeCoverage(scene, cl, p).flyover.seen, c.flyover.seen);
+    p.frameRadiiMm.pop_back();
+    EXPECT_THROW(computeCoverage(scene, cl, p), ParameterError);
 }
 
 TEST(FlyoverFrameRadii, SmoothAlongThePathAndNeverBelowWhatAPointNeeds)
