@@ -68,11 +68,12 @@ int main(int argc, char** argv)
     int phantomTouching = 0;
     bool phantomRedundant = false, phantomTube = false;
     std::string phantomSpacing;
-    phantomCmd->add_option("--touching", phantomTouching, "N (0-6) places where loops far apart along the colon "
-                                                          "press together and their air joins; the truth lists them")
+    phantomCmd->add_option("--touching", phantomTouching, "N places where loops far apart along the colon press "
+                                                          "together and their air joins (at most 2, with --redundant 5); "
+                                                          "the truth lists them")
         ->check(CLI::Range(0, PHANTOM_MAX_CONTACTS));
     phantomCmd->add_flag("--redundant", phantomRedundant, "a redundant colon (extra sigmoid and transverse loops, "
-                                                          "about 2 m)");
+                                                          "about 1.8-1.9 m)");
     phantomCmd->add_flag("--rectal-tube", phantomTube, "an air-filled rectal catheter from the outside air into the rectum");
     phantomCmd->add_option("--spacing", phantomSpacing, "SX,SY,SZ voxel size in mm (same field of view), e.g. "
                                                         "0.8,0.8,1.25; default: the size's");
