@@ -812,7 +812,7 @@ void addContacts(PhantomAnatomy& a, int count, uint64_t seed, const Vec3d& voxel
     if (int(viable.size()) < count) {
         std::ostringstream msg;
         msg << "phantom touching: this colon has room for at most " << viable.size() << " contacts, "
-            << count << " asked";
+            << count << " asked (the default colon has room for 2, the redundant one for 5)";
         throw ParameterError(msg.str());
     }
     std::string lastProblem;
@@ -1014,7 +1014,7 @@ double contactSignedDistanceMm(const PhantomContact& c, const Vec3d& p)
     const Vec3d acrossV = d - c.axis * along;
     // Box: along in [-halfLengthA, halfLengthB], the two across coordinates in +-width/2.
     // The axis is a world axis, so the across components are the other two coordinates.
-    double e[3] = {0.5 * (c.halfLengthAMm + c.halfLengthBMm) - 0.0, 0.5 * c.widthMm, 0.5 * c.widthMm};
+    const double e[3] = {0.5 * (c.halfLengthAMm + c.halfLengthBMm), 0.5 * c.widthMm, 0.5 * c.widthMm};
     const double mid = 0.5 * (c.halfLengthBMm - c.halfLengthAMm);
     int k = 0;
     for (int a = 1; a < 3; ++a)
