@@ -1054,8 +1054,8 @@ PhantomRectalTube makeRectalTube(const PhantomAnatomy& a)
     const Vec3d verge = a.centerlineMm.front();
     const Vec3d tip = a.centerlineMm[std::size_t(std::lround(40.0 / a.stepMm))];
     tube.axisMm = {{-50.0, 150.0, -180.0}, {-45.0, 85.0, -180.0}, {-22.0, 35.0, -171.0}, verge, tip};
-    tube.innerRadiusMm = 3.0;
-    tube.outerRadiusMm = 5.0;
+    tube.innerRadiusMm = 3.5;
+    tube.outerRadiusMm = 5.5;
     tube.wallHu = 200.0;
     return tube;
 }

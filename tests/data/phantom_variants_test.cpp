@@ -431,6 +431,15 @@ TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
             for (double arc : {k.arcAMm, k.arcBMm})
                 EXPECT_TRUE(arc < c.arcStartMm || arc > c.arcEndMm) << "a contact inside a collapsed stretch";
     EXPECT_TRUE(airConnectedToOutside(phantom, phantom.truth.centerlineMm[70]));
+    // The tube's air lumen in the mask stays face-connected to the rectum on 3 mm slices.
+    {
+        const auto& g = phantom.truthLumen.geometry;
+        const auto& axis = phantom.truth.rectalTube.axisMm;
+        const auto mask = [&](const Index& v) { return phantom.truthLumen.at(v[0], v[1], v[2]) != 0; };
+        EXPECT_TRUE(faceConnected(g, nearestVoxel(g, (axis[2] + axis[3]) * 0.5),
+                                  nearestVoxel(g, phantom.truth.centerlineMm[70]), mask))
+            << "the tube's lumen in the mask is not connected to the rectum";
+    }
 
     // The truth JSON carries every variant and reads back.
     const nlohmann::json j = phantomTruthToJson(phantom, p);
