@@ -2,7 +2,7 @@
 # CTest: workflows/cohort/Snakefile on three small phantoms (two CTs, one mask-only) and one
 # corrupt scan, with --cores 2:
 #   1. the three studies complete, the corrupt scan is a "failed" row naming its file and cause;
-#   2. a second invocation does nothing (dry run and real run: "Nothing to be done");
+#   2. a second invocation does nothing ("Nothing to be done", cohort.csv untouched);
 #   3. a changed render parameter re-runs exactly the render jobs (and the report), and flyover
 #      recomputes only its render stage.
 # Usage: cohort_workflow_test.sh FLYOVER_BIN SNAKEFILE.   Exit 77 (skipped) without snakemake.
@@ -19,10 +19,13 @@ WORK=$(mktemp -d "${TMPDIR:-/tmp}/flyover-cohort-test.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
 cd "$WORK" || exit 1
 fails=0
+T0=$(date +%s)
+phase() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
 check() {  # check DESCRIPTION EXPECTED SEEN
   if [ "$2" == "$3" ]; then echo "ok: $1"; else echo "FAIL: $1: expected '$2', saw '$3'"; fails=$((fails + 1)); fi
 }
 
+phase "phantoms"
 # Inputs: phantoms with different seeds; scan 3 is given by its true lumen mask alone.
 mkdir -p scans
 "$FLYOVER" -q phantom scans/p1.nii.gz --truth scans/p1.json --size small --seed 11 || exit 1
@@ -48,29 +51,33 @@ smk() {  # smk RENDER_PARAMS [snakemake options...]
 jobstats() { awk '/^Job stats:/{on=1; next} on && /^total/{exit} on && NF==4 && $2 ~ /^[0-9]+$/ {print $1":"$2}' "$1" | sort | tr '\n' ' '; }
 
 # 1. The first run, without --keep-going: the corrupt scan must not stop the others.
-t0=$(date +%s)
+phase "first run"
 smk "$RENDER" > run1.log 2>&1
 rc=$?
-echo "first run: $(( $(date +%s) - t0 )) s"
+phase "first run done"
 check "first snakemake run exits 0" 0 "$rc"
 [ "$rc" -eq 0 ] || tail -n 40 run1.log
 check "cohort.csv: header + 4 rows" 5 "$(wc -l < cohort/cohort.csv)"
-row() { python3 - "$1" "$2" <<'EOF'
-import csv, sys
-rows = {r["id"]: r for r in csv.DictReader(open("cohort/cohort.csv"))}
-print(rows.get(sys.argv[1], {}).get(sys.argv[2], "<no such row or column>"))
+# The report, read once (one python start per check is slow on a busy machine): "id<TAB>column<TAB>value" lines.
+python3 - > rows.tsv <<'EOF'
+import csv
+for r in csv.DictReader(open("cohort/cohort.csv")):
+    for k, v in r.items():
+        print(f"{r['id']}\t{k}\t{v}")
 EOF
-}
+row() { awk -F'\t' -v id="$1" -v col="$2" '$1 == id && $2 == col {print $3; found=1} END {if (!found) print "<no such row or column>"}' rows.tsv; }
+# between LOW HIGH VALUE: "yes" when LOW < VALUE <= HIGH (a number), else "no: VALUE"
+between() { awk -v lo="$1" -v hi="$2" -v v="$3" 'BEGIN {print (v ~ /^[0-9.eE+-]+$/ && v + 0 > lo && v + 0 <= hi) ? "yes" : "no: " v}'; }
 for id in p1 p2 p3; do
   check "$id: status" ok "$(row $id status)"
   check "$id: error" "" "$(row $id error)"
-  check "$id: lumen volume is a positive number" yes "$(python3 -c "import sys; print('yes' if float(sys.argv[1] or 0) > 100 else 'no')" "$(row $id lumen_volume_ml)")"
-  check "$id: centerline length > 500 mm" yes "$(python3 -c "import sys; print('yes' if float(sys.argv[1] or 0) > 500 else 'no')" "$(row $id centerline_length_mm)")"
-  check "$id: fly-over coverage in (0.9, 1]" yes "$(python3 -c "import sys; v=float(sys.argv[1] or 0); print('yes' if 0.9 < v <= 1 else 'no')" "$(row $id coverage_flyover)")"
+  check "$id: lumen volume in (100, 10000] mL" yes "$(between 100 10000 "$(row $id lumen_volume_ml)")"
+  check "$id: centerline length in (500, 3000] mm" yes "$(between 500 3000 "$(row $id centerline_length_mm)")"
+  check "$id: fly-over coverage in (0.9, 1]" yes "$(between 0.9 1 "$(row $id coverage_flyover)")"
   check "$id: overview thumbnail in the HTML" 1 "$(grep -c "<img src=\"studies/$id/overview.png\"" cohort/cohort.html)"
-  check "$id: render receipt ok" ok "$(python3 -c "import json; print(json.load(open('cohort/studies/$id/stages/render.json'))['status'])")"
+  check "$id: render receipt ok" 1 "$(grep -c '"status": "ok"' cohort/studies/$id/stages/render.json)"
 done
-check "p2 (collapsed sigmoid): collapses >= 1" yes "$(python3 -c "import sys; print('yes' if int(sys.argv[1] or 0) >= 1 else 'no')" "$(row p2 collapses)")"
+check "p2 (collapsed sigmoid): collapses in [1, 3]" yes "$(between 0.5 3 "$(row p2 collapses)")"
 check "p3 is mask-only: no ingest job ran" no "$( [ -e cohort/studies/p3/stages/ingest.json ] && echo yes || echo no)"
 check "broken: status" failed "$(row broken status)"
 check "broken: failed at" ingest "$(row broken failed_stage)"
@@ -82,8 +89,7 @@ check "broken: no overview in its row" "" "$(row broken overview)"
 check "broken: its later stages failed at once with the same cause" yes "$(grep -q 'ingest failed earlier' cohort/studies/broken/stages/render.json && echo yes || echo no)"
 
 # 2. A second invocation does nothing.
-smk "$RENDER" -n > dry2.log 2>&1
-check "second invocation (dry run): nothing to be done" 1 "$(grep -c 'Nothing to be done' dry2.log)"
+phase "second invocation"
 before=$(stat -c %Y cohort/cohort.csv)
 smk "$RENDER" > run2.log 2>&1
 check "second invocation exits 0" 0 "$?"
@@ -96,19 +102,23 @@ sleep 1
 
 # 3. One render parameter changed: only the render jobs (and the report) re-run.
 RENDER2="${RENDER/render.coverage_px=32/render.coverage_px=40}"
-smk "$RENDER2" -n > dry3.log 2>&1
-check "render change (dry run): jobs" "all:1 render:4 report:1 " "$(jobstats dry3.log)"
+phase "render change"
+# The stages the last flyover call computed, from a study's manifest.
+computed_in_manifest() {
+  python3 -c 'import json, sys; m = json.load(open(sys.argv[1])); print(" ".join(s["stage"] for s in m["stages"] if s["computed"]))' \
+    "cohort/studies/$1/manifest.json"
+}
 smk "$RENDER2" > run3.log 2>&1
 check "render change: run exits 0" 0 "$?"
 check "render change: jobs run" "all:1 render:4 report:1 " "$(jobstats run3.log)"
 for id in p1 p2 p3; do
-  check "$id: flyover computed render, reused the rest" "render" "$(python3 -c "
-import json; m = json.load(open('cohort/studies/$id/manifest.json'))
-print(' '.join(s['stage'] for s in m['stages'] if s['computed']))")"
+  check "$id: flyover computed render, reused the rest" "render" "$(computed_in_manifest $id)"
   check "$id: receipts of the other stages untouched" "$(cat receipts-$id.txt)" "$(receipts $id)"
 done
+phase "render change done"
 check "render change: second invocation does nothing" 1 "$(smk "$RENDER2" -n 2>&1 | grep -c 'Nothing to be done')"
 
+phase "end"
 if [ "$fails" -ne 0 ]; then
   echo "$fails check(s) failed; logs:"
   for f in run1.log run3.log; do echo "== $f"; tail -n 30 "$f"; done
