@@ -32,7 +32,7 @@ struct ReviewParams {
     double minRegionMm2 = 10.0;     ///< plan views for missed regions at least this large (mm^2)
     int maxViews = 400;             ///< at most this many review views
     int maxRounds = 4;              ///< rounds of candidates (regions found again each round)
-    std::size_t maxRegionsPerRound = 600;  ///< the largest regions get candidates first
+    std::size_t maxRegionsPerRound = 150;  ///< the largest regions get candidates first
     /// Moves of the rolled pair along the centerline (mm; 0 = at the region's nearest point).
     std::vector<double> shiftsMm{0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 20.0};
     /// Framed half-width of the rolled pair times these factors (1 = the fly-over's elevation).
