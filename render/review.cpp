@@ -265,6 +265,26 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
     double total = 0;
     for (const double a : geo.areaMm2) total += a;
 
+    ReviewResult result;
+    std::vector<uint8_t> seen = flyover.flyover.seen;
+    double seenArea = 0;
+    for (std::size_t f = 0; f < nf; ++f)
+        if (seen[f]) seenArea += geo.areaMm2[f];
+    auto notNeeded = [&] {
+        std::ostringstream s;
+        s << "not needed: fly-over plus review reached the target of " << params.targetFraction * 100.0
+          << "% of the wall";
+        return s.str();
+    };
+    if (seenArea >= params.targetFraction * total) {
+        // The fly-over alone meets the target: its own regions are the answer (no mesh walks).
+        result.withReview = flyover.flyover;
+        result.targetReached = true;
+        for (const MissedRegion& r : result.withReview.missed) result.unreached.push_back({r, notNeeded(), 0.0});
+        reportProgress(progress, 1.0, "review");
+        return result;
+    }
+
     // The fly-over's own regions (same order as flyover.flyover.missed), to say which one each
     // review view serves.
     std::vector<long> flyoverLabel(nf, -1);
@@ -276,12 +296,6 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         for (std::size_t k = 0; k < tris.size(); ++k)
             for (const uint32_t f : tris[k]) flyoverLabel[f] = long(k);
     }
-
-    ReviewResult result;
-    std::vector<uint8_t> seen = flyover.flyover.seen;
-    double seenArea = 0;
-    for (std::size_t f = 0; f < nf; ++f)
-        if (seen[f]) seenArea += geo.areaMm2[f];
 
     const ViewMarker prototype(scene, cov.viewPx, cov.footprint);
     struct Worker {
@@ -393,10 +407,7 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         for (const uint32_t f : finalTris[r]) inRegion[f] = 0;
         std::string why = stopReason;
         if (why.empty() && result.targetReached) {
-            std::ostringstream s;
-            s << "not needed: fly-over plus review reached the target of " << params.targetFraction * 100.0
-              << "% of the wall";
-            why = s.str();
+            why = notNeeded();
         } else if (why.empty() && u.region.areaMm2 < params.minRegionMm2) {
             why = "smaller than the review's minimum region of " + std::to_string(params.minRegionMm2) + " mm^2";
         } else if (why.empty() && last.empty()) {
