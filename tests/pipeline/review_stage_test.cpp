@@ -20,6 +20,8 @@ TEST_F(ReviewStage, WritesReviewFramesPosesAndCoverageWithReview)
 {
     RunOptions o = options("review-on");
     o.params.render.flythroughFrames = false;
+    // Fly-over views 60 mm apart leave gaps between them for the review to fill.
+    o.params.render.coverageStepMm = 60;
     runPipeline(o);
     const fs::path study = o.studyDir;
     const json cov = readJson((study / "coverage/coverage.json").string());
@@ -30,7 +32,7 @@ TEST_F(ReviewStage, WritesReviewFramesPosesAndCoverageWithReview)
     ASSERT_TRUE(cov.contains("flyover_with_review") && cov["flyover_with_review"].is_object());
     const json& withReview = cov["flyover_with_review"];
     const double reviewed = withReview["fraction"].get<double>();
-    std::printf("small phantom, coverage 32 px every 20 mm: fly-over %.4f, with %d review views %.4f\n", alone,
+    std::printf("small phantom, coverage 32 px every 60 mm: fly-over %.4f, with %d review views %.4f\n", alone,
                 cov["review_views"].get<int>(), reviewed);
     EXPECT_GE(reviewed, alone);
     EXPECT_EQ(withReview["target"].get<double>(), 0.995);
@@ -42,7 +44,7 @@ TEST_F(ReviewStage, WritesReviewFramesPosesAndCoverageWithReview)
     }
     EXPECT_EQ(withReview["missed_regions"].size(), withReview["missed_regions_count"].get<std::size_t>());
 
-    // The coarse coverage (32 px every 20 mm) misses plenty: the review has work to do.
+    // Views 60 mm apart miss plenty: the review has work to do.
     EXPECT_LT(alone, 0.995);
     const int views = cov["review_views"].get<int>();
     EXPECT_GT(views, 0);
