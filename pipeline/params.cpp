@@ -83,6 +83,8 @@ template <typename V> void visit(RenderParams& p, V&& v)
     v("coverage", p.coverage, "coverage of fly-over and fly-through, missed regions (coverage/)");
     v("coverage_px", p.coveragePx, "coverage rays per view: coverage_px x coverage_px");
     v("coverage_step_mm", p.coverageStepMm, "distance between coverage views along the centerline (mm)");
+    v("review", p.review, "review views for the fly-over's missed regions >= 10 mm^2 (review/; needs coverage)");
+    v("review_target", p.reviewTarget, "review until fly-over plus review sees this fraction of the wall (0..1]");
 }
 
 template <typename F> void visitStage(PipelineParams& p, const std::string& stage, F&& f)
@@ -277,6 +279,7 @@ void validateParams(const PipelineParams& p)
     require(p.render.videoFps >= 1 && p.render.videoFps <= 120, "render.video_fps", "must be in [1, 120]");
     require(p.render.coveragePx >= 8 && p.render.coveragePx <= 4096, "render.coverage_px", "must be in [8, 4096]");
     require(p.render.coverageStepMm > 0, "render.coverage_step_mm", "must be > 0");
+    require(p.render.reviewTarget > 0 && p.render.reviewTarget <= 1, "render.review_target", "must be in (0, 1]");
 }
 
 std::string describeParams()

@@ -49,6 +49,8 @@ struct RenderParams {
     /// every 1 mm to within 0.1% on the phantoms, at a sixth of the time (issue 8 note).
     int coveragePx = 96;
     double coverageStepMm = 3.0;     ///< distance between coverage views along the centerline (mm)
+    bool review = true;              ///< review views for the fly-over's missed regions (review/)
+    double reviewTarget = 0.995;     ///< review until fly-over plus review sees this fraction (0..1]
     static constexpr int VERSION = 3;  // 3: camera elevation from the framed half-width R(p), not D(p)
 };
 

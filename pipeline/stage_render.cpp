@@ -7,6 +7,7 @@
 //   frames/                   pair_NNNN.png (camera 0 | camera 1), poses.json, flyover.mp4
 //   flythrough/               pair_NNNN.png (forward | backward) at the same positions, poses.json
 //   coverage/                 coverage.json, surface_seen.ply
+//   review/                   review_NNNN.png (review views for what the fly-over missed), poses.json
 // The first fly-over pair is rendered and written before anything else, so it is on disk a
 // fraction of a second after the stage starts (report: first_pair_seconds).
 #include "pipeline/stage_context.h"
@@ -18,6 +19,7 @@
 #include "render/overview.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"
+#include "render/review.h"
 #include "volume/error.h"
 
 #include <tbb/parallel_for.h>
@@ -414,6 +416,91 @@ bool readPlainPly(const std::string& path, std::vector<float>& xyz, std::vector<
     return true;
 }
 
+/// Review views after the fly-over's coverage (render.review): plans them (render/review.h),
+/// renders each into `folder` as review_NNNN.png (a pair like frames/, or one targeted view)
+/// with poses.json, and returns what coverage.json says about them: "flyover_with_review",
+/// "review_views" and "review". With render.review off the folder holds an empty poses.json.
+json renderReview(const RayScene& scene, const Centerline& cl, const CoverageParams& cp,
+                  const std::vector<double>& frameRadii, const CoverageResult& cov, const RenderParams& rp,
+                  const RenderOptions& ro, StagedFolder& folder, Progress* progress)
+{
+    const auto t0 = Clock::now();
+    const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
+    json poses = json::array();
+    json out{{"flyover_with_review", nullptr}, {"review_views", 0}};
+    if (!rp.review) {
+        writeJson(folder.path("poses.json"), json{{"schema", "flyover.review_poses/1"},
+                                                  {"world_frame", WORLD_FRAME},
+                                                  {"enabled", false},
+                                                  {"views", poses}});
+        out["review"] = json{{"enabled", false}};
+        return out;
+    }
+    ReviewParams params;
+    params.targetFraction = rp.reviewTarget;
+    params.minRegionMm2 = cp.minRegionMm2;
+    const ReviewResult review = planReview(scene, cl, cp, frameRadii, cov, params, progress);
+    const double planSeconds = secondsSince(t0);
+
+    std::vector<json> views(review.views.size());
+    tbb::parallel_for(std::size_t(0), review.views.size(), [&](std::size_t k) {
+        const ReviewView& v = review.views[k];
+        char name[32];
+        std::snprintf(name, sizeof name, "review_%04zu.png", k);
+        RgbImage image = renderView(scene, v.cameras[0], ro);
+        if (v.cameras.size() == 2) image = sideBySide(image, renderView(scene, v.cameras[1], ro));
+        writePng(folder.path(name), image);
+        json cams = json::array();
+        for (const Camera& c : v.cameras) cams.push_back(cameraJson(c));
+        views[k] = json{{"view", k},
+                        {"file", name},
+                        {"kind", v.kind},
+                        {"round", v.round},
+                        {"centerline_index", v.centerlineIndex},
+                        {"arc_mm", double(v.centerlineIndex) * clStep},
+                        {"centerline_point_mm", vec3Json(cl.points[v.centerlineIndex].positionMm)},
+                        {"roll_deg", v.rollDeg},
+                        {"frame_radius_mm", v.frameRadiusMm},
+                        {"added_area_mm2", v.addedAreaMm2},
+                        {"flyover_region", v.flyoverRegion >= 0 ? json(v.flyoverRegion) : json(nullptr)},
+                        {"region_centroid_mm", vec3Json(v.regionCentroidMm)},
+                        {"region_area_mm2", v.regionAreaMm2},
+                        {"cameras", cams}};
+    });
+    writeJson(folder.path("poses.json"),
+              json{{"schema", "flyover.review_poses/1"},
+                   {"world_frame", WORLD_FRAME},
+                   {"enabled", true},
+                   {"layout", "pair views (kind *_pair): camera 0 left, camera 1 right; targeted views: one image"},
+                   {"flyover_region_rule", "index into coverage.json flyover.both_cameras.missed_regions of the "
+                                           "region the view adds the most area to (null: only smaller ones)"},
+                   {"render", renderOptionsJson(ro)},
+                   {"views", views}});
+
+    json missed = missedRegionsJson(review.withReview.missed);
+    for (std::size_t r = 0; r < review.unreached.size(); ++r) {
+        missed[r]["reason"] = review.unreached[r].reason;
+        missed[r]["best_candidate_area_mm2"] = review.unreached[r].bestCandidateAreaMm2;
+    }
+    json withReview = methodJson(review.withReview, cp.minRegionMm2);
+    withReview["missed_regions"] = missed;
+    withReview["target"] = params.targetFraction;
+    withReview["target_reached"] = review.targetReached;
+    out["flyover_with_review"] = withReview;
+    out["review_views"] = review.views.size();
+    out["review"] = json{{"enabled", true},
+                         {"target", params.targetFraction},
+                         {"min_region_mm2", params.minRegionMm2},
+                         {"views", review.views.size()},
+                         {"candidates_evaluated", review.candidatesEvaluated},
+                         {"rounds", review.rounds},
+                         {"rays", review.rays},
+                         {"plan_seconds", planSeconds},
+                         {"seconds", secondsSince(t0)},
+                         {"poses", "review/poses.json"}};
+    return out;
+}
+
 } // namespace
 
 json runRender(StudyRun& run, Progress* progress)
@@ -605,8 +692,9 @@ json runRender(StudyRun& run, Progress* progress)
 
     // --- coverage of fly-over and fly-through, missed regions.
     StagedFolder coverage(run.dir, "coverage");
-    json coverageSummary = nullptr;
-    double coverageSeconds = 0;
+    StagedFolder review(run.dir, "review");
+    json coverageSummary = nullptr, reviewInfo = nullptr;
+    double coverageSeconds = 0, reviewSeconds = 0;
     if (rp.coverage) {
         const auto tCoverage = Clock::now();
         CoverageParams cp;
@@ -617,8 +705,10 @@ json runRender(StudyRun& run, Progress* progress)
         cp.flythroughFovDeg = rp.flythroughFovDeg;
         cp.frameRadiiMm = frameRadii;  // the cameras of the frames and the video
         const CoverageResult cov = computeCoverage(scene, cl, cp);
-        writeJson(coverage.path("coverage.json"),
-                  json{{"schema", "flyover.coverage/1"},
+        const auto tReview = Clock::now();
+        reviewInfo = renderReview(scene, cl, cp, frameRadii, cov, rp, ro, review, progress);
+        reviewSeconds = secondsSince(tReview);
+        json coverageJson{{"schema", "flyover.coverage/1"},
                        {"world_frame", WORLD_FRAME},
                        {"total_area_mm2", cov.totalAreaMm2},
                        {"triangles", scene.triangleCount()},
@@ -641,7 +731,9 @@ json runRender(StudyRun& run, Progress* progress)
                          {"one_way_forward", methodJson(cov.flythroughForward, cp.minRegionMm2)},
                          {"one_way_backward", methodJson(cov.flythroughBackward, cp.minRegionMm2)},
                          {"two_way", methodJson(cov.flythroughTwoWay, cp.minRegionMm2)}}},
-                       {"vertex_rule", "surface_seen.ply: a vertex is 1 when every triangle around it was seen"}});
+                       {"vertex_rule", "surface_seen.ply: a vertex is 1 when every triangle around it was seen"}};
+        for (auto it = reviewInfo.begin(); it != reviewInfo.end(); ++it) coverageJson[it.key()] = it.value();
+        writeJson(coverage.path("coverage.json"), coverageJson);
         writeSurfaceSeen(coverage.path("surface_seen.ply"), scene, cov);
         coverageSeconds = secondsSince(tCoverage);
         coverageSummary = json{{"flyover", cov.flyover.fraction},
@@ -649,6 +741,15 @@ json runRender(StudyRun& run, Progress* progress)
                                {"flythrough_one_way_backward", cov.flythroughBackward.fraction},
                                {"flythrough_two_way", cov.flythroughTwoWay.fraction},
                                {"flyover_missed_regions", cov.flyover.missed.size()}};
+        if (rp.review) {
+            coverageSummary["flyover_with_review"] = reviewInfo["flyover_with_review"]["fraction"];
+            coverageSummary["review_views"] = reviewInfo["review_views"];
+        }
+    } else {
+        writeJson(review.path("poses.json"), json{{"schema", "flyover.review_poses/1"},
+                                                  {"world_frame", WORLD_FRAME},
+                                                  {"enabled", false},
+                                                  {"views", json::array()}});
     }
     reportProgress(progress, 1.0, "render done");
 
@@ -656,6 +757,7 @@ json runRender(StudyRun& run, Progress* progress)
     flythrough.commit();
     overviews.commit();
     coverage.commit();
+    review.commit();
 
     return json{{"frame_pairs", indices.size()},
                 {"triangles", scene.triangleCount()},
@@ -671,6 +773,7 @@ json runRender(StudyRun& run, Progress* progress)
                 {"overview_seconds", overviewSeconds},
                 {"video_seconds", videoSeconds},
                 {"coverage_seconds", coverageSeconds},
+                {"review_seconds", reviewSeconds},
                 {"coverage", coverageSummary},
                 {"overview_camera", overviewCameras["anterior"]}};
 }

@@ -54,7 +54,7 @@ const std::vector<StageSpec>& stageSpecs()
         {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage},
         {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline},
         {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh},
-        {"render", {"centerline", "mesh"}, {"surface.ply", "centerline.json"}, {"overview.png", "frames", "flythrough", "overviews", "coverage"}, runRender},
+        {"render", {"centerline", "mesh"}, {"surface.ply", "centerline.json"}, {"overview.png", "frames", "flythrough", "overviews", "coverage", "review"}, runRender},
     };
     return specs;
 }

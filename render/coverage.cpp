@@ -17,7 +17,26 @@
 
 namespace flyover {
 
+/// Triangles around each vertex (compressed rows), for the edge neighbours of a triangle.
+struct ViewMarker::Topology {
+    std::vector<uint32_t> start;  ///< triangles of vertex v: list[start[v] .. start[v + 1])
+    std::vector<uint32_t> list;
+
+    explicit Topology(const RayScene::Impl& im)
+    {
+        const std::size_t nv = im.vertices.size() - 1;
+        start.assign(nv + 1, 0);
+        for (const uint32_t v : im.indices) ++start[v + 1];
+        for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+        list.resize(im.indices.size());
+        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+        for (std::size_t k = 0; k < im.indices.size(); ++k) list[fill[im.indices[k]]++] = uint32_t(k / 3);
+    }
+};
+
 namespace {
+
+using VertexTriangles = ViewMarker::Topology;
 
 void validate(const CoverageParams& p)
 {
@@ -32,26 +51,9 @@ void validate(const CoverageParams& p)
 }
 
 /// Seen area, fraction and missed regions of one method from its per-triangle marks.
-/// Triangles around each vertex (compressed rows), for the edge neighbours of a triangle.
-struct VertexTriangles {
-    std::vector<uint32_t> start;  ///< triangles of vertex v: list[start[v] .. start[v + 1])
-    std::vector<uint32_t> list;
-
-    explicit VertexTriangles(const RayScene::Impl& im)
-    {
-        const std::size_t nv = im.vertices.size() - 1;
-        start.assign(nv + 1, 0);
-        for (const uint32_t v : im.indices) ++start[v + 1];
-        for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-        list.resize(im.indices.size());
-        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
-        for (std::size_t k = 0; k < im.indices.size(); ++k) list[fill[im.indices[k]]++] = uint32_t(k / 3);
-    }
-};
-
 void summarise(MethodCoverage& m, const RayScene::Impl& im, const VertexTriangles& vt, const TriangleGeometry& geo,
-               double totalArea,
-               const Centerline& line, const CenterlineLocator& locator, double minRegionMm2)
+               double totalArea, const Centerline& line, const CenterlineLocator& locator, double minRegionMm2,
+               std::vector<std::vector<uint32_t>>* regionTriangles = nullptr)
 {
     const std::size_t nf = geo.areaMm2.size();
     m.seenAreaMm2 = 0;
@@ -62,6 +64,8 @@ void summarise(MethodCoverage& m, const RayScene::Impl& im, const VertexTriangle
     // Edge-connected components of unseen triangles (iterative flood fill).
     std::vector<uint8_t> visited(nf, 0);
     std::vector<int> stack;
+    std::vector<uint32_t> members;
+    std::vector<std::vector<uint32_t>> regionMembers;
     m.missed.clear();
     m.missedInListedRegionsMm2 = 0;
     for (std::size_t f0 = 0; f0 < nf; ++f0) {
@@ -70,9 +74,11 @@ void summarise(MethodCoverage& m, const RayScene::Impl& im, const VertexTriangle
         Vec3d weighted{0, 0, 0};
         visited[f0] = 1;
         stack.assign(1, int(f0));
+        members.clear();
         while (!stack.empty()) {
             const int f = stack.back();
             stack.pop_back();
+            if (regionTriangles) members.push_back(uint32_t(f));
             r.areaMm2 += geo.areaMm2[std::size_t(f)];
             weighted += geo.centroidMm[std::size_t(f)] * geo.areaMm2[std::size_t(f)];
             ++r.triangles;
@@ -98,9 +104,21 @@ void summarise(MethodCoverage& m, const RayScene::Impl& im, const VertexTriangle
         r.distanceToCenterlineMm = distance(r.centroidMm, line.points[r.nearestCenterlineIndex].positionMm);
         m.missedInListedRegionsMm2 += r.areaMm2;
         m.missed.push_back(r);
+        if (regionTriangles) regionMembers.push_back(members);
     }
-    std::sort(m.missed.begin(), m.missed.end(),
-              [](const MissedRegion& a, const MissedRegion& b) { return a.areaMm2 > b.areaMm2; });
+    // Largest first (ties in discovery order, so the result does not depend on the sort).
+    std::vector<std::size_t> order(m.missed.size());
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return m.missed[a].areaMm2 > m.missed[b].areaMm2; });
+    std::vector<MissedRegion> sorted;
+    sorted.reserve(order.size());
+    for (const std::size_t k : order) sorted.push_back(m.missed[k]);
+    m.missed.swap(sorted);
+    if (regionTriangles) {
+        regionTriangles->clear();
+        for (const std::size_t k : order) regionTriangles->push_back(std::move(regionMembers[k]));
+    }
 }
 
 } // namespace
@@ -188,6 +206,111 @@ std::size_t CenterlineLocator::nearest(const Vec3d& q) const
     return bestIndex;
 }
 
+/// Per-marker scratch: the hit image and the footprint walk's state.
+struct ViewMarker::Scratch {
+    HitImage hits;
+    std::vector<uint32_t> stamp;  ///< BFS visit marks, one stamp value per ray
+    uint32_t currentStamp = 0;
+    std::vector<uint32_t> queue;
+};
+
+ViewMarker::ViewMarker(const RayScene& scene, int viewPx, bool footprint)
+    : mScene(scene), mViewPx(viewPx), mFootprint(footprint)
+{
+    if (!(viewPx >= 8 && viewPx <= 4096))
+        throw ParameterError("ViewMarker: viewPx must be in 8..4096, got " + std::to_string(viewPx));
+    mTopology = std::make_shared<const Topology>(scene.impl());
+    mScratch = std::make_unique<Scratch>();
+}
+
+ViewMarker::ViewMarker(const ViewMarker& other)
+    : mScene(other.mScene), mViewPx(other.mViewPx), mFootprint(other.mFootprint), mTopology(other.mTopology),
+      mScratch(std::make_unique<Scratch>())
+{
+}
+
+ViewMarker::~ViewMarker() = default;
+
+uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>& out)
+{
+    const RayScene::Impl& im = mScene.impl();
+    const Topology& vt = *mTopology;
+    const std::size_t nf = im.triangles;
+    Scratch& w = *mScratch;
+    if (w.stamp.size() != nf) w.stamp.assign(nf, 0);
+    auto vertexOf = [&](uint32_t f, int k) {
+        const auto& v = im.vertices[im.indices[3 * std::size_t(f) + std::size_t(k)]];
+        return Vec3d{v.x, v.y, v.z};
+    };
+    RenderOptions o;
+    o.widthPx = o.heightPx = mViewPx;
+    o.ost = ost;
+    HitImage& hits = w.hits;
+    traceHits(mScene, camera, o, hits);
+    // Lateral distance between neighbouring rays at depth 1 (dot(dir, forward) == 1).
+    const double spacingAtUnitDepth =
+        2.0 * std::tan(0.5 * camera.fovDeg * 3.14159265358979323846 / 180.0) / double(mViewPx);
+    for (int y = 0; y < hits.height; ++y)
+        for (int x = 0; x < hits.width; ++x) {
+            const std::size_t pix = std::size_t(y) * std::size_t(hits.width) + std::size_t(x);
+            const uint32_t id = hits.primId[pix];
+            if (id >= nf) continue;
+            out.push_back(id);
+            if (!mFootprint) continue;
+            // The ray's footprint: the surface within half the ray spacing of the hit,
+            // stretched by 1/cos of the incidence (capped at 4x), walked over edge
+            // neighbours that face the camera.
+            const Vec3d dir = pixelDirection(camera, hits.width, hits.height, x + 0.5, y + 0.5);
+            const Vec3d hit = camera.position + dir * double(hits.t[pix]);
+            const Vec3d ng = normalize(cross(vertexOf(id, 1) - vertexOf(id, 0), vertexOf(id, 2) - vertexOf(id, 0)));
+            const double cosine = std::fabs(dot(normalize(dir), ng));
+            const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
+            const double r2 = radius * radius;
+            if (++w.currentStamp == 0) {  // wrapped: clear the marks once every 2^32 rays
+                std::fill(w.stamp.begin(), w.stamp.end(), 0u);
+                w.currentStamp = 1;
+            }
+            w.stamp[id] = w.currentStamp;
+            w.queue.assign(1, id);
+            for (std::size_t q = 0; q < w.queue.size(); ++q) {
+                const uint32_t* t = &im.indices[3 * std::size_t(w.queue[q])];
+                for (int e = 0; e < 3; ++e) {
+                    const uint32_t a = t[e], b = t[(e + 1) % 3];
+                    for (uint32_t k = vt.start[a]; k < vt.start[a + 1]; ++k) {
+                        const uint32_t g = vt.list[k];
+                        if (w.stamp[g] == w.currentStamp) continue;
+                        const uint32_t* u = &im.indices[3 * std::size_t(g)];
+                        if (u[0] != b && u[1] != b && u[2] != b) continue;
+                        w.stamp[g] = w.currentStamp;
+                        const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
+                        const Vec3d n = cross(c1 - c0, c2 - c0);
+                        const bool facing = ost ? dot(c0 - camera.position, n) < 0.0 : true;
+                        const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
+                        const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
+                        if (!facing || !near) continue;
+                        out.push_back(g);
+                        w.queue.push_back(g);
+                    }
+                }
+            }
+        }
+    return uint64_t(mViewPx) * uint64_t(mViewPx);
+}
+
+void summariseCoverage(MethodCoverage& m, const RayScene& scene, const Centerline& centerline, double minRegionMm2,
+                       std::vector<std::vector<uint32_t>>* regionTriangles)
+{
+    if (m.seen.size() != scene.triangleCount())
+        throw ParameterError("summariseCoverage: " + std::to_string(m.seen.size()) + " seen flags for " +
+                             std::to_string(scene.triangleCount()) + " triangles");
+    const TriangleGeometry geo = triangleGeometry(scene);
+    double total = 0;
+    for (const double a : geo.areaMm2) total += a;
+    const VertexTriangles vt(scene.impl());
+    const CenterlineLocator locator(centerline);
+    summarise(m, scene.impl(), vt, geo, total, centerline, locator, minRegionMm2, regionTriangles);
+}
+
 CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerline, const CoverageParams& params,
                                Progress* progress)
 {
@@ -212,80 +335,24 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
     if (positions.back() != centerline.points.size() - 1) positions.push_back(centerline.points.size() - 1);
     result.positions = positions.size();
 
-    RenderOptions ro;
-    ro.widthPx = ro.heightPx = params.viewPx;
-    const RayScene::Impl& im = scene.impl();
-    const VertexTriangles vt(im);
-    // Positions are marked in parallel; each worker has its own hit image, BFS state and seen
-    // flags (OR-ed at the end), so no two threads write the same byte.
+    // Positions are marked in parallel; each worker has its own marker (hit image, BFS state)
+    // and seen flags (OR-ed at the end), so no two threads write the same byte.
+    const ViewMarker prototype(scene, params.viewPx, params.footprint);
     struct Worker {
-        HitImage hits;
-        std::vector<uint32_t> stamp;  // BFS visit marks, one stamp value per ray
-        uint32_t currentStamp = 0;
-        std::vector<uint32_t> queue;
+        ViewMarker marker;
+        std::vector<uint32_t> shown;
         std::vector<uint8_t> seen[3];  // fly-over, fly-through forward, backward
         uint64_t rays = 0;
     };
-    tbb::enumerable_thread_specific<Worker> workers([nf] {
-        Worker w;
-        w.stamp.assign(nf, 0);
+    tbb::enumerable_thread_specific<Worker> workers([&] {
+        Worker w{prototype, {}, {}, 0};
         for (auto& s : w.seen) s.assign(nf, 0);
         return w;
     });
-    auto vertexOf = [&](uint32_t f, int k) {
-        const auto& v = im.vertices[im.indices[3 * std::size_t(f) + std::size_t(k)]];
-        return Vec3d{v.x, v.y, v.z};
-    };
     auto mark = [&](Worker& w, const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
-        RenderOptions o = ro;
-        o.ost = ost;
-        HitImage& hits = w.hits;
-        traceHits(scene, camera, o, hits);
-        w.rays += uint64_t(params.viewPx) * uint64_t(params.viewPx);
-        // Lateral distance between neighbouring rays at depth 1 (dot(dir, forward) == 1).
-        const double spacingAtUnitDepth = 2.0 * std::tan(0.5 * camera.fovDeg * 3.14159265358979323846 / 180.0) /
-                                          double(params.viewPx);
-        for (int y = 0; y < hits.height; ++y)
-            for (int x = 0; x < hits.width; ++x) {
-                const std::size_t pix = std::size_t(y) * std::size_t(hits.width) + std::size_t(x);
-                const uint32_t id = hits.primId[pix];
-                if (id >= nf) continue;
-                seen[id] = 1;
-                if (!params.footprint) continue;
-                // The ray's footprint: the surface within half the ray spacing of the hit,
-                // stretched by 1/cos of the incidence (capped at 4x), walked over edge
-                // neighbours that face the camera.
-                const Vec3d dir = pixelDirection(camera, hits.width, hits.height, x + 0.5, y + 0.5);
-                const Vec3d hit = camera.position + dir * double(hits.t[pix]);
-                const Vec3d ng = normalize(cross(vertexOf(id, 1) - vertexOf(id, 0), vertexOf(id, 2) - vertexOf(id, 0)));
-                const double cosine = std::fabs(dot(normalize(dir), ng));
-                const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
-                const double r2 = radius * radius;
-                ++w.currentStamp;
-                w.stamp[id] = w.currentStamp;
-                w.queue.assign(1, id);
-                for (std::size_t q = 0; q < w.queue.size(); ++q) {
-                    const uint32_t* t = &im.indices[3 * std::size_t(w.queue[q])];
-                    for (int e = 0; e < 3; ++e) {
-                        const uint32_t a = t[e], b = t[(e + 1) % 3];
-                        for (uint32_t k = vt.start[a]; k < vt.start[a + 1]; ++k) {
-                            const uint32_t g = vt.list[k];
-                            if (w.stamp[g] == w.currentStamp) continue;
-                            const uint32_t* u = &im.indices[3 * std::size_t(g)];
-                            if (u[0] != b && u[1] != b && u[2] != b) continue;
-                            w.stamp[g] = w.currentStamp;
-                            const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
-                            const Vec3d n = cross(c1 - c0, c2 - c0);
-                            const bool facing = ost ? dot(c0 - camera.position, n) < 0.0 : true;
-                            const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
-                            const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
-                            if (!facing || !near) continue;
-                            seen[g] = 1;
-                            w.queue.push_back(g);
-                        }
-                    }
-                }
-            }
+        w.shown.clear();
+        w.rays += w.marker.mark(camera, ost, w.shown);
+        for (const uint32_t f : w.shown) seen[f] = 1;
     };
     const std::vector<double> frameRadii = params.frameRadiiMm.empty()
                                                ? flyoverFrameRadii(scene, centerline, params.flyover)
@@ -317,7 +384,8 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
     const CenterlineLocator locator(centerline);
     for (MethodCoverage* m :
          {&result.flyover, &result.flythroughForward, &result.flythroughBackward, &result.flythroughTwoWay})
-        summarise(*m, scene.impl(), vt, geo, result.totalAreaMm2, centerline, locator, params.minRegionMm2);
+        summarise(*m, scene.impl(), prototype.topology(), geo, result.totalAreaMm2, centerline, locator,
+                  params.minRegionMm2);
     reportProgress(progress, 1.0, "coverage");
     return result;
 }

@@ -22,6 +22,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <unordered_map>
 #include <vector>
 
@@ -101,5 +102,40 @@ struct TriangleGeometry {
     std::vector<Vec3d> centroidMm;
 };
 TriangleGeometry triangleGeometry(const RayScene& scene);
+
+/// The triangles one view shows, by computeCoverage's rule: each ray's triangle and, with
+/// `footprint`, those within its footprint (see the file comment). Keeps scratch buffers, so
+/// one marker per thread; copies share the mesh topology (built once) and have their own
+/// scratch. Keeps a reference to the scene: it must outlive the marker.
+class ViewMarker {
+public:
+    /// @throw ParameterError for viewPx outside 8..4096
+    ViewMarker(const RayScene& scene, int viewPx, bool footprint);
+    ViewMarker(const ViewMarker& other);
+    ViewMarker& operator=(const ViewMarker&) = delete;
+    ~ViewMarker();
+
+    /// Appends the triangles that `camera` (viewPx x viewPx rays, OST when `ost`) shows to
+    /// `out`; a triangle may be appended more than once. @return the rays traced
+    uint64_t mark(const Camera& camera, bool ost, std::vector<uint32_t>& out);
+
+    struct Topology;
+    const Topology& topology() const { return *mTopology; }
+
+private:
+    const RayScene& mScene;
+    int mViewPx;
+    bool mFootprint;
+    std::shared_ptr<const Topology> mTopology;
+    struct Scratch;
+    std::unique_ptr<Scratch> mScratch;
+};
+
+/// Fills `m.seenAreaMm2`, `m.fraction` and `m.missed` from `m.seen` (one flag per triangle of
+/// the scene), as computeCoverage does for each method; `regionTriangles`, when given, gets the
+/// triangles of each listed region, in the order of `m.missed`.
+/// @throw ParameterError when m.seen has the wrong size; InputError for an empty centerline
+void summariseCoverage(MethodCoverage& m, const RayScene& scene, const Centerline& centerline, double minRegionMm2,
+                       std::vector<std::vector<uint32_t>>* regionTriangles = nullptr);
 
 } // namespace flyover

@@ -63,3 +63,25 @@ TEST(Params, ValidationNamesTheParameter)
     p = {};
     EXPECT_NO_THROW(validateParams(p));
 }
+
+TEST(Params, ReviewParametersParseAndValidate)
+{
+    PipelineParams p;
+    EXPECT_TRUE(p.render.review);
+    EXPECT_DOUBLE_EQ(p.render.reviewTarget, 0.995);
+    applyParamAssignment(p, "render.review=false");
+    applyParamAssignment(p, "render.review_target=0.98");
+    EXPECT_FALSE(p.render.review);
+    EXPECT_DOUBLE_EQ(p.render.reviewTarget, 0.98);
+    EXPECT_NO_THROW(validateParams(p));
+    EXPECT_THROW(applyParamAssignment(p, "render.review=maybe"), ParameterError);
+    for (const double bad : {0.0, -0.5, 1.01}) {
+        p.render.reviewTarget = bad;
+        try {
+            validateParams(p);
+            FAIL() << "render.review_target " << bad << " accepted";
+        } catch (const ParameterError& e) {
+            EXPECT_NE(std::string(e.what()).find("render.review_target"), std::string::npos) << e.what();
+        }
+    }
+}

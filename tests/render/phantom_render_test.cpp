@@ -8,6 +8,7 @@
 #include "render/coverage.h"
 #include "render/flyover_path.h"
 #include "render/render_view.h"
+#include "render/review.h"
 #include "surface/extract_surface.h"
 #include "volume/centerline.h"
 #include "volume/ingest.h"
@@ -16,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <string>
 #pragma GCC diagnostic pop
@@ -198,6 +200,50 @@ TEST_F(SmallPhantom, PolypOnTheCuttingLineIsSeenInOneOfTheViews)
         // each view shows only a part of it (an open ring at the image edge); with the plane
         // nearer the camera one view shows it whole. Measured ratios 2.7..8.6 (seed 1).
         EXPECT_GE(withDefault, 2 * withoutOffset) << "default offset " << withDefault << " px, offset 0 " << withoutOffset << " px";
+    }
+}
+
+TEST_F(SmallPhantom, ReviewReachesTheTargetAndEveryPolypIsSeen)
+{
+    // The render stage's defaults: coverage rays 96 px every 3 mm, review to 99.5%.
+    const RenderParams rp;
+    CoverageParams cp;
+    cp.viewPx = rp.coveragePx;
+    cp.stepMm = rp.coverageStepMm;
+    cp.flyover = defaultFlyoverParams();
+    cp.flythrough = false;
+    cp.frameRadiiMm = flyoverFrameRadii(*data->scene, data->centerline, cp.flyover);
+    const CoverageResult c = computeCoverage(*data->scene, data->centerline, cp);
+    ReviewParams review;
+    review.targetFraction = rp.reviewTarget;
+    const ReviewResult r = planReview(*data->scene, data->centerline, cp, cp.frameRadiiMm, c, review);
+    std::printf("small phantom seed %llu: fly-over %.4f (%zu regions >= 10 mm^2), with %zu review views %.4f "
+                "(%zu regions left, %zu candidates)\n",
+                static_cast<unsigned long long>(SEED), c.flyover.fraction, c.flyover.missed.size(), r.views.size(),
+                r.withReview.fraction, r.withReview.missed.size(), r.candidatesEvaluated);
+    RecordProperty("flyover", std::to_string(c.flyover.fraction));
+    RecordProperty("with_review", std::to_string(r.withReview.fraction));
+    RecordProperty("review_views", int(r.views.size()));
+    EXPECT_GE(c.flyover.fraction, 0.99);
+    EXPECT_GE(r.withReview.fraction, rp.reviewTarget);
+    EXPECT_TRUE(r.targetReached);
+    ASSERT_EQ(r.unreached.size(), r.withReview.missed.size());
+    for (const UnreachedRegion& u : r.unreached) EXPECT_FALSE(u.reason.empty());
+
+    // Every polyp's surface (triangles within 1 mm of its sphere) is seen, nearly all of it.
+    const TriangleGeometry geo = triangleGeometry(*data->scene);
+    ASSERT_GE(data->truth.polyps.size(), 6u);
+    for (const PhantomPolyp& polyp : data->truth.polyps) {
+        double area = 0, seen = 0;
+        for (std::size_t f = 0; f < geo.areaMm2.size(); ++f)
+            if (std::fabs(distance(geo.centroidMm[f], polyp.centerMm) - polyp.radiusMm) <= POLYP_MARGIN_MM) {
+                area += geo.areaMm2[f];
+                if (r.withReview.seen[f]) seen += geo.areaMm2[f];
+            }
+        std::printf("polyp r=%.1f mm at arc %.0f: %.1f of %.1f mm^2 seen with review\n", polyp.radiusMm, polyp.arcMm,
+                    seen, area);
+        ASSERT_GT(area, 0.0) << "no triangles on the polyp at arc " << polyp.arcMm;
+        EXPECT_GE(seen, 0.9 * area) << "polyp r=" << polyp.radiusMm << " at arc " << polyp.arcMm;
     }
 }
 
