@@ -128,6 +128,7 @@ json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* pr
     {
         auto source = openImage(maskPath);
         seg = segmentFromMask(*source, params, run.state.hu.get(), progress, &summary);
+        checkPlausibleColon(seg, params, maskPath);
     }
     if (run.opt.log && summary.voxelsOutsideReference > 0)
         run.opt.log->message("segment: warning: " + std::to_string(summary.voxelsOutsideReference) +

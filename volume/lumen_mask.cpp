@@ -299,38 +299,6 @@ RectalTube cutMaskRectalTube(FloatTree& indicator, const ImageGeometry& g, const
     return tube;
 }
 
-/// A plausible colon: pieces of at least minComponentMl, together a tube rather than a ball:
-/// their volume is at least PLAUSIBLE_ELONGATION times that of the largest ball inside the
-/// lumen (radius: the deepest level set value). A ball gives 1; a tube of radius R and length
-/// L gives 3L / 4R (a whole colon: 10 to 20; a partial colon of a few loops: 3 to 5).
-void checkPlausibleColon(const LumenSegmentation& seg, const SegmentParams& params, const std::string& name)
-{
-    constexpr double PI = 3.14159265358979323846;
-    double bigMl = 0, largestMl = 0;
-    for (const LumenPiece& p : seg.pieces) {
-        if (p.volumeMl >= params.minComponentMl) bigMl += p.volumeMl;
-        largestMl = std::max(largestMl, p.volumeMl);
-    }
-    float deepest = 0;
-    for (auto it = seg.sdf->tree().cbeginValueOn(); it; ++it) deepest = std::min(deepest, *it);
-    const double ballMl = 4.0 / 3.0 * PI * std::pow(double(-deepest), 3) / 1000.0;
-    const double elongation = ballMl > 0 ? bigMl / ballMl : 0.0;
-    if (bigMl > 0 && elongation >= PLAUSIBLE_ELONGATION) return;
-    std::ostringstream msg;
-    msg << std::fixed << std::setprecision(1) << name
-        << ": no plausible colon in the mask (a colon has pieces of at least " << params.minComponentMl
-        << " mL whose volume is at least " << PLAUSIBLE_ELONGATION
-        << " times that of the largest ball inside them: a tube, not a ball): ";
-    if (seg.pieces.empty()) msg << "the lumen is empty";
-    else if (bigMl == 0)
-        msg << seg.pieces.size() << " piece(s), the largest " << std::setprecision(2) << largestMl << " mL";
-    else
-        msg << "the pieces of " << bigMl << " mL are compact, not a tube (largest inside ball " << std::setprecision(1)
-            << 2.0 * double(-deepest) << " mm wide, " << ballMl << " mL; ratio " << std::setprecision(2) << elongation
-            << ")";
-    throw InputError(msg.str());
-}
-
 } // namespace
 
 LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params,
@@ -496,7 +464,6 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     LumenSegmentation result;
     result.rectalTube = tube;
     detail::finishLumen(phi, params, result, progress);
-    checkPlausibleColon(result, params, mask.name());
     if (summaryOut) *summaryOut = summary;
     reportProgress(progress, 1.0, "lumen from mask");
     return result;
@@ -507,6 +474,34 @@ LumenSegmentation segmentFromMask(const Image3<float>& mask, const SegmentParams
 {
     MemoryImageSource source(mask, "mask image");
     return segmentFromMask(source, params, reference, progress, summary);
+}
+
+void checkPlausibleColon(const LumenSegmentation& seg, const SegmentParams& params, const std::string& name)
+{
+    constexpr double PI = 3.14159265358979323846;
+    double bigMl = 0, largestMl = 0;
+    for (const LumenPiece& p : seg.pieces) {
+        if (p.volumeMl >= params.minComponentMl) bigMl += p.volumeMl;
+        largestMl = std::max(largestMl, p.volumeMl);
+    }
+    float deepest = 0;
+    for (auto it = seg.sdf->tree().cbeginValueOn(); it; ++it) deepest = std::min(deepest, *it);
+    const double ballMl = 4.0 / 3.0 * PI * std::pow(double(-deepest), 3) / 1000.0;
+    const double elongation = ballMl > 0 ? bigMl / ballMl : 0.0;
+    if (bigMl > 0 && elongation >= PLAUSIBLE_ELONGATION) return;
+    std::ostringstream msg;
+    msg << std::fixed << std::setprecision(1) << name
+        << ": no plausible colon in the mask (a colon has pieces of at least " << params.minComponentMl
+        << " mL whose volume is at least " << PLAUSIBLE_ELONGATION
+        << " times that of the largest ball inside them: a tube, not a ball): ";
+    if (seg.pieces.empty()) msg << "the lumen is empty";
+    else if (bigMl == 0)
+        msg << seg.pieces.size() << " piece(s), the largest " << std::setprecision(2) << largestMl << " mL";
+    else
+        msg << "the pieces of " << bigMl << " mL are compact, not a tube (largest inside ball " << std::setprecision(1)
+            << 2.0 * double(-deepest) << " mm wide, " << ballMl << " mL; ratio " << std::setprecision(2) << elongation
+            << ")";
+    throw InputError(msg.str());
 }
 
 Image3<uint8_t> rasterizeLumen(const FloatGrid& sdf, const ImageGeometry& geometry)

@@ -317,7 +317,7 @@ TEST(RectalTube, MasksWithoutPlausibleColonRefused)
     SegmentParams p;
     auto message = [&](const Image3<float>& img) {
         try {
-            (void)segmentFromMask(img, p);
+            checkPlausibleColon(segmentFromMask(img, p), p, "test mask");
         } catch (const InputError& e) {
             return std::string(e.what());
         }
@@ -333,7 +333,7 @@ TEST(RectalTube, MasksWithoutPlausibleColonRefused)
     EXPECT_NE(m.find("no plausible colon"), std::string::npos) << m;
     EXPECT_NE(m.find("3 piece(s)"), std::string::npos) << m;
     // The U-shaped colon passes.
-    EXPECT_NO_THROW((void)segmentFromMask(tubeMask(MaskKind::Filled, 0, false), p));
+    EXPECT_NO_THROW(checkPlausibleColon(segmentFromMask(tubeMask(MaskKind::Filled, 0, false), p), p, "test mask"));
 }
 
 } // namespace
