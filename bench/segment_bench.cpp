@@ -1,7 +1,10 @@
 // segment_bench: lumen segmentation (volume/segment.h) on a phantom's HU grid, against a
 // plain pass over the same grid (air threshold + face-connected components), as a ratio.
+// With --mask: the mask-only path (volume/lumen_mask.h, segmentFromMask) on the phantom's true
+// lumen mask written as .nii.gz (read from the file, as `flyover run --mask` does), with the
+// time of each step.
 //
-//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse]
+//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask]
 //
 // The phantom is generated and ingested once and saved as a temporary .vdb; each measured
 // pass then runs in a fresh child process (this program with --grid FILE --mode MODE) that
@@ -11,7 +14,9 @@
 // child's resident memory after loading and at its peak.
 #include "bench/process_memory.h"
 #include "data/phantom.h"
+#include "volume/image_io.h"
 #include "volume/ingest.h"
+#include "volume/lumen_mask.h"
 #include "volume/segment.h"
 #include "volume/segment_tools.h"
 
@@ -63,25 +68,78 @@ std::size_t thresholdAndComponents(const openvdb::FloatGrid& hu)
     return detail::connectedComponents(*air).size();
 }
 
-/// Wall time of each step that segmentLumen reports, summed over the runs.
+/// Wall and CPU time (user + system, all threads: steadier on a shared machine) of each step
+/// that the segmentation reports, summed over the runs.
 struct StepTimes : Progress {
-    std::vector<std::pair<std::string, double>> steps;
+    struct Step {
+        std::string name;
+        double wall = 0, cpu = 0;
+    };
+    std::vector<Step> steps;
     std::chrono::steady_clock::time_point last = std::chrono::steady_clock::now();
+    double lastCpu = cpuSeconds();
     std::string current = "start";
     void update(double, const std::string& what) override
     {
+        if (what == current) return;  // the same step reporting its progress
         const auto now = std::chrono::steady_clock::now();
+        const double c = cpuSeconds();
         const double s = std::chrono::duration<double>(now - last).count();
-        auto it = std::find_if(steps.begin(), steps.end(), [&](const auto& p) { return p.first == current; });
-        if (it == steps.end()) steps.emplace_back(current, s);
-        else it->second += s;
+        auto it = std::find_if(steps.begin(), steps.end(), [&](const Step& p) { return p.name == current; });
+        if (it == steps.end()) steps.push_back({current, s, c - lastCpu});
+        else {
+            it->wall += s;
+            it->cpu += c - lastCpu;
+        }
         last = now;
+        lastCpu = c;
         current = what;
+    }
+    void start()
+    {
+        last = std::chrono::steady_clock::now();
+        lastCpu = cpuSeconds();
+        current = "start";
+    }
+    void print(int runs) const
+    {
+        for (const Step& st : steps)
+            std::printf("#   %-28s wall %.3f s, CPU %.3f s (mean of %d runs)\n", (st.name + ":").c_str(), st.wall / runs,
+                        st.cpu / runs, runs);
     }
 };
 
+int maskChild(const std::string& maskPath, int runs)
+{
+    openvdb::initialize();
+    const double loadedMb = currentRssMb();
+    std::vector<double> seconds, cpu;
+    std::string what;
+    StepTimes steps;
+    for (int r = 0; r < runs; ++r) {
+        const double c0 = cpuSeconds();
+        const auto t0 = std::chrono::steady_clock::now();
+        steps.start();
+        auto source = openImage(maskPath);
+        const LumenSegmentation seg = segmentFromMask(*source, SegmentParams{}, nullptr, &steps);
+        std::ostringstream s;
+        s << seg.pieces.size() << " piece(s), lumen " << seg.lumenVolumeMl << " mL, mask " << seg.maskVolumeMl
+          << " mL, rectal tube " << (seg.rectalTube.found ? "found" : "none");
+        what = s.str();
+        seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        cpu.push_back(cpuSeconds() - c0);
+    }
+    std::sort(seconds.begin(), seconds.end());
+    std::sort(cpu.begin(), cpu.end());
+    steps.print(runs);
+    std::printf("mask %.3f %.3f %.3f %.3f %.0f %.0f %s\n", seconds[seconds.size() / 2], seconds.front(),
+                seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
+    return 0;
+}
+
 int child(const std::string& gridPath, const std::string& mode, int runs)
 {
+    if (mode == "mask") return maskChild(gridPath, runs);
     openvdb::initialize();
     openvdb::io::File file(gridPath);
     file.open();
@@ -95,8 +153,7 @@ int child(const std::string& gridPath, const std::string& mode, int runs)
         const double c0 = cpuSeconds();
         const auto t0 = std::chrono::steady_clock::now();
         if (mode == "segment") {
-            steps.last = t0;
-            steps.current = "start";
+            steps.start();
             const LumenSegmentation seg = segmentLumen(*hu, SegmentParams{}, &steps);
             std::ostringstream s;
             s << seg.pieces.size() << " piece(s), lumen " << seg.lumenVolumeMl << " mL, fluid "
@@ -110,8 +167,7 @@ int child(const std::string& gridPath, const std::string& mode, int runs)
     }
     std::sort(seconds.begin(), seconds.end());
     std::sort(cpu.begin(), cpu.end());
-    for (const auto& [step, total] : steps.steps)
-        std::printf("#   %-28s %.3f s (mean of %d runs)\n", (step + ":").c_str(), total / runs, runs);
+    steps.print(runs);
     std::printf("%s %.3f %.3f %.3f %.3f %.0f %.0f %s\n", mode.c_str(), seconds[seconds.size() / 2],
                 seconds.front(), seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
     return 0;
@@ -152,7 +208,7 @@ int main(int argc, char** argv)
 {
     std::string size = "full", grid, mode;
     int runs = 5;
-    bool fluid = false, collapse = false;
+    bool fluid = false, collapse = false, mask = false;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         if (a == "--size" && i + 1 < argc) size = argv[++i];
@@ -161,8 +217,9 @@ int main(int argc, char** argv)
         else if (a == "--mode" && i + 1 < argc) mode = argv[++i];
         else if (a == "--fluid") fluid = true;
         else if (a == "--collapse") collapse = true;
+        else if (a == "--mask") mask = true;
         else {
-            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse]\n";
+            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask]\n";
             return 2;
         }
     }
@@ -177,6 +234,26 @@ int main(int argc, char** argv)
         const auto t0 = std::chrono::steady_clock::now();
         const fs::path tmp = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + ".vdb");
         double truthMl = 0;
+        if (mask) {
+            const fs::path maskPath = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + "_mask.nii.gz");
+            {
+                Phantom ph = makePhantom(pp);
+                writeImage(ph.truthLumen, maskPath.string());
+                const auto& g = ph.truthLumen.geometry;
+                std::printf("phantom %s%s%s true lumen mask: %lld x %lld x %lld at %.3g x %.3g x %.3g mm, truth lumen "
+                            "%.1f mL (built in %.1f s)\n",
+                            size.c_str(), fluid ? " --fluid" : "", collapse ? " --collapse" : "", (long long)g.size[0],
+                            (long long)g.size[1], (long long)g.size[2], g.spacingMm.x, g.spacingMm.y, g.spacingMm.z,
+                            ph.truth.lumenVolumeMl,
+                            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+            }
+            const std::string self = fs::read_symlink("/proc/self/exe").string();
+            const Measure m = runChild(self, maskPath.string(), "mask", runs);
+            fs::remove(maskPath);
+            std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS peak %.0f MB;%s\n",
+                        "segmentFromMask (file)", m.median, m.min, m.max, runs, m.cpuMedian, m.peakMb, m.what.c_str());
+            return 0;
+        }
         {
             Phantom ph = makePhantom(pp);
             truthMl = ph.truth.lumenVolumeMl;

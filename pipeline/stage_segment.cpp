@@ -55,7 +55,24 @@ json segmentationJson(const LumenSegmentation& seg)
                              {"surface_hu", p.surfaceHu},   {"level_mm", p.levelMm},
                              {"min_mm", vec3Json(p.minMm)}, {"max_mm", vec3Json(p.maxMm)},
                              {"joined", p.joined},          {"reason", p.reason}});
+    const RectalTube& t = seg.rectalTube;
+    json tube = json{{"found", t.found}};
+    if (t.found) {
+        json axis = json::array();
+        for (const Vec3d& p : t.axisMm) axis.push_back(vec3Json(p));
+        tube = json{{"found", true},
+                    {"handling", "left out of the lumen, the surface and the path; its tip is the centerline's rectum "
+                                 "hint unless rectum_mm is set"},
+                    {"tip_mm", vec3Json(t.tipMm)},
+                    {"entry_mm", vec3Json(t.entryMm)},
+                    {"outer_end_mm", vec3Json(t.outerEndMm)},
+                    {"length_mm", t.lengthMm},
+                    {"diameter_mm", t.diameterMm},
+                    {"volume_ml", t.volumeMl},
+                    {"axis_mm", axis}};
+    }
     return json{{"lumen_volume_ml", seg.lumenVolumeMl},
+                {"rectal_tube", tube},
                 {"mask_volume_ml", seg.maskVolumeMl},
                 {"fluid_volume_ml", seg.fluidVolumeMl},
                 {"gravity_direction", vec3Json(seg.gravityDirection)},
@@ -111,6 +128,7 @@ json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* pr
     {
         auto source = openImage(maskPath);
         seg = segmentFromMask(*source, params, run.state.hu.get(), progress, &summary);
+        checkPlausibleColon(seg, params, maskPath);
     }
     if (run.opt.log && summary.voxelsOutsideReference > 0)
         run.opt.log->message("segment: warning: " + std::to_string(summary.voxelsOutsideReference) +

@@ -159,6 +159,8 @@ nlohmann::json runPipeline(const RunOptions& options)
     if (hasCt && !fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
     if (hasMask && !fs::is_regular_file(options.maskPath, ec))
         throw InputError(options.maskPath + ": --mask: no such file");
+    if (hasMask && fs::file_size(options.maskPath, ec) == 0)
+        throw InputError(options.maskPath + ": --mask: the file is empty");
     fs::create_directories(options.studyDir, ec);
     if (ec) throw InputError(options.studyDir + ": cannot create the study folder: " + ec.message());
 

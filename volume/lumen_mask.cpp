@@ -41,6 +41,8 @@ using detail::Neighbours;
 constexpr float CONSTRAINT_TOLERANCE = 0.25f;
 /// How far from a constrained voxel centre (in output voxels) the smoothed surface must stay.
 constexpr float CONSTRAINT_MARGIN_VOXELS = 0.05f;
+/// A plausible colon's volume over that of the largest ball inside it.
+constexpr double PLAUSIBLE_ELONGATION = 2.0;
 
 bool holdsLabel(float v, int label)
 {
@@ -58,6 +60,7 @@ BoolTree::Ptr readLabel(ImageSource& mask, int label, MaskSummary& summary, Prog
     auto tree = std::make_shared<BoolTree>(false);
     openvdb::tree::ValueAccessor<BoolTree> acc(*tree);
     std::set<int> present;
+    float lastPresent = 0.0f;  // the last value inserted: runs of one label skip the set
     for (int64_t k0 = 0; k0 < nz; k0 += SLAB) {
         const int64_t k1 = std::min(nz, k0 + SLAB);
         mask.readSlices(k0, k1, slab.data());
@@ -66,8 +69,10 @@ BoolTree::Ptr readLabel(ImageSource& mask, int label, MaskSummary& summary, Prog
             for (int64_t j = 0; j < ny; ++j)
                 for (int64_t i = 0; i < nx; ++i, ++v) {
                     const float value = slab[v];
-                    if (value != 0.0f && std::isfinite(value) && present.size() < 64)
+                    if (value != 0.0f && value != lastPresent && std::isfinite(value) && present.size() < 64) {
                         present.insert(int(std::lround(value)));
+                        lastPresent = value;
+                    }
                     if (holdsLabel(value, label)) acc.setValueOn(Coord(int(i), int(j), int(k)), true);
                 }
         reportProgress(progress, 0.2 * double(k1) / double(nz), "read mask");
@@ -157,27 +162,55 @@ inline float constrained(float phi, float indicator, float marginMm)
     return phi;
 }
 
-/// Sum over the active voxels of clamp(0.5 - phi' / h, 0, 1) with phi' = the constrained
-/// value of phi - offset: the sub-voxel volume (in voxels) of the offset level set that still
-/// keeps every mask centre on its side. Summed per leaf, then in leaf order.
-double insideVoxels(const FloatTree& phi, const FloatTree& indicator, double offsetMm, double h,
-                    float marginMm)
-{
-    openvdb::tree::LeafManager<const FloatTree> leaves(phi);
-    std::vector<double> perLeaf(leaves.leafCount(), 0.0);
-    leaves.foreach([&](const FloatLeaf& leaf, std::size_t n) {
-        FloatConstAccessor indAcc(indicator);
-        double s = 0;
-        for (auto it = leaf.cbeginValueOn(); it; ++it) {
-            const float v = constrained(float(*it - offsetMm), indAcc.getValue(it.getCoord()), marginMm);
-            s += std::clamp(0.5 - v / h, 0.0, 1.0);
-        }
-        perLeaf[n] = s;
-    });
-    double total = 0;
-    for (double v : perLeaf) total += v;
-    return total;
-}
+/// The sub-voxel volume (in voxels) of the level set phi - offset after the constraints,
+/// for offsets in [-maxOffsetMm, maxOffsetMm]: the sum over the active voxels of
+/// clamp(0.5 - phi' / h, 0, 1), phi' = the constrained value of phi - offset, which keeps every
+/// mask centre on its side. Each voxel's term is monotone in the offset, so a voxel whose term
+/// is the same at both ends of the range contributes a constant (summed once); the others
+/// (about a voxel either side of the surface) are kept in a flat list, so that each call
+/// of insideVoxels() costs a pass over that band only (the bisection calls it 40 times).
+class VolumeOfOffset {
+public:
+    VolumeOfOffset(const FloatTree& phi, const FloatTree& indicator, double maxOffsetMm, double h, float marginMm)
+        : mH(h), mMarginMm(marginMm)
+    {
+        openvdb::tree::LeafManager<const FloatTree> leaves(phi);
+        std::vector<double> fixed(leaves.leafCount(), 0.0);
+        std::vector<std::vector<std::pair<float, float>>> band(leaves.leafCount());
+        leaves.foreach([&](const FloatLeaf& leaf, std::size_t n) {
+            FloatConstAccessor indAcc(indicator);
+            double s = 0;
+            for (auto it = leaf.cbeginValueOn(); it; ++it) {
+                const float ind = indAcc.getValue(it.getCoord());
+                const double lo = term(*it, ind, -maxOffsetMm), hi = term(*it, ind, maxOffsetMm);
+                if (lo == hi) s += lo;
+                else band[n].emplace_back(*it, ind);
+            }
+            fixed[n] = s;
+        });
+        for (double v : fixed) mFixed += v;
+        for (const auto& b : band) mBand.insert(mBand.end(), b.begin(), b.end());
+    }
+
+    double insideVoxels(double offsetMm) const
+    {
+        double s = mFixed;
+        for (const auto& [phi, ind] : mBand) s += term(phi, ind, offsetMm);
+        return s;
+    }
+
+private:
+    double term(float phi, float indicator, double offsetMm) const
+    {
+        const float v = constrained(float(phi - offsetMm), indicator, mMarginMm);
+        return std::clamp(0.5 - v / mH, 0.0, 1.0);
+    }
+
+    double mH;
+    float mMarginMm;
+    double mFixed = 0;
+    std::vector<std::pair<float, float>> mBand;
+};
 
 /// Jacobi iterations of the discrete Laplacian (each replaces a voxel by the mean of its six
 /// neighbours: diffusion for 1/6 voxel^2, i.e. sigma^2 grows by h^2 / 3) on the voxels of
@@ -236,6 +269,36 @@ std::string labelsText(const std::vector<int>& labels)
     return s.str();
 }
 
+/// Finds the rectal tube in the indicator (voxels >= 0.5) and turns its voxels off (outside).
+RectalTube cutMaskRectalTube(FloatTree& indicator, const ImageGeometry& g, const openvdb::math::Transform& xf)
+{
+    BoolTree inside(indicator, false, true, openvdb::TopologyCopy());
+    {
+        openvdb::tree::LeafManager<BoolTree> leaves(inside);
+        leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
+            const FloatLeaf* src = indicator.probeConstLeaf(leaf.origin());
+            if (!src) return;
+            for (auto it = src->cbeginValueOn(); it; ++it)
+                if (!(*it >= 0.5f)) leaf.setValueOff(it.pos(), false);
+        });
+    }
+    detail::pruneInactive(inside);
+    detail::TubeSearch search;
+    search.acceptLowestEnd = true;
+    search.outside = [&](const Coord& c) {
+        const Vec3d u = g.indexFromWorld(fromVdb(xf.indexToWorld(c)));
+        for (int a = 0; a < 3; ++a)
+            if (u[a] < -0.5 || u[a] > double(g.size[std::size_t(a)]) - 0.5) return true;
+        return false;
+    };
+    RectalTube tube;
+    const BoolTree::Ptr cut = detail::findRectalTube(inside, xf, search, tube);
+    if (!tube.found) return tube;
+    openvdb::tree::ValueAccessor<FloatTree> acc(indicator);
+    for (auto it = cut->cbeginValueOn(); it; ++it) acc.setValueOff(it.getCoord(), 0.0f);
+    return tube;
+}
+
 } // namespace
 
 LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params,
@@ -289,9 +352,15 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     summary.resampled = !offset;
     reportProgress(progress, 0.25, "mask on the output grid");
     FloatTree::Ptr indicator = indicatorOnGrid(*label, g, *xf, offset);
-    const double maskVolumeMl =
+    double maskVolumeMl =
         double(summary.labelVoxels) * g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
     label.reset();
+
+    // The rectal tube: a thin, straight tube leaving the lumen's lowest end downwards, to the
+    // image's edge or as the mask's lowest point. Its voxels become outside voxels.
+    reportProgress(progress, 0.3, "rectal tube");
+    RectalTube tube = cutMaskRectalTube(*indicator, g, *xf);
+    if (tube.found) maskVolumeMl = std::max(0.0, maskVolumeMl - tube.volumeMl);
 
     // f0 = 0.5 - indicator: its linear zero crossing lies halfway between inside and outside
     // centres, where a binary mask's surface is. The region covers the exterior band, the
@@ -313,14 +382,36 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     FloatGrid::Ptr fGrid = FloatGrid::create(f);
     fGrid->setTransform(xf->copy());
     reportProgress(progress, 0.35, "mask level set");
+    // Smooth within reach of the surface only: beyond 2 sigma + a voxel nothing moves.
+    const float reachMm = static_cast<float>(2.0 * sigmaMm + h);
+    // With smoothing, this first distance is read within reach + 1 voxel of the surface only:
+    // the voxels deeper inside than reach + 3 voxels (every voxel within that many steps is
+    // inside) are left out of its sweep (deactivated, their value kept, so that no false
+    // interface appears at the edge). Fast sweeping's upwind values come from voxels nearer
+    // the surface, so the distances within the band are those of a sweep over the whole
+    // region; the final sweep below covers the whole region again.
+    auto deep = std::make_shared<BoolTree>(false);
+    if (iterations > 0) {
+        deep = std::make_shared<BoolTree>(*f, false, openvdb::TopologyCopy());
+        openvdb::tree::LeafManager<BoolTree> leaves(*deep);
+        leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
+            const FloatLeaf* src = f->probeConstLeaf(leaf.origin());
+            if (!src) return;
+            for (auto it = src->cbeginValueOn(); it; ++it)
+                if (!(*it < 0.0f)) leaf.setValueOff(it.pos(), false);
+        });
+        detail::erodeVoxels(*deep, int(std::ceil(reachMm / h)) + 3, Neighbours::All);
+        openvdb::tree::LeafManager<const BoolTree> deepLeaves(*deep);
+        deepLeaves.foreach([&](const BoolLeaf& leaf, std::size_t) {
+            FloatLeaf* target = f->probeLeaf(leaf.origin());
+            if (!target) return;
+            for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOff(it.pos());
+        });
+    }
     FloatGrid::Ptr phi = detail::redistance(*fGrid);
-    fGrid.reset();
-    f.reset();
 
     const float marginMm = static_cast<float>(CONSTRAINT_MARGIN_VOXELS * h);
     if (iterations > 0) {
-        // Smooth within reach of the surface only: beyond 2 sigma + a voxel nothing moves.
-        const float reachMm = static_cast<float>(2.0 * sigmaMm + h);
         BoolTree work(phi->tree(), false, true, openvdb::TopologyCopy());
         {
             openvdb::tree::LeafManager<BoolTree> leaves(work);
@@ -332,8 +423,19 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
         }
         reportProgress(progress, 0.5, "constrained smoothing");
         constrainedSmoothing(phi->tree(), work, *indicator, iterations, marginMm);
-        phi = detail::redistance(*phi);
+        // The final sweep over the whole region: the band's values (the smoothed surface),
+        // the deep voxels back in with their sign.
+        openvdb::tree::LeafManager<const FloatTree> bandLeaves(phi->tree());
+        bandLeaves.foreach([&](const FloatLeaf& leaf, std::size_t) {
+            FloatLeaf* target = f->probeLeaf(leaf.origin());
+            if (!target) return;
+            for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOnly(it.pos(), *it);
+        });
+        f->topologyUnion(*deep);
+        phi = detail::redistance(*fGrid);
     }
+    fGrid.reset();
+    f.reset();
     reportProgress(progress, 0.75, "restore the mask's volume");
 
     // A constant offset (bisection, within one voxel) so that the sub-voxel volume enclosed by
@@ -341,9 +443,10 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     // constraints applied after it, so that no mask centre changes side.
     const double targetVoxels = maskVolumeMl / voxelMl;
     double lo = -h, hi = h;
+    const VolumeOfOffset volume(phi->tree(), *indicator, h, h, marginMm);
     for (int i = 0; i < 40; ++i) {
         const double mid = 0.5 * (lo + hi);
-        (insideVoxels(phi->tree(), *indicator, mid, h, marginMm) < targetVoxels ? lo : hi) = mid;
+        (volume.insideVoxels(mid) < targetVoxels ? lo : hi) = mid;
     }
     const float volumeOffsetMm = static_cast<float>(0.5 * (lo + hi));
     {
@@ -359,6 +462,7 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     reportProgress(progress, 0.9, "trim band and build mask");
 
     LumenSegmentation result;
+    result.rectalTube = tube;
     detail::finishLumen(phi, params, result, progress);
     if (summaryOut) *summaryOut = summary;
     reportProgress(progress, 1.0, "lumen from mask");
@@ -370,6 +474,34 @@ LumenSegmentation segmentFromMask(const Image3<float>& mask, const SegmentParams
 {
     MemoryImageSource source(mask, "mask image");
     return segmentFromMask(source, params, reference, progress, summary);
+}
+
+void checkPlausibleColon(const LumenSegmentation& seg, const SegmentParams& params, const std::string& name)
+{
+    constexpr double PI = 3.14159265358979323846;
+    double bigMl = 0, largestMl = 0;
+    for (const LumenPiece& p : seg.pieces) {
+        if (p.volumeMl >= params.minComponentMl) bigMl += p.volumeMl;
+        largestMl = std::max(largestMl, p.volumeMl);
+    }
+    float deepest = 0;
+    for (auto it = seg.sdf->tree().cbeginValueOn(); it; ++it) deepest = std::min(deepest, *it);
+    const double ballMl = 4.0 / 3.0 * PI * std::pow(double(-deepest), 3) / 1000.0;
+    const double elongation = ballMl > 0 ? bigMl / ballMl : 0.0;
+    if (bigMl > 0 && elongation >= PLAUSIBLE_ELONGATION) return;
+    std::ostringstream msg;
+    msg << std::fixed << std::setprecision(1) << name
+        << ": no plausible colon in the mask (a colon has pieces of at least " << params.minComponentMl
+        << " mL whose volume is at least " << PLAUSIBLE_ELONGATION
+        << " times that of the largest ball inside them: a tube, not a ball): ";
+    if (seg.pieces.empty()) msg << "the lumen is empty";
+    else if (bigMl == 0)
+        msg << seg.pieces.size() << " piece(s), the largest " << std::setprecision(2) << largestMl << " mL";
+    else
+        msg << "the pieces of " << bigMl << " mL are compact, not a tube (largest inside ball " << std::setprecision(1)
+            << 2.0 * double(-deepest) << " mm wide, " << ballMl << " mL; ratio " << std::setprecision(2) << elongation
+            << ")";
+    throw InputError(msg.str());
 }
 
 Image3<uint8_t> rasterizeLumen(const FloatGrid& sdf, const ImageGeometry& geometry)

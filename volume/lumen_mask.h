@@ -26,6 +26,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace flyover {
@@ -54,6 +55,13 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
 LumenSegmentation segmentFromMask(const Image3<float>& mask, const SegmentParams& params,
                                   const openvdb::FloatGrid* reference = nullptr,
                                   Progress* progress = nullptr, MaskSummary* summary = nullptr);
+
+/// Refuses a segmentation that holds no plausible colon: pieces of at least minComponentMl
+/// that together are a tube rather than a ball (their volume at least 2 times that of the
+/// largest ball inside the lumen, whose radius is the deepest level set value; a ball gives 1,
+/// a tube of radius R and length L gives 3L / 4R: a whole colon 10 to 20).
+/// @throw InputError starting with `name`: only small pieces, or compact pieces.
+void checkPlausibleColon(const LumenSegmentation& seg, const SegmentParams& params, const std::string& name);
 
 /// 1 where the level set is negative at the voxel centre (trilinear interpolation of `sdf`),
 /// else 0, on the lattice `geometry`; voxels beyond the level set's active region are 0.

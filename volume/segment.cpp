@@ -111,6 +111,7 @@ struct LeafStats {
 struct ComponentStats {
     AirComponent info;
     bool border = false;
+    bool rectalTube = false;
 };
 
 ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
@@ -162,6 +163,60 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
     return out;
 }
 
+/// A rectal tube joins the colon's air to the air outside the body, so the colon's component
+/// touches the outside. Each such component of at least minComponentMl is searched for a tube
+/// (volume/rectal_tube.h); when one is found and the air left after cutting it has a piece
+/// of at least minComponentMl that no longer touches the outside, the component is replaced
+/// by the tube's air (marked rectalTube) and the pieces left. One tube at most. Keeps the
+/// lists sorted by volume, largest first.
+void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentStats>& stats, const FloatTree& hu,
+                   const openvdb::math::Transform& xf, double voxelMl, const SegmentParams& params,
+                   RectalTube& found)
+{
+    FloatConstAccessor huAcc(hu);
+    detail::TubeSearch search;
+    search.hu = &hu;
+    search.outside = [&huAcc](const Coord& c) { return !huAcc.isValueOn(c); };
+    for (std::size_t i = 0; i < segments.size(); ++i) {
+        if (!stats[i].border || stats[i].info.volumeMl < params.minComponentMl) continue;
+        RectalTube tube;
+        BoolTree::Ptr cut = detail::findRectalTube(*segments[i], xf, search, tube);
+        if (cut->empty()) continue;
+        BoolTree rest(*segments[i]);
+        rest.topologyDifference(*cut);
+        detail::pruneInactive(rest);
+        std::vector<BoolTree::Ptr> pieces = detail::connectedComponents(rest);
+        std::vector<ComponentStats> pieceStats;
+        bool colonLeft = false;
+        for (const BoolTree::Ptr& p : pieces) {
+            pieceStats.push_back(measureComponent(*p, hu, xf, voxelMl));
+            colonLeft = colonLeft || (!pieceStats.back().border && pieceStats.back().info.volumeMl >= params.minComponentMl);
+        }
+        if (!colonLeft) continue;
+        ComponentStats tubeStats = measureComponent(*cut, hu, xf, voxelMl);
+        tubeStats.rectalTube = true;
+        segments[i] = cut;
+        stats[i] = tubeStats;
+        segments.insert(segments.end(), pieces.begin(), pieces.end());
+        stats.insert(stats.end(), pieceStats.begin(), pieceStats.end());
+        std::vector<std::size_t> order(segments.size());
+        for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+            return stats[a].info.volumeMl > stats[b].info.volumeMl;
+        });
+        std::vector<BoolTree::Ptr> sortedSegments;
+        std::vector<ComponentStats> sortedStats;
+        for (std::size_t k : order) {
+            sortedSegments.push_back(segments[k]);
+            sortedStats.push_back(stats[k]);
+        }
+        segments.swap(sortedSegments);
+        stats.swap(sortedStats);
+        found = tube;
+        return;
+    }
+}
+
 std::string reasonText(const std::string& reason, const SegmentParams& p)
 {
     std::ostringstream s;
@@ -169,6 +224,7 @@ std::string reasonText(const std::string& reason, const SegmentParams& p)
     else if (reason == "small") s << "small (< " << p.minComponentMl << " mL)";
     else if (reason == "lung") s << "lung (mean HU > " << p.lungMinMeanHu << ")";
     else if (reason == "fraction") s << "fraction (< " << p.keepFraction << " of the largest)";
+    else if (reason == "rectal tube") s << "rectal tube (cut from the colon)";
     else s << reason;
     return s.str();
 }
@@ -299,6 +355,10 @@ void finishLumen(FloatGrid::Ptr sdf, const SegmentParams& params, LumenSegmentat
     trimExteriorBand(sdfTree, bandMm);
     sdf->setGridClass(openvdb::GRID_LEVEL_SET);
     sdf->setName("lumen_sdf");
+    if (result.rectalTube.found) {
+        const Vec3d& tip = result.rectalTube.tipMm;
+        sdf->insertMeta(RECTAL_TUBE_TIP_META, openvdb::Vec3DMetadata(openvdb::Vec3d(tip.x, tip.y, tip.z)));
+    }
 
     auto maskTree = std::make_shared<BoolTree>(sdfTree, false, true, openvdb::TopologyCopy());
     openvdb::tree::LeafManager<BoolTree> maskLeaves(*maskTree);
@@ -428,6 +488,7 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     std::vector<ComponentStats> stats;
     stats.reserve(segments.size());
     for (const auto& seg : segments) stats.push_back(measureComponent(*seg, huTree, xf, voxelMl));
+    cutRectalTube(segments, stats, huTree, xf, voxelMl, params, result.rectalTube);
     std::size_t seeded = segments.size();
     if (params.seedMm) {
         seeded = seededComponent(segments, stats, xf, *params.seedMm);
@@ -442,7 +503,8 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     double referenceMl = 0;
     for (std::size_t i = 0; i < stats.size(); ++i) {
         ComponentStats& s = stats[i];
-        if (i == seeded) s.info.reason = "seed";
+        if (s.rectalTube) s.info.reason = "rectal tube";
+        else if (i == seeded) s.info.reason = "seed";
         else if (s.border) s.info.reason = "border";
         else if (s.info.volumeMl < params.minComponentMl) s.info.reason = "small";
         else if (s.info.meanHu > params.lungMinMeanHu) s.info.reason = "lung";

@@ -17,11 +17,17 @@
 ///    fluid; it is redistanced into a signed distance grid (mm, negative inside).
 /// 4. The lumen's connected pieces are measured and ordered along the colon frame.
 ///
+/// A rectal tube (volume/rectal_tube.h) joins the colon's air to the air outside the body: a
+/// component touching the outside of at least minComponentMl is searched for one; when the
+/// tube is found and cutting it leaves air that no longer touches the outside, the tube's air
+/// becomes a component of its own ("rectal tube", dropped) and the rest is classified as usual.
+///
 /// What it does not do: it does not bridge collapsed segments (the centerline does), and it
 /// does not know the patient's orientation beyond what the air-fluid levels tell.
 #pragma once
 
 #include "volume/progress.h"
+#include "volume/rectal_tube.h"
 #include "volume/vec3.h"
 
 #include <openvdb/openvdb.h>
@@ -68,7 +74,8 @@ struct AirComponent {
     double meanHu = 0;
     Vec3d centroidMm, minMm, maxMm;  ///< world LPS mm
     bool kept = false;
-    /// "colon", "seed" (kept: the seeded component), "lung", "small", "border", "fraction"
+    /// "colon", "seed" (kept: the seeded component), "lung", "small", "border", "fraction",
+    /// "rectal tube" (the tube's air, cut from the colon it joined to the outside)
     std::string reason;
 };
 
@@ -107,7 +114,14 @@ struct LumenSegmentation {
     double lumenVolumeMl = 0;      ///< enclosed by the level set (sub-voxel)
     double maskVolumeMl = 0;       ///< mask voxel count x voxel volume
     double fluidVolumeMl = 0;      ///< joined fluid and air-fluid rim voxels x voxel volume
+    /// The rectal tube cut out of the lumen (volume/rectal_tube.h). When found, its tip is also
+    /// stored in the level set's metadata (RECTAL_TUBE_TIP_META) for the centerline stage.
+    RectalTube rectalTube;
 };
+
+/// Name of the lumen_sdf grid's Vec3d metadata holding the rectal tube's tip (LPS mm), present
+/// only when a tube was found.
+inline constexpr const char* RECTAL_TUBE_TIP_META = "rectal_tube_tip_mm";
 
 /// @throw InputError when no component qualifies as colon lumen (the one-line message lists
 ///        what was found and why each was rejected), when the seed is in no air component,

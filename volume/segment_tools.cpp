@@ -24,6 +24,17 @@ void dilateVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours
                                        openvdb::tools::IGNORE_TILES);
 }
 
+void erodeVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours)
+{
+    if (iterations <= 0) return;
+    openvdb::tools::erodeActiveValues(tree, iterations,
+                                      neighbours == Neighbours::Face
+                                          ? openvdb::tools::NN_FACE
+                                          : openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                      openvdb::tools::IGNORE_TILES);
+    openvdb::tools::pruneInactive(tree);
+}
+
 std::vector<openvdb::BoolTree::Ptr> connectedComponents(const openvdb::BoolTree& tree)
 {
     // segmentActiveVoxels joins face neighbours only (6-connectivity).

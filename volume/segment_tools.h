@@ -26,6 +26,10 @@ enum class Neighbours { Face, All };
 /// Grows the active voxels by `iterations` steps, in place (active tiles are left alone).
 void dilateVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours);
 
+/// Shrinks the active voxels by `iterations` steps, in place: a voxel stays active only when
+/// every voxel within `iterations` steps (face or all neighbours) is active.
+void erodeVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours);
+
 /// Connected components of the active voxels under face (6-) connectivity, sorted by voxel
 /// count, largest first; never returns a tree without active voxels.
 std::vector<openvdb::BoolTree::Ptr> connectedComponents(const openvdb::BoolTree& tree);

@@ -1,0 +1,347 @@
+// Rectal tube: thin pieces left out by a morphological opening, measured along their
+// geodesic axis, followed into the rectum by their ring, cut out (see rectal_tube.h).
+#include "volume/rectal_tube.h"
+
+#include "volume/segment_tools.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <deque>
+#include <limits>
+#include <optional>
+
+namespace flyover::detail {
+
+namespace {
+
+using openvdb::BoolTree;
+using openvdb::Coord;
+using BoolConstAccessor = openvdb::tree::ValueAccessor<const BoolTree>;
+using FloatConstAccessor = openvdb::tree::ValueAccessor<const openvdb::FloatTree>;
+
+constexpr double PI = 3.14159265358979323846;
+/// Width of the geodesic distance bins whose centroids make the tube's axis (mm).
+constexpr double AXIS_BIN_MM = 2.0;
+/// Largest piece looked at (mL): a 10 mm tube 500 mm long.
+constexpr double TUBE_MAX_VOLUME_ML = 40.0;
+/// From a CT: the tube's wall (or the tissue around it) is denser than this (HU).
+constexpr float RING_MIN_HU = -200.0f;
+/// From a CT: inside the tube's lumen, air below this (HU).
+constexpr float LUMEN_MAX_HU = -500.0f;
+/// How far the tube is followed into the rectum at most (mm).
+constexpr double MAX_FOLLOW_MM = 200.0;
+/// Masks: the tube hangs from the wide part within this height above its lowest point (mm).
+constexpr double LOWEST_END_REACH_MM = 60.0;
+/// Directions around the axis sampled for the ring and for the body surface.
+constexpr int RING_DIRECTIONS = 12;
+/// The ring must show in at least this many of them.
+constexpr int RING_MIN_HITS = 9;
+
+const Coord FACE[6] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+
+Vec3d toWorld(const openvdb::math::Transform& xf, const openvdb::Vec3d& ijk)
+{
+    const openvdb::Vec3d w = xf.indexToWorld(ijk);
+    return {w[0], w[1], w[2]};
+}
+
+Coord nearestIndex(const openvdb::math::Transform& xf, const Vec3d& w)
+{
+    return Coord::round(xf.worldToIndex(openvdb::Vec3d(w.x, w.y, w.z)));
+}
+
+/// Two unit vectors completing `d` (unit) to an orthonormal frame.
+void perpendiculars(const Vec3d& d, Vec3d& u, Vec3d& v)
+{
+    const Vec3d a = std::abs(d.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+    u = normalize(cross(d, a));
+    v = cross(d, u);
+}
+
+double polylineLength(const std::vector<Vec3d>& p, std::size_t from, std::size_t to)
+{
+    double s = 0;
+    for (std::size_t i = from; i + 1 <= to && i + 1 < p.size(); ++i) s += distance(p[i], p[i + 1]);
+    return s;
+}
+
+double distanceToSegment(const Vec3d& p, const Vec3d& a, const Vec3d& b)
+{
+    const Vec3d ab = b - a;
+    const double len2 = dot(ab, ab);
+    const double t = len2 > 0 ? std::clamp(dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
+    return distance(p, a + ab * t);
+}
+
+/// One thin piece, measured along its geodesic axis from where it meets the wide part.
+struct PieceAxis {
+    std::vector<Vec3d> axis;   ///< bin centroids, from the attachment outwards
+    Vec3d outerEnd;            ///< the voxel farthest (geodesically) from the attachment
+    double lengthMm = 0;
+    double diameterMm = 0;
+    double strayMm = 0;        ///< largest distance of the axis from its chord
+    bool touchesOutside = false;
+    bool attached = false;
+};
+
+PieceAxis measurePiece(const BoolTree& piece, const BoolTree& wide, const openvdb::math::Transform& xf,
+                       const TubeSearch& search)
+{
+    PieceAxis out;
+    const double h = xf.voxelSize()[0];
+    const double voxelMm3 = std::abs(xf.voxelVolume());
+    openvdb::CoordBBox box;
+    if (!piece.evalActiveVoxelBoundingBox(box)) return out;
+    const Coord dim = box.dim();
+    const std::int64_t nx = dim.x(), ny = dim.y(), nz = dim.z();
+    if (nx * ny * nz > (std::int64_t(1) << 26)) return out;  // far too big for a tube's box
+    auto at = [&](const Coord& c) {
+        return std::size_t((c.x() - box.min().x()) + nx * ((c.y() - box.min().y()) + ny * (c.z() - box.min().z())));
+    };
+    // -2: not in the piece; -1: in it, not reached yet; >= 0: face steps from the attachment.
+    std::vector<std::int32_t> steps(std::size_t(nx * ny * nz), -2);
+    std::deque<Coord> queue;
+    BoolConstAccessor wideAcc(wide);
+    for (auto it = piece.cbeginValueOn(); it; ++it) {
+        const Coord c = it.getCoord();
+        bool attachment = false;
+        for (const Coord& d : FACE) {
+            const Coord n = c + d;
+            if (wideAcc.isValueOn(n)) attachment = true;
+            if (!out.touchesOutside && search.outside && search.outside(n)) out.touchesOutside = true;
+        }
+        steps[at(c)] = attachment ? 0 : -1;
+        if (attachment) queue.push_back(c);
+    }
+    out.attached = !queue.empty();
+    if (!out.attached) return out;
+    std::int32_t farthest = 0;
+    Coord farthestVoxel = queue.front();
+    while (!queue.empty()) {
+        const Coord c = queue.front();
+        queue.pop_front();
+        const std::int32_t s = steps[at(c)];
+        if (s > farthest) {
+            farthest = s;
+            farthestVoxel = c;
+        }
+        for (const Coord& d : FACE) {
+            const Coord n = c + d;
+            if (!box.isInside(n)) continue;
+            std::int32_t& t = steps[at(n)];
+            if (t == -1) {
+                t = s + 1;
+                queue.push_back(n);
+            }
+        }
+    }
+    out.outerEnd = toWorld(xf, farthestVoxel.asVec3d());
+    // Axis: centroids of the geodesic distance bins.
+    const int bins = int(farthest * h / AXIS_BIN_MM) + 1;
+    std::vector<openvdb::Vec3d> sum(std::size_t(bins), openvdb::Vec3d(0.0));
+    std::vector<std::int64_t> count(std::size_t(bins), 0);
+    for (auto it = piece.cbeginValueOn(); it; ++it) {
+        const std::int32_t s = steps[at(it.getCoord())];
+        if (s < 0) continue;  // not reached (cannot happen: the piece is connected)
+        const std::size_t b = std::size_t(std::min(bins - 1, int(s * h / AXIS_BIN_MM)));
+        sum[b] += it.getCoord().asVec3d();
+        ++count[b];
+    }
+    std::vector<std::int64_t> axisCount;
+    for (int b = 0; b < bins; ++b)
+        if (count[std::size_t(b)] > 0) {
+            out.axis.push_back(toWorld(xf, sum[std::size_t(b)] / double(count[std::size_t(b)])));
+            axisCount.push_back(count[std::size_t(b)]);
+        }
+    if (out.axis.size() < 2) return out;
+    out.lengthMm = polylineLength(out.axis, 0, out.axis.size() - 1);
+    // Diameter of the middle part (the ends flare where the piece meets the wide part).
+    std::size_t lo = out.axis.size() / 5, hi = out.axis.size() - 1 - out.axis.size() / 5;
+    if (hi <= lo + 1) {
+        lo = 0;
+        hi = out.axis.size() - 1;
+    }
+    std::int64_t middle = 0;
+    for (std::size_t i = lo; i <= hi; ++i) middle += axisCount[i];
+    // Each bin centroid stands for half a bin on either side: the middle bins' voxels span
+    // the polyline from lo to hi plus one bin spacing.
+    const double spacing = out.lengthMm / double(out.axis.size() - 1);
+    const double middleLength = polylineLength(out.axis, lo, hi) + spacing;
+    if (middleLength > 0) out.diameterMm = 2.0 * std::sqrt(double(middle) * voxelMm3 / (PI * middleLength));
+    for (const Vec3d& p : out.axis)
+        out.strayMm = std::max(out.strayMm, distanceToSegment(p, out.axis.front(), out.axis.back()));
+    return out;
+}
+
+/// World z of the lowest active voxel of `tree` (LPS: z is superior).
+double lowestZ(const BoolTree& tree, const openvdb::math::Transform& xf)
+{
+    double z = std::numeric_limits<double>::max();
+    for (auto it = tree.cbeginValueOn(); it; ++it) z = std::min(z, toWorld(xf, it.getCoord().asVec3d()).z);
+    return z;
+}
+
+} // namespace
+
+BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform& xf, const TubeSearch& search,
+                             RectalTube& info)
+{
+    auto none = std::make_shared<BoolTree>(false);
+    const double h = xf.voxelSize()[0];
+    const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
+    // 1. Opening: a cube of half side n voxels does not fit in a tube of radius
+    //    TUBE_MAX_RADIUS_MM (its corners reach n h sqrt 2); growing back m >= n sqrt 3 steps
+    //    within the set covers every voxel of the wide parts (the cube's corners reach n h sqrt 3).
+    const int n = std::max(1, int(std::ceil(TUBE_MAX_RADIUS_MM / (h * std::sqrt(2.0)))));
+    const int m = int(std::ceil(n * std::sqrt(3.0))) + 1;
+    BoolTree wide(set);
+    erodeVoxels(wide, n, Neighbours::All);
+    if (wide.empty()) return none;
+    for (int i = 0; i < m; ++i) {
+        dilateVoxels(wide, 1, Neighbours::All);
+        wide.topologyIntersection(set);
+    }
+    BoolTree thin(set);
+    thin.topologyDifference(wide);
+    pruneInactive(thin);
+    if (thin.empty()) return none;
+
+    // 2. The thin pieces that look like a tube leaving the body.
+    std::vector<BoolTree::Ptr> pieces = connectedComponents(thin);
+    double wideLowZ = 0, setLowZ = 0;
+    if (search.acceptLowestEnd) {
+        wideLowZ = lowestZ(wide, xf);
+        setLowZ = lowestZ(set, xf);
+    }
+    const BoolTree* tubePiece = nullptr;
+    PieceAxis tube;
+    for (const BoolTree::Ptr& p : pieces) {
+        const double ml = double(p->activeVoxelCount()) * voxelMl;
+        if (ml > TUBE_MAX_VOLUME_ML) continue;
+        if (ml < PI * 1.0 * TUBE_MIN_LENGTH_MM / 1000.0) break;  // sorted largest first: the rest are crumbs
+        PieceAxis a = measurePiece(*p, wide, xf, search);
+        if (!a.attached || a.axis.size() < 2) continue;
+        if (a.lengthMm < TUBE_MIN_LENGTH_MM || a.diameterMm > TUBE_MAX_DIAMETER_MM) continue;
+        if (a.strayMm > std::max(5.0, 0.2 * a.lengthMm)) continue;
+        bool leaves = a.touchesOutside;
+        if (search.acceptLowestEnd) {
+            // A mask has no body: the piece must also hang from the lowest end of the wide
+            // part (the rectum) downwards, to the image's edge or as the lowest point of all.
+            leaves = (leaves || a.outerEnd.z <= setLowZ + h) && a.axis.front().z <= wideLowZ + LOWEST_END_REACH_MM &&
+                     a.outerEnd.z < a.axis.front().z;
+        }
+        if (!leaves) continue;
+        if (!tubePiece || a.lengthMm > tube.lengthMm) {
+            tubePiece = p.get();
+            tube = a;
+        }
+    }
+    if (!tubePiece) return none;
+
+    // 3. Follow it into the rectum along its axis while the cross-section shows the tube: the
+    //    lumen inside, and around it the wall (CT: dense; mask: not in the set).
+    const double radius = 0.5 * tube.diameterMm;
+    const std::size_t back = std::min<std::size_t>(tube.axis.size() - 1, std::size_t(std::ceil(10.0 / AXIS_BIN_MM)));
+    const Vec3d dir = normalize(tube.axis.front() - tube.axis[back]);
+    Vec3d u, v;
+    perpendiculars(dir, u, v);
+    BoolConstAccessor setAcc(set);
+    std::optional<FloatConstAccessor> huAcc;
+    if (search.hu) huAcc.emplace(*search.hu);
+    auto inLumen = [&](const Vec3d& p) {
+        const Coord c = nearestIndex(xf, p);
+        if (huAcc) {
+            float hu = 0;
+            return huAcc->probeValue(c, hu) && hu < LUMEN_MAX_HU;
+        }
+        return setAcc.isValueOn(c);
+    };
+    auto wallAt = [&](const Vec3d& q) {
+        const Coord c = nearestIndex(xf, q);
+        if (huAcc) {
+            float hu = 0;
+            return huAcc->probeValue(c, hu) && hu >= RING_MIN_HU;
+        }
+        return !setAcc.isValueOn(c);
+    };
+    auto ringAround = [&](const Vec3d& p) {
+        int hits = 0;
+        for (int j = 0; j < RING_DIRECTIONS; ++j) {
+            const double t = 2.0 * PI * j / RING_DIRECTIONS;
+            const Vec3d e = u * std::cos(t) + v * std::sin(t);
+            for (double r = radius + 0.5 * h; r <= radius + 3.0; r += 0.5 * h)
+                if (wallAt(p + e * r)) {
+                    ++hits;
+                    break;
+                }
+        }
+        return hits >= RING_MIN_HITS;
+    };
+    const Vec3d start = tube.axis.front();
+    Vec3d tip = start;
+    int misses = 0;
+    for (double t = 0; t <= MAX_FOLLOW_MM; t += 0.5 * h) {
+        const Vec3d p = start + dir * t;
+        if (inLumen(p) && ringAround(p)) {
+            tip = p;
+            misses = 0;
+        } else if (++misses > 2) {
+            break;
+        }
+    }
+
+    // 4. The tube's voxels: the thin piece, and the set's voxels within its lumen radius + a
+    //    voxel of the followed stretch.
+    auto cut = std::make_shared<BoolTree>(*tubePiece);
+    const double reach = radius + h;
+    if (distance(start, tip) > 0) {
+        openvdb::CoordBBox box;
+        for (const Vec3d& p : {start, tip}) {
+            const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z));
+            box.expand(Coord::floor(ijk));
+            box.expand(Coord::floor(ijk) + Coord(1));
+        }
+        box.expand(int(std::ceil(reach / h)) + 1);
+        openvdb::tree::ValueAccessor<BoolTree> cutAcc(*cut);
+        for (auto it = box.begin(); it; ++it) {
+            const Coord c = *it;
+            if (!setAcc.isValueOn(c)) continue;
+            if (distanceToSegment(toWorld(xf, c.asVec3d()), start, tip) <= reach) cutAcc.setValueOn(c, true);
+        }
+    }
+
+    info = RectalTube{};
+    info.found = true;
+    info.tipMm = tip;
+    info.outerEndMm = tube.outerEnd;
+    info.diameterMm = tube.diameterMm;
+    info.lengthMm = tube.lengthMm + distance(start, tip);
+    info.volumeMl = double(cut->activeVoxelCount()) * voxelMl;
+    info.axisMm.assign(tube.axis.rbegin(), tube.axis.rend());
+    if (distance(start, tip) > 0) info.axisMm.push_back(tip);
+    // The body surface (CT): going inwards from the outer end, the first axis point with the
+    // body all around (active voxels beyond the wall); from a mask: the outer end.
+    info.entryMm = tube.outerEnd;
+    if (huAcc) {
+        for (std::size_t i = tube.axis.size(); i-- > 0;) {
+            const Vec3d p = tube.axis[i];
+            const Vec3d d = normalize(tube.axis[i == 0 ? 0 : i - 1] - tube.axis[std::min(i + 1, tube.axis.size() - 1)]);
+            Vec3d a, b;
+            perpendiculars(length(d) > 0 ? d : dir, a, b);
+            int inside = 0;
+            for (int j = 0; j < RING_DIRECTIONS; ++j) {
+                const double t = 2.0 * PI * j / RING_DIRECTIONS;
+                const Coord c = nearestIndex(xf, p + (a * std::cos(t) + b * std::sin(t)) * (radius + 5.0));
+                inside += huAcc->isValueOn(c) ? 1 : 0;
+            }
+            if (inside >= RING_DIRECTIONS - 2) {
+                info.entryMm = p;
+                break;
+            }
+        }
+    }
+    return cut;
+}
+
+} // namespace flyover::detail
