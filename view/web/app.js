@@ -163,6 +163,7 @@ async function pumpPair() {
     if (pairCanvas.width !== bmp.width || pairCanvas.height !== bmp.height) {
       pairCanvas.width = overlay.width = bmp.width;
       pairCanvas.height = overlay.height = bmp.height;
+      views.style.aspectRatio = `${bmp.width} / ${bmp.height}`;
     }
     pairCtx.drawImage(bmp, 0, 0);
     bmp.close();
@@ -196,9 +197,9 @@ async function pumpPair() {
   pumpPair();
 }
 
-function pairScale() {
-  // pixels of the pair canvas per pixel of a single view of size px
-  return S.shown ? pairCanvas.height / S.shown.params.px : 1;
+/** Width of the separator between the two views in the pair image (canvas pixels). */
+function viewGap() {
+  return Math.max(0, pairCanvas.width - 2 * pairCanvas.height);
 }
 
 function drawOverlay() {
@@ -208,7 +209,7 @@ function drawOverlay() {
   const h = overlay.height;
   const at = (m) => {
     const s = h / m.px;
-    return [m.view * h + m.x * s, m.y * s];
+    return [m.view * (h + viewGap()) + m.x * s, m.y * s];
   };
   const r = Math.max(6, h / 40);
   if (S.marker && S.marker.key === S.shown.key) {
@@ -245,11 +246,16 @@ function viewPixel(ev) {
   if (!S.shown || S.shown.failed) return null;
   const rect = pairCanvas.getBoundingClientRect();
   const px = S.shown.params.px;
-  const u = ((ev.clientX - rect.left) / rect.width) * 2 * px;
+  // canvas pixels: view 0 | separator | view 1; a view of px pixels is pairCanvas.height high
+  const k = pairCanvas.height / px;
+  const u = ((ev.clientX - rect.left) / rect.width) * pairCanvas.width / k;
   const v = ((ev.clientY - rect.top) / rect.height) * px;
-  if (u < 0 || v < 0 || u >= 2 * px || v >= px) return null;
-  const view = u >= px ? 1 : 0;
-  return { view, x: fmt(u - view * px, 1), y: fmt(v, 1), px };
+  const gap = viewGap() / k;
+  if (u < 0 || v < 0 || v >= px) return null;
+  let view;
+  let x;
+  if (u < px) { view = 0; x = u; } else if (u >= px + gap && u < 2 * px + gap) { view = 1; x = u - px - gap; } else return null;
+  return { view, x: fmt(x, 1), y: fmt(v, 1), px };
 }
 
 async function pickAt(vp) {
@@ -386,11 +392,13 @@ function setPlaying(on) {
 let lastTick = 0;
 function tick(now) {
   if (!S.playing) return;
-  const dt = Math.min(0.25, (now - lastTick) / 1000);
-  lastTick = now;
-  const next = S.arc + S.speed * travelSign() * dt;
+  // rAF's time stamp is the frame's start and may precede the press of Play: never negative
+  const dt = clamp((now - lastTick) / 1000, 0, 0.25);
+  lastTick = Math.max(lastTick, now);
+  const v = S.speed * travelSign();
+  const next = S.arc + v * dt;
   const max = arcMax();
-  if (next <= 0 || next >= max) {
+  if ((v < 0 && next <= 0) || (v > 0 && next >= max)) {
     S.arc = clamp(next, 0, max);
     setPlaying(false);
     setStatus(next <= 0 ? 'Reached the start of the colon' : 'Reached the end of the colon');

@@ -220,6 +220,7 @@ async function run() {
     }
   };
   const near = (a, b, tol = 0.05) => Math.abs(Number(a) - Number(b)) <= tol;
+  const nearAngle = (a, b, tol = 0.06) => Math.abs(((Number(a) - Number(b)) % 360 + 540) % 360 - 180) <= tol;
 
   // ---- play forward, pause
   await page.keyboard.press('0');
@@ -307,13 +308,19 @@ async function run() {
   await page.fill('#arc-input', String(Number(locA.arc_mm).toFixed(2)));
   await page.press('#arc-input', 'Enter');
   await page.locator('#pair').focus().catch(() => {});
-  const atA = await waitFrame('pose of polyp A', (d) => near(d.arcMm, locA.arc_mm, 0.01) && near(d.rollDeg, locA.roll_deg, 0.06)
+  const atA = await waitFrame('pose of polyp A', (d) => near(d.arcMm, locA.arc_mm, 0.01) && nearAngle(d.rollDeg, locA.roll_deg)
     && d.direction === locA.direction && d.loading === 'false');
   const pxShown = Number(atA.px);
   const k = pxShown / Number(locA.px);
+  // The pair image is view 0 | separator | view 1, each view px x px (the server puts a few
+  // pixels between them, as in frames/pair_NNNN.png); the canvas shows it scaled to its box.
   const pairBox = await page.locator('#pair').boundingBox();
-  const toScreen = (view, x, y) => [pairBox.x + ((view * pxShown + x * k) / (2 * pxShown)) * pairBox.width,
-    pairBox.y + ((y * k) / pxShown) * pairBox.height];
+  const [pairW, pairH] = await page.$eval('#pair', (c) => [c.width, c.height]);
+  check(pairH === pxShown && pairW >= 2 * pxShown && pairW <= 2 * pxShown + 16, 'pair image size',
+    `${2 * pxShown} (+ separator) x ${pxShown}`, `${pairW} x ${pairH}`);
+  const gap = pairW - 2 * pxShown;
+  const toScreen = (view, x, y) => [pairBox.x + ((view * (pxShown + gap) + x * k) / pairW) * pairBox.width,
+    pairBox.y + ((y * k) / pairH) * pairBox.height];
 
   // ---- click polyp A in the fly-over view -> the CT crosshair lands on it
   const cursorBefore = await page.getAttribute('#ct', 'data-cursor-mm');
@@ -389,7 +396,7 @@ async function run() {
     // the marker is drawn: the overlay has yellow pixels at the marked spot
     const drawn = await page.$eval('#pair-overlay', (c, m) => {
       const s = c.height / Number(m.px);
-      const x = Math.round(Number(m.view) * c.height + Number(m.x) * s);
+      const x = Math.round(Number(m.view) * (c.width - c.height) + Number(m.x) * s);
       const y = Math.round(Number(m.y) * s);
       const r = Math.ceil(Math.max(6, c.height / 40) * 3);
       const img = c.getContext('2d').getImageData(Math.max(0, x - r), Math.max(0, y - r), 2 * r, 2 * r).data;
