@@ -8,6 +8,7 @@
 #include "pipeline/phantom_io.h"
 #include "pipeline/params.h"
 #include "pipeline/study.h"
+#include "view/view_server.h"
 #include "volume/error.h"
 
 #include <CLI/CLI.hpp>
@@ -140,6 +141,15 @@ int main(int argc, char** argv)
     exportCmd->add_option("--lumen", exportLumenPath, "lumen mask (uint8, 1 inside) on the original scan's grid "
                                                       "and geometry: .nii.gz, .nii, .nrrd or .mha");
 
+    // flyover view
+    auto* viewCmd = app.add_subcommand("view", "interactive viewer: a local web page (127.0.0.1, token in the URL) "
+                                               "flying over a study; Ctrl-C stops it");
+    std::string viewStudy, viewCt;
+    int viewPort = 0;
+    viewCmd->add_option("--study", viewStudy, "study folder (after flyover run)")->required();
+    viewCmd->add_option("--port", viewPort, "port on 127.0.0.1 (0 = a free one)")->check(CLI::Range(0, 65535));
+    viewCmd->add_option("--ct", viewCt, "CT for the slices when the study has no ct.vdb (a mask-only study)");
+
     // flyover params
     auto* paramsCmd = app.add_subcommand("params", "list every stage parameter with its default");
 
@@ -242,6 +252,7 @@ int main(int argc, char** argv)
             if (!any) throw ParameterError("export: name at least one output (--mesh, --lumen, --centerline)");
             return 0;
         }
+        if (*viewCmd) return runViewCommand(viewStudy, viewPort, viewCt, std::cout);
         if (*cleanCmd) {
             cleanStudy(cleanDir);
             log("study " + cleanDir + " cleaned");
