@@ -336,6 +336,9 @@ async function run() {
       const d = dist(p, A.center_mm);
       check(d <= A.radius_mm + 1.0, `${plane} crosshair on polyp A (distance of its LPS point to the true centre)`,
         `<= ${(A.radius_mm + 1).toFixed(1)} mm`, `${d.toFixed(2)} mm at ${fmtP(p)}`);
+      check(Math.abs(d - A.radius_mm) <= 1.5, `${plane} crosshair on polyp A's surface: | |p - centre| - radius |`,
+        '<= 1.5 mm', `${Math.abs(d - A.radius_mm).toFixed(2)} mm`);
+      check(dist(p, picked) <= 0.05, `${plane} crosshair at the picked point`, fmtP(picked), fmtP(p));
     }
     log(`polyp A (r ${A.radius_mm} mm): picked ${dist(picked, A.center_mm).toFixed(2)} mm from the centre; crosshairs `
       + Object.entries(cross).map(([pl, p]) => `${pl} ${dist(p, A.center_mm).toFixed(2)} mm`).join(', '));
@@ -391,7 +394,7 @@ async function run() {
     });
     check(hit.hit === true, '/api/pick at the marked pixel', 'a hit', JSON.stringify(hit));
     const off = Math.abs(dist(hit.point_mm, B.center_mm) - B.radius_mm);
-    check(off <= 1.5, 'marked pixel on polyp B: | |hit - centre| - radius |', '<= 1.5 mm (surface of the polyp)',
+    check(off <= 1.0, 'marked pixel on polyp B: | |hit - centre| - radius |', '<= 1.0 mm (surface of the polyp)',
       `${off.toFixed(2)} mm (hit ${fmtP(hit.point_mm)}, radius ${B.radius_mm} mm)`);
     // the marker is drawn: the overlay has yellow pixels at the marked spot
     const drawn = await page.$eval('#pair-overlay', (c, m) => {
@@ -514,8 +517,10 @@ async function run() {
       const d = document.querySelector('#views').dataset;
       return d.markerKey && d.key === d.markerKey && d.loading === 'false';
     }, null, { timeout: 30000 });
+    await page.setViewportSize({ width: 1440, height: 880 });
     await sleep(1500);
-    await page.screenshot({ path: args.screenshot, type: args.screenshot.endsWith('.png') ? 'png' : 'jpeg', ...(args.screenshot.endsWith('.png') ? {} : { quality: 80 }) });
+    const png = /\.png$/i.test(args.screenshot);
+    await page.screenshot({ path: args.screenshot, type: png ? 'png' : 'jpeg', ...(png ? {} : { quality: 82 }) });
     log(`page picture: ${args.screenshot} (${fs.statSync(args.screenshot).size} bytes)`);
   }
 
