@@ -14,7 +14,6 @@
 
 import { spawn } from 'node:child_process';
 import fs from 'node:fs';
-import os from 'node:os';
 import path from 'node:path';
 import readline from 'node:readline';
 
@@ -162,19 +161,13 @@ async function run() {
   srv = await startServer();
   log(`server: ${srv.url.replace(srv.token, '…')}`);
 
-  const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), 'flyover-chromium-'));
+  // launch() starts chromium with a fresh temporary profile of its own (its --user-data-dir),
+  // removed when the browser closes.
   browser = await chromium.launch({
     executablePath: chromiumPath,
     headless: true,
     args: ['--no-sandbox', '--no-first-run', '--disable-background-networking', '--disable-component-update',
-      '--disable-sync', `--user-data-dir=${userDataDir}`],
-  }).catch(async (e) => {
-    // Playwright refuses --user-data-dir in launch(); it makes a fresh profile of its own then.
-    if (!/user-data-dir/.test(String(e.message))) throw e;
-    return chromium.launch({
-      executablePath: chromiumPath, headless: true,
-      args: ['--no-sandbox', '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-    });
+      '--disable-sync'],
   });
   log(`chromium ${browser.version()}`);
   const context = await browser.newContext({ viewport: { width: 1600, height: 1000 }, acceptDownloads: true });
