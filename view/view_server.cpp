@@ -704,6 +704,12 @@ int runViewCommand(const std::string& studyDir, int port, const std::string& ctP
     out << "flyover: view: " << server.url() << std::endl;
     server.listen();
     listenDone = true;
+    if (stopping && !study.loaded()) {
+        // Stopped while the study is still loading: nothing to save, do not wait for the load.
+        watcher.join();
+        out.flush();
+        std::_Exit(0);
+    }
     loadWatch.join();
     if (!stopping) pthread_kill(watcher.native_handle(), SIGTERM);
     watcher.join();

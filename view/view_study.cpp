@@ -3,7 +3,6 @@
 #include "pipeline/artifact_io.h"
 #include "render/flyover_path.h"
 #include "render/overview.h"
-#include "surface/openmesh_log.h"
 #include "volume/error.h"
 #include "volume/image.h"
 #include "volume/image_io.h"
@@ -111,12 +110,12 @@ void ViewStudy::loadNow()
         std::vector<float> xyz;
         std::vector<uint32_t> tris;
         std::unique_ptr<RayScene> scene;
-        if (readPlainPly(ply, xyz, tris))
-            scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
-        else {
-            const ScopedOpenMeshMute mute;  // its own messages would break the one-line error
-            scene = std::make_unique<RayScene>(readMesh(ply));
-        }
+        // Only the layout flyover writes: OpenMesh's general reader can allocate without bound
+        // on a malformed header (measured: gigabytes for a 3-line file), so it is never tried here.
+        if (!readPlainPly(ply, xyz, tris))
+            throw InputError(ply + ": not the binary PLY layout flyover writes (float x y z, triangles); remake it "
+                                   "with: " + mRunHint + " --force mesh");
+        scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
         if (scene->triangleCount() == 0) throw InputError(ply + ": the surface has no triangles");
         openvdb::FloatGrid::Ptr ct;
         if (!mCtSource.empty()) {
@@ -179,6 +178,12 @@ void ViewStudy::waitLoaded() const
     std::unique_lock<std::mutex> lock(mLoadMutex);
     mLoadedCv.wait(lock, [this] { return mLoaded; });
     if (!mLoadError.empty()) throw InputError(mLoadError);
+}
+
+bool ViewStudy::loaded() const
+{
+    std::lock_guard<std::mutex> lock(mLoadMutex);
+    return mLoaded;
 }
 
 std::string ViewStudy::loadError() const

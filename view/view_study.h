@@ -92,6 +92,8 @@ public:
     void load();
     /// Blocks until loading has finished; @throw InputError when it failed.
     void waitLoaded() const;
+    /// True once loading has finished (successfully or not).
+    bool loaded() const;
     /// "" while loading or after success, else the one-line reason.
     std::string loadError() const;
 

@@ -81,6 +81,7 @@ std::string readAll(int fd)
 /// Waits for the child; -1 when it has not exited within the timeout (it is then killed).
 int waitExit(pid_t pid, std::chrono::seconds timeout)
 {
+    if (pid <= 0) return -1;  // never waitpid(-1): that would reap any child
     const auto end = std::chrono::steady_clock::now() + timeout;
     int status = 0;
     while (std::chrono::steady_clock::now() < end) {
@@ -142,11 +143,24 @@ TEST(ViewCli, AStudyWithoutItsPartsSaysWhatIsMissingAndHowToMakeIt)
     // A corrupt surface: the URL may be out, then one line and exit 1.
     fs::create_directories(root / "corrupt");
     fs::copy_file(fs::path(sharedStudy().study) / "centerline.json", root / "corrupt" / "centerline.json");
-    std::ofstream(root / "corrupt" / "surface.ply") << "ply\nformat binary_little_endian 1.0\nelement vertex 99\n";
+    {
+        // A header that promises more than the file holds, then a malformed header.
+        std::ofstream(root / "corrupt" / "surface.ply")
+            << "ply\nformat binary_little_endian 1.0\nelement vertex 99\nproperty float x\nproperty float y\n"
+               "property float z\nelement face 5\nproperty list uchar int vertex_indices\nend_header\n0123";
+    }
     const CliResult corrupt = runToEnd({"view", "--study", (root / "corrupt").string()});
     EXPECT_EQ(corrupt.code, 1) << corrupt.err;
     EXPECT_EQ(lines(corrupt.err), 1) << corrupt.err;
     EXPECT_NE(corrupt.err.find("surface.ply"), std::string::npos) << corrupt.err;
+
+    fs::create_directories(root / "badheader");
+    fs::copy_file(fs::path(sharedStudy().study) / "centerline.json", root / "badheader" / "centerline.json");
+    std::ofstream(root / "badheader" / "surface.ply") << "ply\nformat binary_little_endian 1.0\nelement vertex 99\n";
+    const CliResult badHeader = runToEnd({"view", "--study", (root / "badheader").string()});
+    EXPECT_EQ(badHeader.code, 1) << badHeader.err;
+    EXPECT_EQ(lines(badHeader.err), 1) << badHeader.err;
+    EXPECT_NE(badHeader.err.find("surface.ply"), std::string::npos) << badHeader.err;
 
     const CliResult badPort = runToEnd({"view", "--study", sharedStudy().study, "--port", "70000"});
     EXPECT_EQ(badPort.code, 2) << badPort.err;

@@ -161,7 +161,9 @@ TEST_F(ViewSecurity, BadParametersAreOneLineJsonErrors)
     expectJsonError(c->Get("/api/overview?marker_mm=-1"), 422, "marker off the path");
     expectJsonError(c->Get("/api/slice?plane=axial&x_mm=0&y_mm=0&z_mm=0&window=0"), 422, "window 0");
     expectJsonError(c->Get("/api/nothing"), 404, "unknown API path");
-    expectJsonError(c->Put("/api/bookmarks", "{}", "application/json"), 405, "PUT");
+    expectJsonError(c->Put("/api/bookmarks", "{}", "application/json"), 403, "PUT without Origin");
+    expectJsonError(c->Put("/api/bookmarks", httplib::Headers{{"Origin", sServer->origin()}}, "{}", "application/json"), 405,
+                    "PUT");
     expectJsonError(c->Post("/api/pair", httplib::Headers{{"Origin", sServer->origin()}}, "{}", "application/json"), 405,
                     "POST to a GET path");
     const std::string big(200 * 1024, ' ');

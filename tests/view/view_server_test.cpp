@@ -169,9 +169,14 @@ TEST_F(ViewApi, LocateThenPickFindsEveryTruthPolyp)
         ASSERT_EQ(pk->status, 200) << pk->body;
         const json h = json::parse(pk->body);
         ASSERT_TRUE(h["hit"].get<bool>()) << "polyp at arc " << polyp.arcMm;
+        // The roll puts the point on the view's horizontal midline (the image's vertical axis is
+        // the lateral one); along the tangent it may be off-centre by its arc offset.
+        EXPECT_NEAR(l["y"].get<double>(), 0.5 * px, 1e-6 * px) << "polyp at arc " << polyp.arcMm;
+        // On the polyp's surface: within 1 mm plus half a voxel, because the small phantom's 2.5 mm
+        // voxels flatten its 3-4 mm polyps in the reconstructed surface.
         const double d = distance(vec(h["point_mm"]), m);
-        EXPECT_NEAR(d, polyp.radiusMm, 1.0) << "polyp at arc " << polyp.arcMm << " radius " << polyp.radiusMm
-                                            << ": the picked point is not on its surface";
+        EXPECT_NEAR(d, polyp.radiusMm, 1.0 + 0.5 * 2.5) << "polyp at arc " << polyp.arcMm << " radius "
+                                                        << polyp.radiusMm << ": the picked point is not on its surface";
     }
 }
 
