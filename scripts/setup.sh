@@ -13,6 +13,7 @@ PACKAGES=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev libpng-dev libtoml11-dev
   ffmpeg time
   libcpp-httplib-dev libturbojpeg0-dev   # flyover view: HTTP server (cpp-httplib), JPEG frames
+  snakemake bc                           # workflows/cohort/Snakefile and its test; bench/cohort_bench.sh
 )
 
 # flyover view's browser test (tests/view/browser): Debian's chromium, driven from node by
