@@ -10,9 +10,11 @@
 #include <openvdb/openvdb.h>
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace flyover {
 
@@ -56,6 +58,13 @@ openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& grid
 /// Binary PLY through OpenMesh's writer. @throw InputError.
 void writeMesh(const std::string& path, const TriMesh& mesh);
 TriMesh readMesh(const std::string& path);
+
+/// Reads the vertices and triangles of a binary little-endian PLY with exactly float x, y, z
+/// per vertex and `list uchar int vertex_indices` of 3 per face (what writeMesh produces),
+/// without building a mesh topology (for RayScene's array constructor).
+/// @return false when the file has another layout (read it with readMesh then).
+/// @throw InputError when it is unreadable, truncated or has a bad vertex index.
+bool readPlainPly(const std::string& path, std::vector<float>& xyz, std::vector<uint32_t>& tris);
 
 void writePng(const std::string& path, const RgbImage& image);
 /// Reads an 8-bit RGB or RGBA PNG (alpha dropped). @throw InputError.

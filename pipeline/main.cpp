@@ -9,6 +9,7 @@
 #include "pipeline/params.h"
 #include "pipeline/stage_command.h"
 #include "pipeline/study.h"
+#include "view/view_server.h"
 #include "volume/error.h"
 
 #include <CLI/CLI.hpp>
@@ -156,6 +157,15 @@ int main(int argc, char** argv)
     exportCmd->add_option("--lumen", exportLumenPath, "lumen mask (uint8, 1 inside) on the original scan's grid "
                                                       "and geometry: .nii.gz, .nii, .nrrd or .mha");
 
+    // flyover view
+    auto* viewCmd = app.add_subcommand("view", "interactive viewer: a local web page (127.0.0.1, token in the URL) "
+                                               "flying over a study; Ctrl-C stops it");
+    std::string viewStudy, viewCt;
+    int viewPort = 0;
+    viewCmd->add_option("--study", viewStudy, "study folder (after flyover run)")->required();
+    viewCmd->add_option("--port", viewPort, "port on 127.0.0.1 (0 = a free one)")->check(CLI::Range(0, 65535));
+    viewCmd->add_option("--ct", viewCt, "CT for the slices when the study has no ct.vdb (a mask-only study)");
+
     // flyover stage (for workflow engines; see pipeline/stage_command.h for the exit codes)
     auto* stageCmd = app.add_subcommand("stage", "run one stage from the study's existing results (upstream stages must be "
                                                  "fresh); writes DIR/stages/NAME.json; exit 1 bad input, 2 bad parameter, "
@@ -278,6 +288,7 @@ int main(int argc, char** argv)
             if (!any) throw ParameterError("export: name at least one output (--mesh, --lumen, --centerline)");
             return 0;
         }
+        if (*viewCmd) return runViewCommand(viewStudy, viewPort, viewCt, std::cout);
         if (*stageCmd) {
             if (!stageConfig.empty()) applyParamsJson(stageOpt.params, readConfigFile(stageConfig), stageConfig);
             for (const auto& a : stageAssignments) applyParamAssignment(stageOpt.params, a);

@@ -371,51 +371,6 @@ void writeSurfaceSeen(const std::string& path, const RayScene& scene, const Cove
     });
 }
 
-/// Reads the vertices and triangles of a binary little-endian PLY with exactly float x, y, z
-/// per vertex and `list uchar int vertex_indices` of 3 per face (what writeMesh produces),
-/// without building a mesh topology: that takes most of a second for a million triangles, and
-/// the renderer needs none. @return false when the file has another layout (the caller then
-/// reads it with the general reader).
-bool readPlainPly(const std::string& path, std::vector<float>& xyz, std::vector<uint32_t>& tris)
-{
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError(path + ": cannot open for reading");
-    std::string line;
-    std::vector<std::string> header;
-    while (std::getline(in, line)) {
-        if (!line.empty() && line.back() == '\r') line.pop_back();
-        if (line.rfind("comment", 0) == 0 || line.rfind("obj_info", 0) == 0) continue;
-        header.push_back(line);
-        if (line == "end_header" || header.size() > 16) break;
-    }
-    long long nv = -1, nf = -1;
-    if (header.size() != 9 || header[0] != "ply" || header[1] != "format binary_little_endian 1.0" ||
-        std::sscanf(header[2].c_str(), "element vertex %lld", &nv) != 1 || header[3] != "property float x" ||
-        header[4] != "property float y" || header[5] != "property float z" ||
-        std::sscanf(header[6].c_str(), "element face %lld", &nf) != 1 ||
-        (header[7] != "property list uchar int vertex_indices" && header[7] != "property list uchar int vertex_index") ||
-        header[8] != "end_header" || !isLittleEndian())
-        return false;
-    if (nv < 0 || nf < 0 || nv >= (1LL << 32) || nf > (1LL << 30)) return false;
-    xyz.resize(std::size_t(3 * nv));
-    in.read(reinterpret_cast<char*>(xyz.data()), std::streamsize(xyz.size() * sizeof(float)));
-    std::vector<char> faces(std::size_t(nf) * 13);
-    in.read(faces.data(), std::streamsize(faces.size()));
-    if (!in) throw InputError(path + ": truncated PLY");
-    tris.resize(std::size_t(3 * nf));
-    for (std::size_t f = 0; f < std::size_t(nf); ++f) {
-        const char* rec = &faces[f * 13];
-        if (uint8_t(rec[0]) != 3) return false;  // not all triangles
-        int32_t idx[3];
-        std::memcpy(idx, rec + 1, sizeof idx);
-        for (int k = 0; k < 3; ++k) {
-            if (idx[k] < 0 || idx[k] >= nv) throw InputError(path + ": face " + std::to_string(f) + " has a bad vertex index");
-            tris[3 * f + std::size_t(k)] = uint32_t(idx[k]);
-        }
-    }
-    return true;
-}
-
 /// Review views after the fly-over's coverage (render.review): plans them (render/review.h),
 /// renders each into `folder` as review_NNNN.png (a pair like frames/, or one targeted view)
 /// with poses.json, and returns what coverage.json says about them: "flyover_with_review",

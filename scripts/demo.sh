@@ -15,3 +15,6 @@ echo "  overview (OST of the whole colon, anterior view): $(realpath "$OUT/study
 echo "  fly-over frame pairs (camera 0 | camera 1):       $(realpath "$OUT/study/frames")/pair_*.png"
 echo "  camera poses of every frame:                      $(realpath "$OUT/study/frames/poses.json")"
 echo "  all artifacts and manifest.json:                  $(realpath "$OUT/study")"
+echo
+echo "Fly over it interactively (a local web page; open the URL it prints, Ctrl-C stops it):"
+echo "  $BUILD_DIR/pipeline/flyover view --study $(realpath "$OUT/study")"

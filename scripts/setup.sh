@@ -12,8 +12,17 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev libpng-dev libtoml11-dev
   ffmpeg time
+  libcpp-httplib-dev libturbojpeg0-dev   # flyover view: HTTP server (cpp-httplib), JPEG frames
   snakemake bc                           # workflows/cohort/Snakefile and its test; bench/cohort_bench.sh
 )
+
+# flyover view's browser test (tests/view/browser): Debian's chromium, driven from node by
+# playwright-core. node and npm come from Debian (Node 18, npm 9) only when missing: a machine
+# with Node from another source keeps it (Debian's npm conflicts with such a nodejs).
+PACKAGES+=(chromium)
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  PACKAGES+=(nodejs npm)
+fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do
