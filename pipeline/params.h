@@ -49,7 +49,9 @@ struct RenderParams {
     /// every 1 mm to within 0.1% on the phantoms, at a sixth of the time (issue 8 note).
     int coveragePx = 96;
     double coverageStepMm = 3.0;     ///< distance between coverage views along the centerline (mm)
-    static constexpr int VERSION = 3;  // 3: camera elevation from the framed half-width R(p), not D(p)
+    /// 3: camera elevation from the framed half-width R(p), not D(p); 4: render split into
+    /// steps (frames, flythrough, overviews, video, coverage), the video in video/.
+    static constexpr int VERSION = 4;
 };
 
 struct PipelineParams {
