@@ -2,12 +2,14 @@
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"
+#include "pipeline/deferred_writes.h"
 #include "pipeline/stage_context.h"
 #include "volume/error.h"
 
 #include <tbb/flow_graph.h>
 
 #include <chrono>
+#include <future>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -44,6 +46,11 @@ struct StageSpec {
     std::vector<std::string> paramNames = {};
     /// Steps that run first when both run (order only: no data passes, no key depends on it).
     std::vector<std::string> after = {};
+    /// Write-behind: the next stages start as soon as the body returns (they take its results
+    /// from memory); the fsync and rename of its artifacts and its cache record follow beside
+    /// them. The artifacts are hashed before, in their temporaries, so that keys stay content
+    /// digests.
+    bool writeBehind = false;
 };
 
 /// The segment stage: from the CT's air, or from the external mask when the run has one.
@@ -66,10 +73,10 @@ const std::vector<StageSpec>& stageSpecs()
     static const std::vector<std::string> renderIn{"surface.ply", "centerline.json"};
     static const std::vector<std::string> renderUp{"centerline", "mesh"};
     static const std::vector<StageSpec> specs{
-        {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest},
-        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage},
-        {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline},
-        {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh},
+        {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest, "", {}, {}, true},
+        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage, "", {}, {}, true},
+        {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline, "", {}, {}, true},
+        {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh, "", {}, {}, true},
         {"frames", renderUp, renderIn, {"frames"}, runFrames, RENDER_GROUP,
          {FLYOVER_CAMERA, FLYOVER_IMAGE, "frame_step_mm"}},
         {"flythrough", renderUp, renderIn, {"flythrough"}, runFlythrough, RENDER_GROUP,
@@ -252,6 +259,9 @@ nlohmann::json runPipeline(const RunOptions& options)
     if (hasMask) digests["mask"] = inputDigest(options.maskPath);
     std::map<std::string, json> entries;
     std::set<std::string> usedRecords;
+    // Write-behind: the finishing of each such stage (fsync, rename, record), joined before the
+    // manifest is written (and, being std::async futures, on any way out of this function).
+    std::vector<std::pair<std::string, std::future<void>>> behind;
 
     auto execute = [&](const StageSpec& spec) {
         if (!wanted.count(spec.name)) return;
@@ -295,28 +305,39 @@ nlohmann::json runPipeline(const RunOptions& options)
         if (log) log->stageStarted(spec.name);
         StageProgress progress(log, spec.name);
         const auto t0 = std::chrono::steady_clock::now();
+        auto deferred = std::make_shared<DeferredWrites>();
         json report;
         try {
+            const DeferredWrites::Scope scope(spec.writeBehind ? deferred.get() : nullptr);
             report = spec.body(run, &progress);
         } catch (const std::exception& e) {
             throw StageError(spec.name, e.what());
         }
         const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         json outputs = json::object();
-        for (const auto& a : spec.outputs) outputs[a] = artifactDigest(run.path(a));
+        for (const auto& a : spec.outputs) {
+            const std::string pending = deferred->pendingFile(run.path(a));
+            outputs[a] = artifactDigest(pending.empty() ? run.path(a) : pending);
+        }
         entry["outputs"] = outputs;
         entry["wall_seconds"] = secs;
         entry["computed"] = true;
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        store.commit(record2);
-        crashPoint(("stage:" + spec.name + ":committed").c_str());
+        auto finish = [&store, deferred, record2, name = spec.name] {
+            crashPoint(("writebehind:" + name + ":before-finish").c_str());
+            deferred->finish();
+            store.commit(record2);
+            crashPoint(("stage:" + name + ":committed").c_str());
+        };
+        if (!spec.writeBehind) finish();
         std::lock_guard<std::mutex> g(mutex);
+        if (spec.writeBehind) behind.emplace_back(spec.name, std::async(std::launch::async, finish));
         for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
         entries[spec.name] = entry;
         usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
-        if (log) log->stageFinished(spec.name, true, secs, "");
+        if (log) log->stageFinished(spec.name, true, secs, spec.writeBehind ? "artifacts written behind" : "");
     };
 
     // The stage graph: ingest -> segment -> {centerline, mesh} -> frames -> {flythrough,
@@ -340,6 +361,14 @@ nlohmann::json runPipeline(const RunOptions& options)
         g.wait_for_all();
     } catch (...) {
         failure = std::current_exception();
+    }
+    for (auto& [name, done] : behind) {
+        try {
+            done.get();
+        } catch (const std::exception& e) {
+            entries.erase(name);
+            if (!failure) failure = std::make_exception_ptr(StageError(name, std::string("writing its artifacts: ") + e.what()));
+        }
     }
 
     // The manifest: this run's entries, plus earlier entries of stages this run did not touch.

@@ -342,7 +342,10 @@ TEST_F(StudyTest, KilledRunsLeaveNothingThatLies)
     // Exact kill points: mid-write (temporary file complete, not yet renamed), between a
     // cache object and its record, and right after a stage's record, each on a fresh study.
     for (const char* point : {"atomic-write:before-rename", "store:objects-linked", "stage:segment:committed",
-                              "frames:first-pair", "stage:frames:committed", "stage:video:committed"}) {
+                              "frames:first-pair", "stage:frames:committed", "stage:video:committed",
+                              // write-behind: mesh's files still in their temporaries, and
+                              // ingest's record after its file, both while later stages run
+                              "writebehind:mesh:before-finish", "stage:ingest:committed"}) {
         const std::string s = studyDir(std::string("crash-") + point);
         const int killed = std::system(("FLYOVER_CRASH_AT=" + std::string(point) + " " + flyover + " -q run " +
                                         ctPath() + " --study " + s + common + " 2>/dev/null").c_str());
