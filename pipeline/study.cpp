@@ -9,6 +9,7 @@
 #include <tbb/flow_graph.h>
 
 #include <chrono>
+#include <exception>
 #include <future>
 #include <filesystem>
 #include <map>
@@ -186,7 +187,7 @@ std::string studyFilesProblem(const ArtifactStore& store, const fs::path& dir, c
         if (digest == it.value().get<std::string>()) continue;
         if (store.anotherRecordHas(stage, it.key(), digest, record.value("key", "")))
             return it.key() + " in the study holds the output of other " + stage +
-                   " parameters than these (run restores these from the cache)";
+                   " parameters than these (run restores it from the cache)";
         return it.key() + " in the study is corrupt, incomplete or modified (digest mismatch; run restores it from "
                           "the cache)";
     }
@@ -311,7 +312,8 @@ nlohmann::json runPipeline(const RunOptions& options)
             const DeferredWrites::Scope scope(spec.writeBehind ? deferred.get() : nullptr);
             report = spec.body(run, &progress);
         } catch (const std::exception& e) {
-            throw StageError(spec.name, e.what());
+            // Nested: the cause's type stays visible (out of memory, a full disk: retryable).
+            std::throw_with_nested(StageError(spec.name, e.what()));
         }
         const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         json outputs = json::object();
@@ -367,7 +369,13 @@ nlohmann::json runPipeline(const RunOptions& options)
             done.get();
         } catch (const std::exception& e) {
             entries.erase(name);
-            if (!failure) failure = std::make_exception_ptr(StageError(name, std::string("writing its artifacts: ") + e.what()));
+            if (!failure) {
+                try {  // nested like a stage body's failure: the cause's type stays visible
+                    std::throw_with_nested(StageError(name, std::string("writing its artifacts: ") + e.what()));
+                } catch (...) {
+                    failure = std::current_exception();
+                }
+            }
         }
     }
 
