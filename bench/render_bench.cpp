@@ -7,7 +7,8 @@
 //           (16-wide coherent packets, no filter, no shading) for the same rays, for each OST
 //           method, with and without Embree's robust mode; PNG encoding; scene build; and, with
 //           --study, the time from the cached surface and centerline to the first saved pair
-//           (the render stage itself, through the pipeline).
+//           (the frames step itself, through the pipeline, on a copy of the study: the
+//           study is never written).
 // coverage  coverage fractions against the coverage rays' resolution and step (convergence).
 // sweep     the clip offset sweep: coverage, polyp visibility (also on the cutting line) and
 //           occlusion by other loops of colon for each offset (needs the truth polyps).
@@ -289,18 +290,31 @@ void benchSceneAndPng(const Args& a, const Subject& s)
                 double(images.size()) / median(all), a.threads);
 }
 
-/// The render stage itself on a cached study: surface.ply and centerline.json on disk, render
-/// forced. Video, coverage and fly-through frames off (they come after the first pair anyway).
+/// The frames step itself on a cached study: surface.ply and centerline.json on disk, frames
+/// forced. Runs on a copy of the study (copyStudy), never in the user's study: a benchmark's
+/// parameters must not leave their frames and manifest there.
 void benchFirstPair(const Args& a)
 {
-    const nlohmann::json manifest = readJson((fs::path(a.study) / "manifest.json").string());
+    const fs::path copy = fs::temp_directory_path() / ("flyover-render-bench-" + std::to_string(::getpid()));
+    fs::remove_all(copy);
+    copyStudy(a.study, copy.string());
+    struct RemoveCopy {
+        fs::path p;
+        ~RemoveCopy() { std::error_code ec; fs::remove_all(p, ec); }
+    } removeCopy{copy};
+    const nlohmann::json manifest = readJson((copy / "manifest.json").string());
     RunOptions o;
     o.ctPath = manifest.at("input").get<std::string>();
-    o.studyDir = a.study;
-    o.forceStage = "render";
-    o.params.render.video = false;
-    o.params.render.coverage = false;
-    o.params.render.flythroughFrames = false;
+    o.studyDir = copy.string();
+    // The study's own parameters for the stages before the frames, so that they are reused.
+    for (const auto& st : manifest.at("stages")) {
+        const std::string stage = st.value("stage", "");
+        if ((stage == "ingest" || stage == "segment" || stage == "centerline" || stage == "mesh") &&
+            st.contains("parameters") && stageVersion(stage) == st.value("version", -1))
+            applyParamsJson(o.params, nlohmann::json{{stage, st.at("parameters")}}, "manifest.json");
+    }
+    o.untilStage = "frames";
+    o.forceStage = "frames";
     o.params.render.frameStepMm = 400;
     o.params.render.widthPx = o.params.render.heightPx = a.px;
     std::vector<double> total;
@@ -308,13 +322,13 @@ void benchFirstPair(const Args& a)
     for (int r = 0; r < a.runs; ++r) {
         const nlohmann::json m = runPipeline(o);
         for (const auto& st : m.at("stages"))
-            if (st.at("stage") == "render") {
+            if (st.at("stage") == "frames") {
                 total.push_back(st.at("report").at("first_pair_seconds").get<double>());
                 for (const auto& [k, v] : st.at("report").at("first_pair_breakdown_seconds").items())
                     parts[k].push_back(v.get<double>());
             }
     }
-    std::printf("\ntime from the cached surface and centerline to the first saved pair (render stage, %d x %d "
+    std::printf("\ntime from the cached surface and centerline to the first saved pair (frames step, %d x %d "
                 "per view): %.3f s median of %d (",
                 a.px, a.px, median(total), a.runs);
     const char* sep = "";

@@ -1,5 +1,7 @@
 #include "pipeline/artifact_io.h"
 
+#include "pipeline/deferred_writes.h"
+
 #include "volume/error.h"
 #include "volume/image.h"
 
@@ -41,6 +43,59 @@ void crashPoint(const char* point)
     if (target && std::strcmp(target, point) == 0) ::raise(SIGKILL);
 }
 
+namespace {
+
+thread_local DeferredWrites* tDeferred = nullptr;
+
+void fsyncFile(const std::string& path)
+{
+    if (FILE* f = std::fopen(path.c_str(), "rb")) {
+        ::fsync(fileno(f));
+        std::fclose(f);
+    }
+}
+
+} // namespace
+
+DeferredWrites::Scope::Scope(DeferredWrites* writes) : mPrevious(tDeferred) { tDeferred = writes; }
+DeferredWrites::Scope::~Scope() { tDeferred = mPrevious; }
+
+DeferredWrites* DeferredWrites::active() { return tDeferred; }
+
+DeferredWrites::~DeferredWrites()
+{
+    std::error_code ec;
+    for (const auto& [tmp, target] : mFiles) fs::remove(tmp, ec);
+}
+
+void DeferredWrites::add(const std::string& tmpPath, const std::string& path) { mFiles.emplace_back(tmpPath, path); }
+
+std::string DeferredWrites::pendingFile(const std::string& path) const
+{
+    for (auto it = mFiles.rbegin(); it != mFiles.rend(); ++it)
+        if (it->second == path) return it->first;
+    return {};
+}
+
+void DeferredWrites::finish()
+{
+    for (const auto& [tmp, target] : mFiles) {
+        fsyncFile(tmp);
+        crashPoint("atomic-write:before-rename");
+        fs::rename(tmp, target);
+    }
+    mFiles.clear();
+}
+
+std::string writtenFile(const std::string& path)
+{
+    if (tDeferred) {
+        const std::string pending = tDeferred->pendingFile(path);
+        if (!pending.empty()) return pending;
+    }
+    return path;
+}
+
 void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write)
 {
     const fs::path target(path);
@@ -49,12 +104,13 @@ void writeAtomically(const std::string& path, const std::function<void(const std
     try {
         errno = 0;  // what a failing writer leaves here says why (see the catch below)
         write(tmp.string());
+        if (tDeferred) {  // write-behind: the fsync and the rename come with finish()
+            tDeferred->add(tmp.string(), path);
+            return;
+        }
         // Flush the data to disk before the rename makes it visible: a crash must never leave
         // a renamed but empty file.
-        if (FILE* f = std::fopen(tmp.c_str(), "rb")) {
-            ::fsync(fileno(f));
-            std::fclose(f);
-        }
+        fsyncFile(tmp.string());
         crashPoint("atomic-write:before-rename");
         fs::rename(tmp, target);
     } catch (const TransientError&) {

@@ -236,6 +236,27 @@ void ArtifactStore::touch(const std::string& stage, const std::string& key) cons
                         fs::file_time_type::clock::now(), ec);
 }
 
+bool ArtifactStore::anotherRecordHas(const std::string& stage, const std::string& name, const std::string& digest,
+                                     const std::string& exceptKey) const
+{
+    std::error_code ec;
+    const std::string prefix = stage + "-";
+    for (const auto& e : fs::directory_iterator(fs::path(mDir) / ".flyover" / "records", ec)) {
+        const std::string file = e.path().filename().string();
+        if (file.rfind(prefix, 0) != 0 || e.path().extension() != ".json" ||
+            file == recordFileName(stage, exceptKey))
+            continue;
+        try {
+            const json r = readJson(e.path().string());
+            if (r.value("stage", "") == stage && r.contains("outputs") && r["outputs"].value(name, "") == digest)
+                return true;
+        } catch (const std::exception&) {
+            // a damaged record proves nothing
+        }
+    }
+    return false;
+}
+
 void ArtifactStore::dropRecord(const std::string& stage, const std::string& key) const
 {
     std::error_code ec;

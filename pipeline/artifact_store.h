@@ -70,6 +70,10 @@ public:
     /// Marks a record as used now (for least-recently-used eviction).
     void touch(const std::string& stage, const std::string& key) const;
 
+    /// Whether a record of `stage` other than `exceptKey` lists `digest` for the output `name`.
+    bool anotherRecordHas(const std::string& stage, const std::string& name, const std::string& digest,
+                          const std::string& exceptKey) const;
+
     /// Drops a record (e.g. after its objects were found corrupt).
     void dropRecord(const std::string& stage, const std::string& key) const;
 

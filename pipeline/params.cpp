@@ -77,7 +77,7 @@ template <typename V> void visit(RenderParams& p, V&& v)
     v("overview_marker_mm", p.overviewMarkerMm, "overview marker at this arc length from the rectum (mm), < 0: none");
     v("flythrough_frames", p.flythroughFrames, "also save fly-through pairs (forward | backward)");
     v("flythrough_fov_deg", p.flythroughFovDeg, "field of view of the fly-through cameras (degrees)");
-    v("video", p.video, "MP4 of the whole fly-over in frames/ (needs the ffmpeg program)");
+    v("video", p.video, "MP4 of the whole fly-over in video/ (needs the ffmpeg program)");
     v("video_step_mm", p.videoStepMm, "distance between video frames along the centerline (mm)");
     v("video_fps", p.videoFps, "video frame rate (frames per second)");
     v("coverage", p.coverage, "coverage of fly-over and fly-through, missed regions (coverage/)");

@@ -51,7 +51,9 @@ struct RenderParams {
     double coverageStepMm = 3.0;     ///< distance between coverage views along the centerline (mm)
     bool review = true;              ///< review views for the fly-over's missed regions (review/)
     double reviewTarget = 0.995;     ///< review until fly-over plus review sees this fraction (0..1]
-    static constexpr int VERSION = 3;  // 3: camera elevation from the framed half-width R(p), not D(p)
+    /// 3: camera elevation from the framed half-width R(p), not D(p); 4: render split into
+    /// steps (frames, flythrough, overviews, video, coverage), the video in video/.
+    static constexpr int VERSION = 4;
 };
 
 struct PipelineParams {

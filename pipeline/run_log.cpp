@@ -132,4 +132,21 @@ void RunLog::message(const std::string& text)
     }
 }
 
+void RunLog::firstPair(const std::string& path)
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - mStart).count();
+    const std::string line = "first fly-over pair: " + path + " (" + seconds(secs) + " after start)";
+    switch (mMode) {
+    case Mode::Quiet: return;
+    case Mode::Json: jsonLine(mOut, {{"event", "first_pair"}, {"path", path}, {"seconds_since_start", secs}}); return;
+    case Mode::Plain: mOut << "flyover: " << line << std::endl; return;
+    case Mode::Bars:
+        clearBarsLocked();
+        mOut << "flyover: " << line << "\n";
+        redrawLocked(true);
+        return;
+    }
+}
+
 } // namespace flyover

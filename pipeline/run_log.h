@@ -28,6 +28,10 @@ public:
     /// @param computed  false when reused from the cache
     void stageFinished(const std::string& stage, bool computed, double seconds, const std::string& note);
     void message(const std::string& text);
+    /// The first fly-over pair is on disk at `path`: a log line, or the JSON event
+    /// {"event": "first_pair", "path": ..., "seconds_since_start": ...} (since this log was made,
+    /// i.e. since the command started).
+    void firstPair(const std::string& path);
 
     Mode mode() const { return mMode; }
 
@@ -46,6 +50,7 @@ private:
     std::map<std::string, Running> mRunning;
     int mDrawnLines = 0;
     std::chrono::steady_clock::time_point mLastDraw;
+    std::chrono::steady_clock::time_point mStart = std::chrono::steady_clock::now();
 };
 
 /// Adapts RunLog to the Progress interface stage code polls.

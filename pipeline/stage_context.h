@@ -1,7 +1,8 @@
 /// @file stage_context.h
 /// @brief What a stage body sees of a run (internal to pipeline/): the options, the study
 ///        folder, and the objects earlier stages of the same run left in memory. Each stage
-///        body lives in its own stage_<name>.cpp and returns its report for the manifest.
+///        body lives in its own stage_<name>.cpp and returns its report for the manifest; the
+///        render steps (frames, flythrough, overviews, video, coverage) share stage_render.cpp.
 #pragma once
 
 #include "pipeline/study.h"
@@ -12,13 +13,30 @@
 
 #include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
+#include <tbb/collaborative_call_once.h>
 
+#include <chrono>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace flyover {
+
+class RayScene;
+
+/// What every render step renders from: the Embree scene of the surface, the centerline and
+/// the framed half-width R(p) of every centerline point for the run's fly-over cameras. Built
+/// once per run by whichever render step asks first; the others reuse it.
+struct RenderInputs {
+    std::unique_ptr<RayScene> scene;
+    const Centerline* centerline = nullptr;
+    std::vector<double> frameRadii;
+    double readSurfaceSeconds = 0, buildSceneSeconds = 0, readCenterlineSeconds = 0, frameRadiiSeconds = 0;
+    ~RenderInputs();
+};
 
 /// Objects handed from stage to stage in memory within one run.
 struct StudyState {
@@ -30,7 +48,7 @@ struct StudyState {
 
 class StudyRun {
 public:
-    explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir) {}
+    explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir), start(std::chrono::steady_clock::now()) {}
 
     std::string path(const std::string& name) const { return (dir / name).string(); }
 
@@ -38,12 +56,20 @@ public:
     /// Thread-safe (centerline and mesh ask for it at the same time).
     openvdb::FloatGrid::Ptr sdf();
 
+    /// The scene, centerline and frame radii of the render steps: from memory when mesh and
+    /// centerline ran in this run, else from surface.ply and centerline.json. Built once, by
+    /// the first step that asks (the others wait, or help build it: no TBB deadlock).
+    const RenderInputs& renderInputs();
+
     const RunOptions& opt;
     std::filesystem::path dir;
     StudyState state;
+    std::chrono::steady_clock::time_point start;  ///< when runPipeline started
 
 private:
     std::mutex mLoadMutex;
+    tbb::collaborative_once_flag mRenderOnce;
+    std::unique_ptr<RenderInputs> mRender;
 };
 
 inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
@@ -58,6 +84,13 @@ nlohmann::json runSegment(StudyRun& run, Progress* progress);
 nlohmann::json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* progress);
 nlohmann::json runCenterline(StudyRun& run, Progress* progress);
 nlohmann::json runMesh(StudyRun& run, Progress* progress);
-nlohmann::json runRender(StudyRun& run, Progress* progress);
+// The render steps: each its own cached step of the graph, side by side after the frames.
+/// Fly-over pairs in frames/; the first pair is rendered, written and announced before the
+/// rest (log line "first fly-over pair", JSON event "first_pair").
+nlohmann::json runFrames(StudyRun& run, Progress* progress);
+nlohmann::json runFlythrough(StudyRun& run, Progress* progress);
+nlohmann::json runOverviews(StudyRun& run, Progress* progress);
+nlohmann::json runVideo(StudyRun& run, Progress* progress);
+nlohmann::json runCoverage(StudyRun& run, Progress* progress);
 
 } // namespace flyover

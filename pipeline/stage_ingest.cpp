@@ -1,6 +1,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/deferred_writes.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
 
@@ -55,7 +56,7 @@ json runIngest(StudyRun& run, Progress* progress)
                 {"interpolation", rep.interpolation},
                 {"active_voxels", rep.activeVoxels},
                 {"memory_bytes", rep.memoryBytes},
-                {"file_bytes", static_cast<int64_t>(fs::file_size(run.path("ct.vdb")))},
+                {"file_bytes", static_cast<int64_t>(fs::file_size(writtenFile(run.path("ct.vdb"))))},
                 {"grid_size", rep.gridSize},
                 {"grid_origin_mm", vec3Json(rep.gridOriginMm)},
                 {"input_size", rep.inputSize},

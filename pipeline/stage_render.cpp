@@ -1,15 +1,17 @@
-// The render stage: fly-over frame pairs (PNG) and video (MP4 through the ffmpeg program),
-// fly-through pairs for comparison, the six OST overviews, and coverage with missed regions.
+// The render steps, each a cached step of the stage graph with its own key (study.cpp lists
+// the parameters each one depends on): fly-over frame pairs first, then fly-through pairs, the
+// six OST overviews, the video (MP4 through the ffmpeg program) and coverage side by side.
 //
 // Artifacts (all folders are flat):
+//   frames/                   pair_NNNN.png (camera 0 | camera 1), poses.json
+//   flythrough/               pair_NNNN.png (forward | backward) at the same positions, poses.json
 //   overview.png              the anterior overview (with the marker when one is asked for)
 //   overviews/                <view>.png for the six canonical views, cameras.json
-//   frames/                   pair_NNNN.png (camera 0 | camera 1), poses.json, flyover.mp4
-//   flythrough/               pair_NNNN.png (forward | backward) at the same positions, poses.json
+//   video/                    flyover.mp4, poses.json (schema flyover.video/1: every video frame's cameras)
 //   coverage/                 coverage.json, surface_seen.ply
 //   review/                   review_NNNN.png (review views for what the fly-over missed), poses.json
-// The first fly-over pair is rendered and written before anything else, so it is on disk a
-// fraction of a second after the stage starts (report: first_pair_seconds).
+// The first fly-over pair is rendered and written before anything else, published in the
+// study's frames/ at once and announced (report: first_pair_seconds).
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
@@ -456,65 +458,93 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
     return out;
 }
 
+/// The fly-over cameras' settings and the frame images' options, as every step derives them.
+struct FlyoverSetup {
+    FlyoverParams fp;
+    RenderOptions ro;
+    double clStep;
+};
+
+FlyoverSetup flyoverSetup(const RenderParams& rp, const Centerline& cl)
+{
+    return FlyoverSetup{flyoverParamsOf(rp), frameOptionsOf(rp), cl.stepMm > 0 ? cl.stepMm : 1.0};
+}
+
+/// Makes DIR/frames a folder holding only the first pair (a hard link to the staged file), so
+/// that a viewer finds it before the step ends; the commit then replaces the folder by the
+/// complete one. Nothing records this folder: a run killed before the commit leaves a frames/
+/// whose digest matches no record, which status reports and the next run replaces.
+void publishFirstPair(const fs::path& dir, const std::string& stagedPair, const std::string& name)
+{
+    const std::string pid = std::to_string(::getpid());
+    const fs::path tmp = dir / (".tmp-" + pid + "-first-frames"), old = dir / (".tmp-" + pid + "-old-first-frames");
+    fs::remove_all(tmp);
+    fs::remove_all(old);
+    fs::create_directories(tmp);
+    fs::create_hard_link(stagedPair, tmp / name);
+    if (fs::exists(dir / "frames")) fs::rename(dir / "frames", old);
+    fs::rename(tmp, dir / "frames");
+    fs::remove_all(old);
+}
+
 } // namespace
 
-json runRender(StudyRun& run, Progress* progress)
+RenderInputs::~RenderInputs() = default;
+
+const RenderInputs& StudyRun::renderInputs()
+{
+    tbb::collaborative_call_once(mRenderOnce, [this] {
+        auto in = std::make_unique<RenderInputs>();
+        const auto t0 = Clock::now();
+        // The scene straight from the mesh in memory, or from surface.ply's arrays (no topology).
+        if (state.mesh) {
+            in->scene = std::make_unique<RayScene>(*state.mesh);
+        } else {
+            std::vector<float> xyz;
+            std::vector<uint32_t> tris;
+            if (readPlainPly(path("surface.ply"), xyz, tris)) {
+                in->readSurfaceSeconds = secondsSince(t0);
+                in->scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
+            } else {
+                state.mesh = readMesh(path("surface.ply"));
+                in->readSurfaceSeconds = secondsSince(t0);
+                in->scene = std::make_unique<RayScene>(*state.mesh);
+            }
+        }
+        in->buildSceneSeconds = secondsSince(t0) - in->readSurfaceSeconds;
+        const auto tCenterline = Clock::now();
+        if (!state.centerline)
+            state.centerline = centerlineFromJson(readJson(path("centerline.json")), path("centerline.json"));
+        if (state.centerline->points.empty()) throw InputError(path("centerline.json") + ": the centerline is empty");
+        in->centerline = &*state.centerline;
+        in->readCenterlineSeconds = secondsSince(tCenterline);
+        const auto tRadii = Clock::now();
+        in->frameRadii = flyoverFrameRadii(*in->scene, *in->centerline, flyoverParamsOf(opt.params.render));
+        in->frameRadiiSeconds = secondsSince(tRadii);
+        mRender = std::move(in);
+    });
+    return *mRender;
+}
+
+json runFrames(StudyRun& run, Progress* progress)
 {
     const auto tStart = Clock::now();
     const RenderParams& rp = run.opt.params.render;
-    // Fail before any work when the video cannot be made.
-    std::string ffmpeg;
-    if (rp.video) {
-        ffmpeg = findOnPath("ffmpeg");
-        if (ffmpeg.empty())
-            throw std::runtime_error("render.video: the 'ffmpeg' program is not on PATH; install it "
-                                     "(Debian: apt-get install ffmpeg) or set render.video=false");
-    }
-
-    // The scene straight from the mesh in memory, or from surface.ply's arrays (no topology).
-    std::unique_ptr<RayScene> scenePtr;
-    double readSurfaceSeconds = 0;
-    if (run.state.mesh) {
-        scenePtr = std::make_unique<RayScene>(*run.state.mesh);
-    } else {
-        std::vector<float> xyz;
-        std::vector<uint32_t> tris;
-        if (readPlainPly(run.path("surface.ply"), xyz, tris)) {
-            readSurfaceSeconds = secondsSince(tStart);
-            scenePtr = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
-        } else {
-            run.state.mesh = readMesh(run.path("surface.ply"));
-            readSurfaceSeconds = secondsSince(tStart);
-            scenePtr = std::make_unique<RayScene>(*run.state.mesh);
-        }
-    }
-    const RayScene& scene = *scenePtr;
-    const double sceneSeconds = secondsSince(tStart) - readSurfaceSeconds;
-    const auto tCenterline = Clock::now();
-    if (!run.state.centerline)
-        run.state.centerline =
-            centerlineFromJson(readJson(run.path("centerline.json")), run.path("centerline.json"));
-    const Centerline& cl = *run.state.centerline;
-    if (cl.points.empty()) throw InputError(run.path("centerline.json") + ": the centerline is empty");
-    const double readCenterlineSeconds = secondsSince(tCenterline);
-
-    const FlyoverParams fp = flyoverParamsOf(rp);
-    const auto tFrameRadii = Clock::now();
-    const std::vector<double> frameRadii = flyoverFrameRadii(scene, cl, fp);
-    const double frameRadiiSeconds = secondsSince(tFrameRadii);
-    const RenderOptions ro = frameOptionsOf(rp);
+    const RenderInputs& in = run.renderInputs();
+    const double inputsSeconds = secondsSince(tStart);
+    const RayScene& scene = *in.scene;
+    const Centerline& cl = *in.centerline;
+    const FlyoverSetup s = flyoverSetup(rp, cl);
     const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
-    const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
 
-    // --- fly-over frame pairs; the first one before anything else.
     StagedFolder frames(run.dir, "frames");
     std::vector<json> poses(indices.size());
     double firstRenderSeconds = 0, firstPngSeconds = 0;
     auto renderPair = [&](std::size_t f) {
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
-        const auto cams = flyoverCameras(p, fp, frameRadii[indices[f]]);
-        const RgbImage pair = sideBySide(renderView(scene, cams[0], ro), renderView(scene, cams[1], ro));
+        const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
+        const RgbImage pair = sideBySide(renderView(scene, cams[0], s.ro), renderView(scene, cams[1], s.ro));
         const auto t1 = Clock::now();
         writePng(frames.path(pairName(f)), pair);
         if (f == 0) {
@@ -524,48 +554,94 @@ json runRender(StudyRun& run, Progress* progress)
         poses[f] = json{{"frame", f},
                         {"file", pairName(f)},
                         {"centerline_index", indices[f]},
-                        {"arc_mm", double(indices[f]) * clStep},
+                        {"arc_mm", double(indices[f]) * s.clStep},
                         {"centerline_point_mm", vec3Json(p.positionMm)},
                         {"radius_mm", p.radiusMm},
-                        {"frame_radius_mm", frameRadii[indices[f]]},
+                        {"frame_radius_mm", in.frameRadii[indices[f]]},
                         {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
     };
-    const auto tFrames = Clock::now();
+    // The first pair before anything else, in the study's frames/ at once, announced.
     renderPair(0);
+    publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
     const double firstPairSeconds = secondsSince(tStart);
+    const double firstPairSinceRunStart = secondsSince(run.start);
+    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+    crashPoint("frames:first-pair");
+
+    const auto tRest = Clock::now();
     std::atomic<std::size_t> done{1};
     tbb::parallel_for(std::size_t(1), indices.size(), [&](std::size_t f) {
         renderPair(f);
-        reportProgress(progress, 0.3 * double(++done) / double(indices.size()), "fly-over frame pairs");
+        reportProgress(progress, double(++done) / double(indices.size()), "fly-over frame pairs");
     });
-    const double framesSeconds = secondsSince(tFrames);
+    writeJson(frames.path("poses.json"),
+              json{{"schema", "flyover.poses/1"},
+                   {"world_frame", WORLD_FRAME},
+                   {"image_size_px", {rp.widthPx, rp.heightPx}},
+                   {"layout", "pair images: camera 0 left, camera 1 right"},
+                   {"ost", rp.ost},
+                   {"render", renderOptionsJson(s.ro)},
+                   {"frames", poses}});
+    frames.commit();
+    return json{{"frame_pairs", indices.size()},
+                {"triangles", scene.triangleCount()},
+                {"first_pair_seconds", firstPairSeconds},
+                {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
+                {"first_pair_breakdown_seconds",
+                 {{"read_surface", in.readSurfaceSeconds},
+                  {"build_scene", in.buildSceneSeconds},
+                  {"read_centerline", in.readCenterlineSeconds},
+                  {"frame_radii", in.frameRadiiSeconds},
+                  {"wait_for_inputs", inputsSeconds},
+                  {"render_pair", firstRenderSeconds},
+                  {"write_png", firstPngSeconds}}},
+                {"other_pairs_seconds", secondsSince(tRest)}};
+}
 
-    // --- fly-through pairs (forward | backward) at the same positions.
+json runFlythrough(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
     StagedFolder flythrough(run.dir, "flythrough");
+    std::size_t pairs = 0;
     if (rp.flythroughFrames) {
+        const RenderInputs& in = run.renderInputs();
+        const Centerline& cl = *in.centerline;
+        const FlyoverSetup s = flyoverSetup(rp, cl);
+        const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
         std::vector<json> ftPoses(indices.size());
+        std::atomic<std::size_t> done{0};
         tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
             const CenterlinePoint& p = cl.points[indices[f]];
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
-            writePng(flythrough.path(pairName(f)), sideBySide(renderView(scene, fwd, ro), renderView(scene, back, ro)));
+            writePng(flythrough.path(pairName(f)),
+                     sideBySide(renderView(*in.scene, fwd, s.ro), renderView(*in.scene, back, s.ro)));
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
                               {"centerline_index", indices[f]},
-                              {"arc_mm", double(indices[f]) * clStep},
+                              {"arc_mm", double(indices[f]) * s.clStep},
                               {"cameras", json::array({cameraJson(fwd), cameraJson(back)})}};
+            reportProgress(progress, double(++done) / double(indices.size()), "fly-through frame pairs");
         });
         writeJson(flythrough.path("poses.json"),
                   json{{"schema", "flyover.poses/1"},
                        {"world_frame", WORLD_FRAME},
                        {"layout", "pair images: forward (rectum -> cecum) left, backward right"},
-                       {"render", renderOptionsJson(ro)},
+                       {"render", renderOptionsJson(s.ro)},
                        {"frames", ftPoses}});
+        pairs = indices.size();
     }
-    reportProgress(progress, 0.4, "fly-through frame pairs");
+    flythrough.commit();
+    return json{{"frame_pairs", pairs}};
+}
 
-    // --- the six overviews (thesis V.C), with the marker when asked for.
-    const auto tOverview = Clock::now();
+json runOverviews(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
+    const RenderInputs& in = run.renderInputs();
+    const RayScene& scene = *in.scene;
+    const Centerline& cl = *in.centerline;
+    const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
     StagedFolder overviews(run.dir, "overviews");
     RenderOptions ov;
     ov.widthPx = ov.heightPx = rp.overviewPx;
@@ -580,6 +656,7 @@ json runRender(StudyRun& run, Progress* progress)
     }
     json overviewCameras = json::object();
     RgbImage anterior;
+    std::size_t done = 0;
     for (const CanonicalView& view : canonicalViews()) {
         const Camera cam = overviewCamera(scene.boundsMin(), scene.boundsMax(), view.viewDir, view.up, 30.0);
         RgbImage image = renderView(scene, cam, ov);
@@ -587,6 +664,7 @@ json runRender(StudyRun& run, Progress* progress)
         writePng(overviews.path(std::string(view.name) + ".png"), image);
         overviewCameras[view.name] = cameraJson(cam);
         if (std::string(view.name) == "anterior") anterior = std::move(image);
+        reportProgress(progress, double(++done) / double(canonicalViews().size()), "overviews");
     }
     json overviewInfo{{"schema", "flyover.overviews/1"},
                       {"world_frame", WORLD_FRAME},
@@ -598,70 +676,82 @@ json runRender(StudyRun& run, Progress* progress)
                                       {"radius_mm", marker->radiusMm}};
     writeJson(overviews.path("cameras.json"), overviewInfo);
     writePng(run.path("overview.png"), anterior);
-    const double overviewSeconds = secondsSince(tOverview);
-    reportProgress(progress, 0.5, "overviews");
+    overviews.commit();
+    return json{{"overview_camera", overviewCameras["anterior"]}};
+}
 
-    // --- the video of the whole fly-over, frames every videoStepMm, straight to ffmpeg.
-    json videoInfo = nullptr;
-    double videoSeconds = 0;
+json runVideo(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
+    StagedFolder videoDir(run.dir, "video");
+    std::size_t frameCount = 0;
     if (rp.video) {
-        const auto tVideo = Clock::now();
+        const std::string ffmpeg = findOnPath("ffmpeg");
+        if (ffmpeg.empty())
+            throw std::runtime_error("render.video: the 'ffmpeg' program is not on PATH; install it "
+                                     "(Debian: apt-get install ffmpeg) or set render.video=false");
+        const RenderInputs& in = run.renderInputs();
+        const Centerline& cl = *in.centerline;
+        const FlyoverSetup s = flyoverSetup(rp, cl);
         const std::vector<std::size_t> vIdx = pathIndices(cl, rp.videoStepMm);
         const int pairWidth = 2 * rp.widthPx + 4;
         std::vector<json> vPoses;
-        writeAtomically(frames.path("flyover.mp4"), [&](const std::string& tmp) {
-            FfmpegVideo video(ffmpeg, tmp, frames.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
+        writeAtomically(videoDir.path("flyover.mp4"), [&](const std::string& tmp) {
+            FfmpegVideo video(ffmpeg, tmp, videoDir.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
             RgbImage left, right;
             for (std::size_t k = 0; k < vIdx.size(); ++k) {
-                const auto cams = flyoverCameras(cl.points[vIdx[k]], fp, frameRadii[vIdx[k]]);
-                renderView(scene, cams[0], ro, left);
-                renderView(scene, cams[1], ro, right);
+                const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
+                renderView(*in.scene, cams[0], s.ro, left);
+                renderView(*in.scene, cams[1], s.ro, right);
                 video.write(sideBySide(left, right));
                 vPoses.push_back(json{{"frame", k},
                                       {"centerline_index", vIdx[k]},
-                                      {"arc_mm", double(vIdx[k]) * clStep},
+                                      {"arc_mm", double(vIdx[k]) * s.clStep},
                                       {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}});
-                if (k % 32 == 0)
-                    reportProgress(progress, 0.5 + 0.3 * double(k + 1) / double(vIdx.size()), "video frames");
+                if (k % 32 == 0) reportProgress(progress, double(k + 1) / double(vIdx.size()), "video frames");
             }
             video.finish();
         });
-        fs::remove(frames.path(".ffmpeg.log"));
-        videoSeconds = secondsSince(tVideo);
-        videoInfo = json{{"file", "flyover.mp4"},
-                         {"codec", "H.264 (libx264, yuv420p, crf 20)"},
-                         {"fps", rp.videoFps},
-                         {"step_mm", rp.videoStepMm},
-                         {"layout", "pair images: camera 0 left, camera 1 right"},
-                         {"frames", vPoses}};
+        fs::remove(videoDir.path(".ffmpeg.log"));
+        writeJson(videoDir.path("poses.json"),
+                  json{{"schema", "flyover.video/1"},
+                       {"world_frame", WORLD_FRAME},
+                       {"file", "flyover.mp4"},
+                       {"codec", "H.264 (libx264, yuv420p, crf 20)"},
+                       {"fps", rp.videoFps},
+                       {"step_mm", rp.videoStepMm},
+                       {"image_size_px", {pairWidth, rp.heightPx}},
+                       {"layout", "pair images: camera 0 left, camera 1 right"},
+                       {"render", renderOptionsJson(s.ro)},
+                       {"frames", vPoses}});
+        frameCount = vIdx.size();
     }
-    writeJson(frames.path("poses.json"),
-              json{{"schema", "flyover.poses/1"},
-                   {"world_frame", WORLD_FRAME},
-                   {"image_size_px", {rp.widthPx, rp.heightPx}},
-                   {"layout", "pair images: camera 0 left, camera 1 right"},
-                   {"ost", rp.ost},
-                   {"render", renderOptionsJson(ro)},
-                   {"frames", poses},
-                   {"video", videoInfo}});
+    videoDir.commit();
+    return json{{"video_frames", frameCount}};
+}
 
-    // --- coverage of fly-over and fly-through, missed regions.
+json runCoverage(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
     StagedFolder coverage(run.dir, "coverage");
     StagedFolder review(run.dir, "review");
-    json coverageSummary = nullptr, reviewInfo = nullptr;
-    double coverageSeconds = 0, reviewSeconds = 0;
+    json summary = nullptr, reviewInfo = nullptr;
+    double reviewSeconds = 0;
     if (rp.coverage) {
-        const auto tCoverage = Clock::now();
+        const RenderInputs& in = run.renderInputs();
+        const RayScene& scene = *in.scene;
+        reportProgress(progress, 0.05, "coverage rays");
         CoverageParams cp;
         cp.viewPx = rp.coveragePx;
         cp.stepMm = rp.coverageStepMm;
-        cp.flyover = fp;
+        cp.flyover = flyoverParamsOf(rp);
         cp.ost = rp.ost;
         cp.flythroughFovDeg = rp.flythroughFovDeg;
-        cp.frameRadiiMm = frameRadii;  // the cameras of the frames and the video
-        const CoverageResult cov = computeCoverage(scene, cl, cp);
+        cp.frameRadiiMm = in.frameRadii;  // the cameras of the frames and the video
+        const CoverageResult cov = computeCoverage(scene, *in.centerline, cp);
+        const FlyoverParams& fp = cp.flyover;
         const auto tReview = Clock::now();
-        reviewInfo = renderReview(scene, cl, cp, frameRadii, cov, rp, ro, review, progress);
+        reviewInfo = renderReview(scene, *in.centerline, cp, in.frameRadii, cov, rp, frameOptionsOf(rp), review, progress);
         reviewSeconds = secondsSince(tReview);
         json coverageJson{{"schema", "flyover.coverage/1"},
                        {"world_frame", WORLD_FRAME},
@@ -690,15 +780,14 @@ json runRender(StudyRun& run, Progress* progress)
         for (auto it = reviewInfo.begin(); it != reviewInfo.end(); ++it) coverageJson[it.key()] = it.value();
         writeJson(coverage.path("coverage.json"), coverageJson);
         writeSurfaceSeen(coverage.path("surface_seen.ply"), scene, cov);
-        coverageSeconds = secondsSince(tCoverage);
-        coverageSummary = json{{"flyover", cov.flyover.fraction},
-                               {"flythrough_one_way_forward", cov.flythroughForward.fraction},
-                               {"flythrough_one_way_backward", cov.flythroughBackward.fraction},
-                               {"flythrough_two_way", cov.flythroughTwoWay.fraction},
-                               {"flyover_missed_regions", cov.flyover.missed.size()}};
+        summary = json{{"flyover", cov.flyover.fraction},
+                       {"flythrough_one_way_forward", cov.flythroughForward.fraction},
+                       {"flythrough_one_way_backward", cov.flythroughBackward.fraction},
+                       {"flythrough_two_way", cov.flythroughTwoWay.fraction},
+                       {"flyover_missed_regions", cov.flyover.missed.size()}};
         if (rp.review) {
-            coverageSummary["flyover_with_review"] = reviewInfo["flyover_with_review"]["fraction"];
-            coverageSummary["review_views"] = reviewInfo["review_views"];
+            summary["flyover_with_review"] = reviewInfo["flyover_with_review"]["fraction"];
+            summary["review_views"] = reviewInfo["review_views"];
         }
     } else {
         writeJson(review.path("poses.json"), json{{"schema", "flyover.review_poses/1"},
@@ -706,31 +795,10 @@ json runRender(StudyRun& run, Progress* progress)
                                                   {"enabled", false},
                                                   {"views", json::array()}});
     }
-    reportProgress(progress, 1.0, "render done");
-
-    frames.commit();
-    flythrough.commit();
-    overviews.commit();
+    reportProgress(progress, 1.0, "coverage done");
     coverage.commit();
     review.commit();
-
-    return json{{"frame_pairs", indices.size()},
-                {"triangles", scene.triangleCount()},
-                {"first_pair_seconds", firstPairSeconds},
-                {"first_pair_breakdown_seconds",
-                 {{"read_surface", readSurfaceSeconds},
-                  {"build_scene", sceneSeconds},
-                  {"read_centerline", readCenterlineSeconds},
-                  {"frame_radii", frameRadiiSeconds},
-                  {"render_pair", firstRenderSeconds},
-                  {"write_png", firstPngSeconds}}},
-                {"frame_pairs_seconds", framesSeconds},
-                {"overview_seconds", overviewSeconds},
-                {"video_seconds", videoSeconds},
-                {"coverage_seconds", coverageSeconds},
-                {"review_seconds", reviewSeconds},
-                {"coverage", coverageSummary},
-                {"overview_camera", overviewCameras["anterior"]}};
+    return json{{"coverage", summary}, {"review_seconds", reviewSeconds}};
 }
 
 } // namespace flyover

@@ -2,6 +2,7 @@
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"
+#include "pipeline/deferred_writes.h"
 #include "pipeline/stage_context.h"
 #include "volume/error.h"
 
@@ -9,6 +10,7 @@
 
 #include <chrono>
 #include <exception>
+#include <future>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -38,6 +40,18 @@ struct StageSpec {
     std::vector<std::string> inputs;    ///< artifact names read ("input" = the scan)
     std::vector<std::string> outputs;   ///< artifact names written
     json (*body)(StudyRun&, Progress*);
+    /// The parameter section the stage takes its parameters from ("" = its own name), and the
+    /// names it depends on (empty = all of them): a render step is keyed by its own subset of
+    /// render.*, so that changing render.video_fps recomputes the video only.
+    std::string paramStage = "";
+    std::vector<std::string> paramNames = {};
+    /// Steps that run first when both run (order only: no data passes, no key depends on it).
+    std::vector<std::string> after = {};
+    /// Write-behind: the next stages start as soon as the body returns (they take its results
+    /// from memory); the fsync and rename of its artifacts and its cache record follow beside
+    /// them. The artifacts are hashed before, in their temporaries, so that keys stay content
+    /// digests.
+    bool writeBehind = false;
 };
 
 /// The segment stage: from the CT's air, or from the external mask when the run has one.
@@ -47,17 +61,53 @@ json runSegmentStage(StudyRun& run, Progress* progress)
                                     : runSegmentFromMask(run, run.opt.maskPath, progress);
 }
 
+// The render parameters each render step depends on.
+#define FLYOVER_CAMERA "fov_deg", "roll_deg", "direction", "clip_offset_fraction", "clip_offset_mm"
+#define FLYOVER_IMAGE "width_px", "height_px", "supersample", "ost", "smooth_shading", "depth_cue", "depth_cue_mm"
+
+/// The render steps; `--until render`, `--force render` and "render" in stagesNeededFor /
+/// stagesAffectedBy mean all of them.
+const char* const RENDER_GROUP = "render";
+
 const std::vector<StageSpec>& stageSpecs()
 {
+    static const std::vector<std::string> renderIn{"surface.ply", "centerline.json"};
+    static const std::vector<std::string> renderUp{"centerline", "mesh"};
     static const std::vector<StageSpec> specs{
-        {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest},
-        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage},
-        {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline},
-        {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh},
-        {"render", {"centerline", "mesh"}, {"surface.ply", "centerline.json"}, {"overview.png", "frames", "flythrough", "overviews", "coverage", "review"}, runRender},
+        {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest, "", {}, {}, true},
+        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage, "", {}, {}, true},
+        {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline, "", {}, {}, true},
+        {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh, "", {}, {}, true},
+        {"frames", renderUp, renderIn, {"frames"}, runFrames, RENDER_GROUP,
+         {FLYOVER_CAMERA, FLYOVER_IMAGE, "frame_step_mm"}},
+        {"flythrough", renderUp, renderIn, {"flythrough"}, runFlythrough, RENDER_GROUP,
+         {"flythrough_frames", "flythrough_fov_deg", "frame_step_mm", FLYOVER_IMAGE}, {"frames"}},
+        {"overviews", renderUp, renderIn, {"overview.png", "overviews"}, runOverviews, RENDER_GROUP,
+         {"overview_px", "overview_marker_mm", "ost", "supersample", "smooth_shading", "depth_cue"}, {"frames"}},
+        {"video", renderUp, renderIn, {"video"}, runVideo, RENDER_GROUP,
+         {"video", "video_step_mm", "video_fps", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}},
+        {"coverage", renderUp, renderIn, {"coverage", "review"}, runCoverage, RENDER_GROUP,
+         {"coverage", "review", "review_target", "coverage_px", "coverage_step_mm", "flythrough_fov_deg", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}},
     };
     return specs;
 }
+
+#undef FLYOVER_CAMERA
+#undef FLYOVER_IMAGE
+
+const std::string& paramStageOf(const StageSpec& spec) { return spec.paramStage.empty() ? spec.name : spec.paramStage; }
+
+/// The canonical parameters a stage's key covers.
+json stageParams(const StageSpec& spec, const PipelineParams& params)
+{
+    const json all = stageParamsToJson(params, paramStageOf(spec));
+    if (spec.paramNames.empty()) return all;
+    json subset = json::object();
+    for (const auto& n : spec.paramNames) subset[n] = all.at(n);
+    return subset;
+}
+
+int stageVersionOf(const StageSpec& spec) { return stageVersion(paramStageOf(spec)); }
 
 const StageSpec& specOf(const std::string& name)
 {
@@ -65,7 +115,18 @@ const StageSpec& specOf(const std::string& name)
         if (s.name == name) return s;
     std::string known;
     for (const auto& s : stageSpecs()) known += (known.empty() ? "" : ", ") + s.name;
-    throw ParameterError("unknown stage '" + name + "' (stages: " + known + ")");
+    throw ParameterError("unknown stage '" + name + "' (stages: " + known + ", or " + RENDER_GROUP +
+                         " for all render steps)");
+}
+
+/// The stages a name stands for: itself, or every render step for "render".
+std::vector<std::string> stagesNamed(const std::string& name)
+{
+    std::vector<std::string> out;
+    for (const auto& s : stageSpecs())
+        if (s.paramStage == name && name == RENDER_GROUP) out.push_back(s.name);
+    if (out.empty()) out.push_back(specOf(name).name);
+    return out;
 }
 
 /// Digest of the scan: its content (a DICOM folder: the names and contents of its files),
@@ -109,11 +170,36 @@ json manifestEntry(const json& manifest, const std::string& stage)
     return json();
 }
 
+/// Whether the study's files are the outputs of `record`: "" when they are, else why not
+/// (missing, the output of another parameter set of the stage, or modified).
+std::string studyFilesProblem(const ArtifactStore& store, const fs::path& dir, const std::string& stage,
+                              const json& record)
+{
+    for (auto it = record.at("outputs").begin(); it != record.at("outputs").end(); ++it) {
+        const fs::path p = dir / it.key();
+        if (!fs::exists(p)) return it.key() + " is missing from the study (run restores it from the cache)";
+        std::string digest;
+        try {
+            digest = artifactDigest(p.string());
+        } catch (const InputError&) {
+            return it.key() + " in the study is unreadable (run restores it from the cache)";
+        }
+        if (digest == it.value().get<std::string>()) continue;
+        if (store.anotherRecordHas(stage, it.key(), digest, record.value("key", "")))
+            return it.key() + " in the study holds the output of other " + stage +
+                   " parameters than these (run restores it from the cache)";
+        return it.key() + " in the study is corrupt, incomplete or modified (digest mismatch; run restores it from "
+                          "the cache)";
+    }
+    return {};
+}
+
 } // namespace
 
 std::vector<std::string> stagesNeededFor(const std::string& stage)
 {
-    std::set<std::string> needed{stage};
+    const auto named = stagesNamed(stage);
+    std::set<std::string> needed(named.begin(), named.end());
     for (auto it = stageSpecs().rbegin(); it != stageSpecs().rend(); ++it)
         if (needed.count(it->name))
             for (const auto& u : it->upstream) needed.insert(u);
@@ -125,8 +211,8 @@ std::vector<std::string> stagesNeededFor(const std::string& stage)
 
 std::vector<std::string> stagesAffectedBy(const std::string& stage)
 {
-    specOf(stage);
-    std::set<std::string> affected{stage};
+    const auto named = stagesNamed(stage);
+    std::set<std::string> affected(named.begin(), named.end());
     for (const auto& s : stageSpecs())
         for (const auto& u : s.upstream)
             if (affected.count(u)) affected.insert(s.name);
@@ -143,7 +229,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     if (options.untilStage.empty())
         for (const auto& s : stageSpecs()) wanted.insert(s.name);
     else
-        for (const auto& s : stagesNeededFor(specOf(options.untilStage).name)) wanted.insert(s);
+        for (const auto& s : stagesNeededFor(options.untilStage)) wanted.insert(s);
     if (!options.forceStage.empty())
         for (const auto& s : stagesAffectedBy(options.forceStage)) forced.insert(s);
     if (!(options.cacheMaxGb > 0)) throw ParameterError("--cache-max-gb: must be > 0");
@@ -176,6 +262,9 @@ nlohmann::json runPipeline(const RunOptions& options)
     if (hasMask) digests["mask"] = inputDigest(options.maskPath);
     std::map<std::string, json> entries;
     std::set<std::string> usedRecords;
+    // Write-behind: the finishing of each such stage (fsync, rename, record), joined before the
+    // manifest is written (and, being std::async futures, on any way out of this function).
+    std::vector<std::pair<std::string, std::future<void>>> behind;
 
     auto execute = [&](const StageSpec& spec) {
         if (!wanted.count(spec.name)) return;
@@ -184,8 +273,8 @@ nlohmann::json runPipeline(const RunOptions& options)
             std::lock_guard<std::mutex> g(mutex);
             for (const auto& a : stageInputs(spec, hasCt, hasMask)) inputs[a] = digests.at(a);
         }
-        const json params = stageParamsToJson(options.params, spec.name);
-        const int version = stageVersion(spec.name);
+        const json params = stageParams(spec, options.params);
+        const int version = stageVersionOf(spec);
         const std::string key = stageKey(spec.name, version, params, inputs);
         json entry{{"stage", spec.name}, {"version", version}, {"key", key},
                    {"parameters", params}, {"inputs", inputs}};
@@ -219,8 +308,10 @@ nlohmann::json runPipeline(const RunOptions& options)
         if (log) log->stageStarted(spec.name);
         StageProgress progress(log, spec.name);
         const auto t0 = std::chrono::steady_clock::now();
+        auto deferred = std::make_shared<DeferredWrites>();
         json report;
         try {
+            const DeferredWrites::Scope scope(spec.writeBehind ? deferred.get() : nullptr);
             report = spec.body(run, &progress);
         } catch (const std::exception& e) {
             // Nested: the cause's type stays visible (out of memory, a full disk: retryable).
@@ -228,24 +319,34 @@ nlohmann::json runPipeline(const RunOptions& options)
         }
         const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         json outputs = json::object();
-        for (const auto& a : spec.outputs) outputs[a] = artifactDigest(run.path(a));
+        for (const auto& a : spec.outputs) {
+            const std::string pending = deferred->pendingFile(run.path(a));
+            outputs[a] = artifactDigest(pending.empty() ? run.path(a) : pending);
+        }
         entry["outputs"] = outputs;
         entry["wall_seconds"] = secs;
         entry["computed"] = true;
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        store.commit(record2);
-        crashPoint(("stage:" + spec.name + ":committed").c_str());
+        auto finish = [&store, deferred, record2, name = spec.name] {
+            crashPoint(("writebehind:" + name + ":before-finish").c_str());
+            deferred->finish();
+            store.commit(record2);
+            crashPoint(("stage:" + name + ":committed").c_str());
+        };
+        if (!spec.writeBehind) finish();
         std::lock_guard<std::mutex> g(mutex);
+        if (spec.writeBehind) behind.emplace_back(spec.name, std::async(std::launch::async, finish));
         for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
         entries[spec.name] = entry;
         usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
-        if (log) log->stageFinished(spec.name, true, secs, "");
+        if (log) log->stageFinished(spec.name, true, secs, spec.writeBehind ? "artifacts written behind" : "");
     };
 
-    // The stage graph: ingest -> segment -> {centerline, mesh} -> render. The flow graph runs
-    // centerline and mesh side by side; parallel loops run inside each stage. An exception in a
+    // The stage graph: ingest -> segment -> {centerline, mesh} -> frames -> {flythrough,
+    // overviews, video, coverage}. The flow graph runs centerline and mesh side by side, and the
+    // render steps after the frames side by side; parallel loops run inside each stage. An exception in a
     // node cancels the graph and is rethrown by wait_for_all().
     using namespace tbb::flow;
     graph g;
@@ -253,8 +354,10 @@ nlohmann::json runPipeline(const RunOptions& options)
     for (const auto& spec : stageSpecs())
         nodes[spec.name] = std::make_unique<continue_node<continue_msg>>(
             g, [&execute, &spec](const continue_msg&) { execute(spec); });
-    for (const auto& spec : stageSpecs())
+    for (const auto& spec : stageSpecs()) {
         for (const auto& u : spec.upstream) make_edge(*nodes[u], *nodes[spec.name]);
+        for (const auto& u : spec.after) make_edge(*nodes[u], *nodes[spec.name]);
+    }
 
     std::exception_ptr failure;
     nodes["ingest"]->try_put(continue_msg());
@@ -262,6 +365,20 @@ nlohmann::json runPipeline(const RunOptions& options)
         g.wait_for_all();
     } catch (...) {
         failure = std::current_exception();
+    }
+    for (auto& [name, done] : behind) {
+        try {
+            done.get();
+        } catch (const std::exception& e) {
+            entries.erase(name);
+            if (!failure) {
+                try {  // nested like a stage body's failure: the cause's type stays visible
+                    std::throw_with_nested(StageError(name, std::string("writing its artifacts: ") + e.what()));
+                } catch (...) {
+                    failure = std::current_exception();
+                }
+            }
+        }
     }
 
     // The manifest: this run's entries, plus earlier entries of stages this run did not touch.
@@ -302,7 +419,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
             const json e = manifestEntry(manifest, spec.name);
             if (!e.is_null() && e.contains("parameters")) {
                 try {
-                    applyParamsJson(params, json{{spec.name, e["parameters"]}}, "manifest.json");
+                    applyParamsJson(params, json{{paramStageOf(spec), e["parameters"]}}, "manifest.json");
                 } catch (const ParameterError&) {
                     // parameters of an older stage version: the stage will show as stale
                 }
@@ -338,31 +455,25 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
             out.push_back(st);
             continue;
         }
-        const json params2 = stageParamsToJson(params, spec.name);
-        const std::string key = stageKey(spec.name, stageVersion(spec.name), params2, inputs);
+        const json params2 = stageParams(spec, params);
+        const std::string key = stageKey(spec.name, stageVersionOf(spec), params2, inputs);
         const auto record = store.findRecord(spec.name, key);
         if (record) {
             std::string problem = store.verifyRecord(*record);
-            if (problem.empty())
-                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it) {
-                    const fs::path p = dir / it.key();
-                    if (!fs::exists(p)) { problem = it.key() + " is missing from the study (run restores it from the cache)"; break; }
-                    if (artifactDigest(p.string()) != it.value().get<std::string>()) {
-                        problem = it.key() + " in the study is corrupt or modified (digest mismatch)";
-                        break;
-                    }
-                }
+            // The cache holds the result; the study's own files must be that result too, not
+            // the output of another parameter set or a modified copy (a run restores them).
+            const bool cacheIntact = problem.empty();
+            if (cacheIntact)
+                problem = studyFilesProblem(store, dir, spec.name, *record);
             if (problem.empty()) {
                 st.state = "fresh";
-                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
-                    digests[it.key()] = it.value().get<std::string>();
             } else {
                 st.state = "stale";
                 st.reason = problem;
-                if (problem.find("run restores it") != std::string::npos)
-                    for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
-                        digests[it.key()] = it.value().get<std::string>();
             }
+            if (cacheIntact)
+                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
+                    digests[it.key()] = it.value().get<std::string>();
             out.push_back(st);
             continue;
         }
@@ -371,12 +482,12 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
             st.reason = "never run";
         } else {
             st.state = "stale";
-            if (last.value("version", -1) != stageVersion(spec.name)) st.reason = "stage version changed";
+            if (last.value("version", -1) != stageVersionOf(spec)) st.reason = "stage version changed";
             else if (last["parameters"] != params2) {
                 std::string changed;
                 for (auto it = params2.begin(); it != params2.end(); ++it)
                     if (!last["parameters"].contains(it.key()) || last["parameters"][it.key()] != it.value())
-                        changed += (changed.empty() ? "" : ", ") + spec.name + "." + it.key();
+                        changed += (changed.empty() ? "" : ", ") + paramStageOf(spec) + "." + it.key();
                 st.reason = "parameters changed (" + changed + ")";
             } else if (last["inputs"] != json(inputs)) {
                 std::string changed;
@@ -391,6 +502,24 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
         out.push_back(st);
     }
     return out;
+}
+
+void copyStudy(const std::string& from, const std::string& to)
+{
+    const fs::path src(from), dst(to);
+    if (!fs::exists(src / ".flyover") || !fs::exists(src / "manifest.json"))
+        throw InputError(from + ": not a flyover study (no manifest.json or .flyover/)");
+    std::error_code ec;
+    if (fs::exists(dst, ec)) throw InputError(to + ": already exists (the copy of a study needs a new folder)");
+    fs::create_directories(dst / ".flyover");
+    for (const auto& e : fs::directory_iterator(src)) {
+        const std::string name = e.path().filename().string();
+        if (name == ".flyover" || name.rfind(".tmp-", 0) == 0) continue;
+        fs::copy(e.path(), dst / name, fs::copy_options::recursive);
+    }
+    fs::copy(src / ".flyover" / "records", dst / ".flyover" / "records", fs::copy_options::recursive);
+    fs::copy(src / ".flyover" / "objects", dst / ".flyover" / "objects",
+             fs::copy_options::recursive | fs::copy_options::create_hard_links);
 }
 
 void cleanStudy(const std::string& studyDir)

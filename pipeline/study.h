@@ -1,15 +1,20 @@
 /// @file study.h
 /// @brief A study folder and the stages that fill it: ingest -> segment -> {centerline,
-///        mesh} -> render, run as a TBB flow graph (centerline and mesh side by side), each
-///        stage cached by a key over (stage, version, parameters, input digests).
+///        mesh} -> frames -> {flythrough, overviews, video, coverage} (the render steps), run as
+///        a TBB flow graph (centerline and mesh side by side, the render steps after the frames
+///        side by side), each stage cached by a key over (stage, version, the parameters it
+///        depends on, input digests). "render" names all render steps in --until and --force.
 ///
 /// Artifacts (all written atomically, all kept content-addressed under DIR/.flyover/):
 ///   ct.vdb           FloatGrid "ct_hu" (HU, LPS mm transform, outside air inactive)
 ///   lumen.vdb        BoolGrid "lumen_mask" and FloatGrid "lumen_sdf" (mm, negative inside)
 ///   centerline.json  schema flyover.centerline/1
 ///   surface.ply      binary PLY, faces wound so that normals point into the lumen
-///   overview.png     OST of the whole colon from outside (anterior view)
 ///   frames/          pair_NNNN.png (camera 0 | camera 1) and poses.json
+///   flythrough/      fly-through pairs (forward | backward) and poses.json
+///   overview.png     OST of the whole colon from outside (anterior view); overviews/ the six views
+///   video/           flyover.mp4 and its poses.json
+///   coverage/        coverage.json, surface_seen.ply
 ///   manifest.json    per stage: key, version, parameters, input/output digests, wall time,
 ///                    computed or reused, report
 #pragma once
@@ -71,6 +76,12 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options);
 
 /// Removes every artifact, the manifest and the cache of a study (takes the lock).
 void cleanStudy(const std::string& studyDir);
+
+/// Copies a study for work that must not touch it (benchmarks, experiments): the manifest,
+/// the artifacts and the cache records are copied, the cache objects hard-linked (nothing
+/// ever writes an object in place: every writer renames a new file over the old name).
+/// `to` must not exist. @throw InputError when `from` is not a study or `to` exists.
+void copyStudy(const std::string& from, const std::string& to);
 
 /// Stage names upstream of `stage`, inclusive, in pipeline order.
 std::vector<std::string> stagesNeededFor(const std::string& stage);

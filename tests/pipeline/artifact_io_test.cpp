@@ -1,4 +1,5 @@
 #include "pipeline/artifact_io.h"
+#include "pipeline/deferred_writes.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>
@@ -125,4 +126,48 @@ TEST(ArtifactIo, VdbFilesAreByteIdenticalForIdenticalGrids)
     EXPECT_EQ(back->tree().getValue(openvdb::Coord(1, 2, 3)), 40.f);
     EXPECT_THROW(readGrid((d / "a.vdb").string(), "nope"), InputError);
     fs::remove_all(d);
+}
+
+TEST(ArtifactIo, DeferredWritesStayInTheirTemporariesUntilFinished)
+{
+    const fs::path dir = tempDir("deferred");
+    const std::string a = (dir / "a.json").string(), b = (dir / "b.json").string();
+    auto tmpCount = [&] {
+        int n = 0;
+        for (const auto& e : fs::directory_iterator(dir)) n += e.path().filename().string().rfind(".tmp-", 0) == 0;
+        return n;
+    };
+    {
+        DeferredWrites writes;
+        {
+            const DeferredWrites::Scope scope(&writes);
+            writeJson(a, nlohmann::json{{"x", 1}});
+            EXPECT_FALSE(fs::exists(a)) << "a deferred write must not be visible under its name";
+            const std::string pending = writtenFile(a);
+            EXPECT_NE(pending, a);
+            EXPECT_EQ(pending, writes.pendingFile(a));
+            EXPECT_EQ(readJson(pending)["x"], 1) << "the temporary holds the whole content";
+            {
+                const DeferredWrites::Scope immediate(nullptr);  // a nested stage that writes at once
+                writeJson(b, nlohmann::json{{"y", 2}});
+                EXPECT_TRUE(fs::exists(b));
+            }
+            EXPECT_EQ(DeferredWrites::active(), &writes) << "the outer scope is back";
+        }
+        EXPECT_EQ(DeferredWrites::active(), nullptr);
+        EXPECT_EQ(writtenFile(a), a) << "outside the scope the name is the file";
+        EXPECT_EQ(tmpCount(), 1);
+        writes.finish();
+        EXPECT_EQ(readJson(a)["x"], 1);
+        EXPECT_EQ(tmpCount(), 0);
+    }
+    {
+        // A stage that fails before finish(): its temporaries go, its name keeps the old file.
+        DeferredWrites writes;
+        const DeferredWrites::Scope scope(&writes);
+        writeJson(a, nlohmann::json{{"x", 3}});
+    }
+    EXPECT_EQ(tmpCount(), 0);
+    EXPECT_EQ(readJson(a)["x"], 1);
+    fs::remove_all(dir);
 }

@@ -26,10 +26,10 @@ using namespace flyover::test;
 
 namespace {
 
-const std::map<std::string, bool> ALL_COMPUTED{
-    {"ingest", true}, {"segment", true}, {"centerline", true}, {"mesh", true}, {"render", true}};
-const std::map<std::string, bool> NONE_COMPUTED{
-    {"ingest", false}, {"segment", false}, {"centerline", false}, {"mesh", false}, {"render", false}};
+const std::map<std::string, bool> ALL_COMPUTED =
+    withRenderSteps({{"ingest", true}, {"segment", true}, {"centerline", true}, {"mesh", true}}, true);
+const std::map<std::string, bool> NONE_COMPUTED =
+    withRenderSteps({{"ingest", false}, {"segment", false}, {"centerline", false}, {"mesh", false}}, false);
 
 std::string describe(const std::map<std::string, bool>& m)
 {
@@ -75,16 +75,18 @@ TEST_F(StudyTest, ParameterChangesRecomputeExactlyWhatDependsOnThem)
     RunOptions o = options("params");
     runPipeline(o);
 
+    // The roll moves the fly-over cameras: frames, video and coverage; not the fly-through
+    // pairs nor the overviews.
     o.params.render.rollDeg = 30;
     auto m = computedStages(runPipeline(o));
     EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", false}, {"centerline", false},
-                                              {"mesh", false}, {"render", true}}))
+                                              {"mesh", false}, {"frames", true}, {"flythrough", false},
+                                              {"overviews", false}, {"video", true}, {"coverage", true}}))
         << "render.roll_deg changed: " << describe(m);
 
     o.params.segment.surfaceIsoHu = -450;
     m = computedStages(runPipeline(o));
-    EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", true}, {"centerline", true},
-                                              {"mesh", true}, {"render", true}}))
+    EXPECT_EQ(m, withRenderSteps({{"ingest", false}, {"segment", true}, {"centerline", true}, {"mesh", true}}, true))
         << "segment.surface_iso_hu changed: " << describe(m);
 
     // Keys are over input *content*: a segmentation parameter whose change leaves the lumen
@@ -95,8 +97,8 @@ TEST_F(StudyTest, ParameterChangesRecomputeExactlyWhatDependsOnThem)
     m = computedStages(after);
     EXPECT_TRUE(m["segment"]);
     if (outputDigests(after)["segment"] == before.at("segment")) {
-        EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", true}, {"centerline", false},
-                                                  {"mesh", false}, {"render", false}}))
+        EXPECT_EQ(m, withRenderSteps({{"ingest", false}, {"segment", true}, {"centerline", false}, {"mesh", false}},
+                                     false))
             << "identical lumen, yet downstream recomputed: " << describe(m);
     }
 }
@@ -107,14 +109,14 @@ TEST_F(StudyTest, SwitchingAParameterBackReusesTheEarlierResult)
     const auto a = runPipeline(o);
     o.params.render.rollDeg = 45;
     const auto b = runPipeline(o);
-    EXPECT_TRUE(computedStages(b)["render"]);
-    EXPECT_NE(outputDigests(a)["render"], outputDigests(b)["render"]) << "a 45 degree roll must change the frames";
+    EXPECT_TRUE(computedStages(b)["frames"]);
+    EXPECT_NE(outputDigests(a)["frames"], outputDigests(b)["frames"]) << "a 45 degree roll must change the frames";
     o.params.render.rollDeg = 0;
     const auto c = runPipeline(o);
     EXPECT_EQ(computedStages(c), NONE_COMPUTED) << describe(computedStages(c));
     EXPECT_EQ(outputDigests(a), outputDigests(c));
     // The study's files are the first result again.
-    EXPECT_EQ(artifactDigest(o.studyDir + "/frames"), outputDigests(a)["render"]["frames"].get<std::string>());
+    EXPECT_EQ(artifactDigest(o.studyDir + "/frames"), outputDigests(a)["frames"]["frames"].get<std::string>());
 }
 
 TEST_F(StudyTest, ScanContentNotMtimeDecides)
@@ -179,7 +181,8 @@ TEST_F(StudyTest, CorruptOrTruncatedArtifactsAreReportedAndRecomputed)
     // A removed artifact is reported as missing.
     fs::remove(o.studyDir + "/overview.png");
     st = studyStatus(so);
-    EXPECT_NE(statusOf(st, "render").find("missing"), std::string::npos) << statusOf(st, "render");
+    EXPECT_NE(statusOf(st, "overviews").find("missing"), std::string::npos) << statusOf(st, "overviews");
+    EXPECT_EQ(statusOf(st, "frames"), "fresh");
     runPipeline(o);
     EXPECT_TRUE(fs::exists(o.studyDir + "/overview.png"));
 }
@@ -198,7 +201,7 @@ TEST_F(StudyTest, StatusSaysWhyAStageIsStale)
     EXPECT_EQ(statusOf(st, "mesh"), "fresh");
     EXPECT_NE(statusOf(st, "centerline").find("parameters changed (centerline.step_mm)"), std::string::npos)
         << statusOf(st, "centerline");
-    EXPECT_EQ(statusOf(st, "render").rfind("stale", 0), 0u) << statusOf(st, "render");
+    for (const auto& step : RENDER_STEPS) EXPECT_EQ(statusOf(st, step).rfind("stale", 0), 0u) << statusOf(st, step);
     StatusOptions none;
     none.studyDir = studyDir("not-a-study");
     fs::create_directories(none.studyDir);
@@ -216,8 +219,18 @@ TEST_F(StudyTest, UntilAndForceSelectStages)
     o.untilStage.clear();
     o.forceStage = "mesh";
     m = computedStages(runPipeline(o));
-    EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", false}, {"centerline", true},
-                                              {"mesh", true}, {"render", true}}))
+    EXPECT_EQ(m, withRenderSteps({{"ingest", false}, {"segment", false}, {"centerline", true}, {"mesh", true}}, true))
+        << describe(m);
+    // "render" names the render steps; forcing one step recomputes it alone.
+    o.forceStage = "video";
+    m = computedStages(runPipeline(o));
+    EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", false}, {"centerline", false},
+                                              {"mesh", false}, {"frames", false}, {"flythrough", false},
+                                              {"overviews", false}, {"video", true}, {"coverage", false}}))
+        << describe(m);
+    o.forceStage = "render";
+    m = computedStages(runPipeline(o));
+    EXPECT_EQ(m, withRenderSteps({{"ingest", false}, {"segment", false}, {"centerline", false}, {"mesh", false}}, true))
         << describe(m);
     o.forceStage = "nonsense";
     EXPECT_THROW(runPipeline(o), ParameterError);
@@ -274,7 +287,7 @@ TEST_F(StudyTest, CacheIsCappedWithLeastRecentlyUsedEviction)
     o.params.render.rollDeg = 30;
     EXPECT_EQ(computedStages(runPipeline(o)), NONE_COMPUTED) << "the latest result survived eviction";
     o.params.render.rollDeg = 10;
-    EXPECT_TRUE(computedStages(runPipeline(o))["render"]) << "the oldest render was evicted";
+    EXPECT_TRUE(computedStages(runPipeline(o))["frames"]) << "the oldest frames were evicted";
 }
 
 TEST_F(StudyTest, FailingStageIsNamedAndNothingDownstreamRuns)
@@ -329,7 +342,10 @@ TEST_F(StudyTest, KilledRunsLeaveNothingThatLies)
     // Exact kill points: mid-write (temporary file complete, not yet renamed), between a
     // cache object and its record, and right after a stage's record, each on a fresh study.
     for (const char* point : {"atomic-write:before-rename", "store:objects-linked", "stage:segment:committed",
-                              "stage:render:committed"}) {
+                              "frames:first-pair", "stage:frames:committed", "stage:video:committed",
+                              // write-behind: mesh's files still in their temporaries, and
+                              // ingest's record after its file, both while later stages run
+                              "writebehind:mesh:before-finish", "stage:ingest:committed"}) {
         const std::string s = studyDir(std::string("crash-") + point);
         const int killed = std::system(("FLYOVER_CRASH_AT=" + std::string(point) + " " + flyover + " -q run " +
                                         ctPath() + " --study " + s + common + " 2>/dev/null").c_str());

@@ -78,3 +78,22 @@ TEST(RunLog, QuietModeWritesNothing)
     }
     EXPECT_TRUE(out.str().empty());
 }
+
+TEST(RunLog, FirstPairIsALineOrAJsonEventWithTheTimeSinceStart)
+{
+    std::ostringstream plain, json, quiet;
+    {
+        RunLog p(RunLog::Mode::Plain, plain), j(RunLog::Mode::Json, json), q(RunLog::Mode::Quiet, quiet);
+        p.firstPair("/s/frames/pair_0000.png");
+        j.firstPair("/s/frames/pair_0000.png");
+        q.firstPair("/s/frames/pair_0000.png");
+    }
+    EXPECT_EQ(plain.str().rfind("flyover: first fly-over pair: /s/frames/pair_0000.png (", 0), 0u) << plain.str();
+    EXPECT_NE(plain.str().find(" s after start)\n"), std::string::npos) << plain.str();
+    const auto e = nlohmann::json::parse(json.str());
+    EXPECT_EQ(e["event"], "first_pair");
+    EXPECT_EQ(e["path"], "/s/frames/pair_0000.png");
+    EXPECT_GE(e["seconds_since_start"].get<double>(), 0.0);
+    EXPECT_LT(e["seconds_since_start"].get<double>(), 60.0);
+    EXPECT_TRUE(quiet.str().empty());
+}

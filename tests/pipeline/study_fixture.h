@@ -61,6 +61,16 @@ protected:
     static inline Phantom* sPhantom = nullptr;
 };
 
+/// The render steps, each its own stage of the graph, in pipeline order.
+inline const std::vector<std::string> RENDER_STEPS{"frames", "flythrough", "overviews", "video", "coverage"};
+
+/// `stages` plus every render step, each computed (true) or reused (false) as `render`.
+inline std::map<std::string, bool> withRenderSteps(std::map<std::string, bool> stages, bool render)
+{
+    for (const auto& s : RENDER_STEPS) stages[s] = render;
+    return stages;
+}
+
 /// Stage name -> computed (true) or reused (false), from a manifest.
 inline std::map<std::string, bool> computedStages(const nlohmann::json& manifest)
 {

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Time to viewing (issue 15): cold runs of `flyover run` on a phantom, each in a fresh study.
+# Usage: bench/first_pair.sh [small|medium|full] [runs] [extra flyover run arguments...]
+# Prints, as the median / min / max over the cold runs: CT -> first fly-over pair (the
+# "first_pair" event's seconds_since_start), the whole run, and the peak RSS (GNU time); then
+# the median of unchanged re-runs. Works only in its own folder (FLYOVER_BENCH_DIR, default
+# /tmp/flyover-bench-first-pair): never in a user's study. Build first: scripts/build.sh.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SIZE=${1:-full}
+RUNS=${2:-5}
+shift $(( $# < 2 ? $# : 2 ))
+FLYOVER=${FLYOVER_BIN:-build/pipeline/flyover}
+WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-first-pair}
+mkdir -p "$WORK"
+CT="$WORK/phantom-$SIZE.nii.gz"
+[ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
+STUDY="$WORK/study-$SIZE"
+TIME=()
+[ -x /usr/bin/time ] && TIME=(/usr/bin/time -f "%M" -o "$WORK/rss")
+
+now() { date +%s%N; }
+secs() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", (b - a) / 1e9 }'; }
+stats() {  # label unit values...
+  local label=$1 unit=$2; shift 2
+  printf '%s\n' "$@" | sort -g | awk -v label="$label" -v unit="$unit" '
+    { t[NR] = $1 }
+    END { printf "%-34s median %9.3f %s   min %9.3f   max %9.3f   (%d runs)\n", label,
+          (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2), unit, t[1], t[NR], NR }'
+}
+
+first=() whole=() rss=()
+for _ in $(seq "$RUNS"); do
+  rm -rf "$STUDY"
+  sync
+  t0=$(now)
+  "${TIME[@]}" "$FLYOVER" run "$CT" --study "$STUDY" --log-json "$@" 2> "$WORK/log.jsonl" || {
+    echo "flyover run failed:"; tail -5 "$WORK/log.jsonl"; exit 1; }
+  t1=$(now)
+  whole+=("$(secs "$t0" "$t1")")
+  fp=$(sed -n 's/.*"event":"first_pair".*"seconds_since_start":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | head -1)
+  [ -n "$fp" ] || { echo "no first_pair event in the log"; exit 1; }
+  first+=("$fp")
+  [ -f "$WORK/rss" ] && rss+=("$(awk '/^[0-9]+$/ { printf "%.1f", $1 / 1024 }' "$WORK/rss" | tail -1)")
+done
+echo "flyover run, $SIZE phantom, cold (fresh study each run), extra arguments: ${*:-none}"
+stats "CT -> first fly-over pair" s "${first[@]}"
+stats "whole run" s "${whole[@]}"
+[ ${#rss[@]} -gt 0 ] && stats "peak RSS" MB "${rss[@]}"
+rerun=()
+for _ in $(seq "$RUNS"); do
+  t0=$(now); "$FLYOVER" -q run "$CT" --study "$STUDY" "$@"; t1=$(now)
+  rerun+=("$(secs "$t0" "$t1")")
+done
+stats "unchanged re-run" s "${rerun[@]}"
+echo "per stage of the last cold run (wall s, computed):"
+sed -n 's/.*"event":"stage_finished".*"stage":"\([a-z]*\)".*"wall_seconds":\([0-9.eE+-]*\).*/  \1 \2/p' "$WORK/log.jsonl" ||
+  true

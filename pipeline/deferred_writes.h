@@ -1,0 +1,59 @@
+/// @file deferred_writes.h
+/// @brief Write-behind of a stage's artifacts (issue 15). While a DeferredWrites::Scope is
+///        open on a thread, writeAtomically() (artifact_io.h) writes each file to its temporary
+///        as usual but leaves the fsync and the rename to DeferredWrites::finish(). The pipeline
+///        hashes the temporaries at once (so that the next stages' keys stay content digests and
+///        they can start) and runs finish() and the cache record beside the next stages. A run
+///        killed before finish() leaves only temporaries, which the next run removes; nothing
+///        is recorded before its files are renamed and on disk.
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace flyover {
+
+class DeferredWrites {
+public:
+    DeferredWrites() = default;
+    /// Removes the temporaries of writes never finished (a failing stage).
+    ~DeferredWrites();
+    DeferredWrites(const DeferredWrites&) = delete;
+    DeferredWrites& operator=(const DeferredWrites&) = delete;
+
+    /// Defers the writes of this thread to `writes` while it lives, or writes at once when
+    /// `writes` is null. Nests: a TBB thread may run another stage's body while it waits inside
+    /// one, so every stage body runs in a scope of its own. Only writes made on the scope's own
+    /// thread are deferred (not those of a parallel loop's workers).
+    class Scope {
+    public:
+        explicit Scope(DeferredWrites* writes);
+        ~Scope();
+        Scope(const Scope&) = delete;
+        Scope& operator=(const Scope&) = delete;
+
+    private:
+        DeferredWrites* mPrevious;
+    };
+
+    /// The deferred writes of this thread, or null when no Scope is open.
+    static DeferredWrites* active();
+
+    /// Records a complete temporary file that is to replace `path`.
+    void add(const std::string& tmpPath, const std::string& path);
+    /// The temporary holding the deferred write of `path`, or "" when there is none.
+    std::string pendingFile(const std::string& path) const;
+    /// fsyncs each temporary and renames it onto its name, in the order written.
+    /// @throw std::filesystem::filesystem_error when a rename fails.
+    void finish();
+
+private:
+    std::vector<std::pair<std::string, std::string>> mFiles;  ///< (temporary, final name)
+};
+
+/// The file holding `path`'s newest content: the temporary of a write deferred on this thread,
+/// else `path` itself.
+std::string writtenFile(const std::string& path);
+
+} // namespace flyover
