@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
 
 namespace flyover {
 
@@ -75,6 +76,14 @@ inline double voxelNoise(uint64_t seedKey, uint64_t voxelIndex)
     return std::sqrt(-2.0 * std::log(u1)) * std::cos(TWO_PI * u2);
 }
 
+/// Voxel centres of one slice: in lumen fluid, in the colon's own lumen (as if there were
+/// no rectal tube), in the rectal tube's air lumen inside the body (part of the mask).
+struct SliceCounts {
+    int64_t fluid = 0;
+    int64_t colonLumen = 0;
+    int64_t tubeLumen = 0;
+};
+
 class Voxeliser {
 public:
     Voxeliser(const PhantomAnatomy& anatomy, const ImageGeometry& geometry, const PhantomParams& params)
@@ -117,10 +126,9 @@ public:
         }
     }
 
-    /// Fills slices [k0, k1) of `ct` and `truth`; fluidPerSlice[k] gets the number of
-    /// voxel centres of slice k in lumen fluid.
+    /// Fills slices [k0, k1) of `ct` and `truth`; counts[k] gets the voxel counts of slice k.
     void run(int64_t k0, int64_t k1, Image3<int16_t>& ct, Image3<uint8_t>& truth,
-             int64_t* fluidPerSlice) const
+             SliceCounts* counts) const
     {
         const std::size_t sliceVoxels = std::size_t(mGeometry.size[0] * mGeometry.size[1]);
         std::vector<float> bestSd(sliceVoxels);
@@ -128,7 +136,7 @@ public:
         std::vector<float> bestT(sliceVoxels);
         for (int64_t k = k0; k < k1; ++k) {
             splatColon(k, bestSd, bestSegment, bestT);
-            fluidPerSlice[k] = shadeSlice(k, bestSd, bestSegment, bestT, ct, truth);
+            counts[k] = shadeSlice(k, bestSd, bestSegment, bestT, ct, truth);
         }
     }
 
@@ -222,11 +230,11 @@ private:
         return AIR_HU;
     }
 
-    /// Shades slice k; returns how many of its voxel centres lie in lumen fluid.
-    int64_t shadeSlice(int64_t k, const std::vector<float>& bestSd, const std::vector<int32_t>& bestSegment,
-                       const std::vector<float>& bestT, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+    /// Shades slice k; returns its voxel counts.
+    SliceCounts shadeSlice(int64_t k, const std::vector<float>& bestSd, const std::vector<int32_t>& bestSegment,
+                           const std::vector<float>& bestT, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
     {
-        int64_t fluidVoxels = 0;
+        SliceCounts counts;
         const auto& g = mGeometry;
         const int64_t nx = g.size[0], ny = g.size[1];
         const double z = g.originMm.z + double(k) * g.spacingMm.z;
@@ -246,6 +254,30 @@ private:
             addIfNear(lung, LUNG_HU);
         for (const Ellipsoid& pocket : mAnatomy.gasPockets)
             addIfNear(pocket, AIR_HU);
+        // Contact channels and the rectal tube that reach this slice (variants).
+        std::vector<const PhantomContact*> contacts;
+        for (const PhantomContact& c : mAnatomy.contacts) {
+            const double reach = std::max(c.halfLengthAMm, c.halfLengthBMm) + c.widthMm + h;
+            if (std::abs(z - c.positionMm.z) < reach)
+                contacts.push_back(&c);
+        }
+        const PhantomRectalTube& tube = mAnatomy.rectalTube;
+        bool tubeNear = false;
+        double tubeBox[4] = {1e300, -1e300, 1e300, -1e300};  // x0, x1, y0, y1
+        if (mAnatomy.hasRectalTube) {
+            const double reach = tube.outerRadiusMm + h;
+            for (std::size_t s = 0; s + 1 < tube.axisMm.size(); ++s) {
+                const Vec3d& a = tube.axisMm[s];
+                const Vec3d& b = tube.axisMm[s + 1];
+                if (z < std::min(a.z, b.z) - reach || z > std::max(a.z, b.z) + reach)
+                    continue;
+                tubeNear = true;
+                tubeBox[0] = std::min({tubeBox[0], a.x - reach, b.x - reach});
+                tubeBox[1] = std::max({tubeBox[1], a.x + reach, b.x + reach});
+                tubeBox[2] = std::min({tubeBox[2], a.y - reach, b.y - reach});
+                tubeBox[3] = std::max({tubeBox[3], a.y + reach, b.y + reach});
+            }
+        }
         // Intervertebral discs: slabs centred every DISC_PERIOD_MM from z = 0.
         const double discSlabSd = std::abs(std::remainder(z, DISC_PERIOD_MM)) - 0.5 * DISC_THICKNESS_MM;
 
@@ -282,7 +314,35 @@ private:
                             bool inFluid = false;
                             paint(hu, lumenContentHu(p, arc, inFluid), lumenSd, invH);
                             inLumen = lumenSd < 0 ? 1 : 0;
-                            fluidVoxels += inLumen && inFluid ? 1 : 0;
+                            counts.fluid += inLumen && inFluid ? 1 : 0;
+                        }
+                    }
+                    // A contact: a channel of air through both walls. Voxels whose centre is
+                    // in it are air (no partial volume inside, so a 1-voxel channel stays
+                    // dark in the CT); the ramp lies outside.
+                    for (const PhantomContact* c : contacts) {
+                        const double contactSd = contactSignedDistanceMm(*c, p);
+                        if (contactSd < h) {
+                            paint(hu, AIR_HU, contactSd - 0.5 * h, invH);
+                            inLumen = contactSd < 0 ? 1 : inLumen;
+                        }
+                    }
+                }
+                counts.colonLumen += inLumen;
+                // The rectal tube lies over everything, inside and outside the body: a plastic
+                // wall, and air in its lumen. Its lumen inside the body is in the mask (as a
+                // segmentation of the colon's air would take it); its wall is not.
+                if (tubeNear && x > tubeBox[0] && x < tubeBox[1] && y > tubeBox[2] && y < tubeBox[3]) {
+                    const TubeDistance d = rectalTubeDistance(tube, Vec3d{x, y, z});
+                    const double wallSd = std::max(d.axisMm - tube.outerRadiusMm, d.beyondTipMm);
+                    if (wallSd < h) {
+                        const double airSd = std::max(d.axisMm - tube.innerRadiusMm, d.beyondTipMm);
+                        paint(hu, tube.wallHu, wallSd, invH);
+                        paint(hu, AIR_HU, airSd, invH);
+                        if (wallSd < 0) {
+                            const bool tubeAir = airSd < 0 && skinSd < 0;
+                            inLumen = tubeAir ? 1 : 0;
+                            counts.tubeLumen += tubeAir ? 1 : 0;
                         }
                     }
                 }
@@ -292,7 +352,7 @@ private:
                 truth.voxels[v] = inLumen;
             }
         }
-        return fluidVoxels;
+        return counts;
     }
 
     const PhantomAnatomy& mAnatomy;
@@ -311,24 +371,33 @@ Phantom makePhantom(const PhantomParams& params)
     if (!(params.noiseHu >= 0.0) || !std::isfinite(params.noiseHu))
         throw ParameterError("phantom noiseHu: expected a finite value >= 0, got " +
                              std::to_string(params.noiseHu));
-    PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed);
+    if (params.touching < 0 || params.touching > PHANTOM_MAX_CONTACTS)
+        throw ParameterError("phantom touching: expected 0.." + std::to_string(PHANTOM_MAX_CONTACTS) +
+                             " contacts, got " + std::to_string(params.touching));
+    const ImageGeometry geometry = phantomImageGeometry(params);
+    AnatomyOptions options;
+    options.redundant = params.redundant;
+    options.touching = params.touching;
+    options.voxelMm = geometry.spacingMm;
+    options.rectalTube = params.rectalTube;
+    PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed, options);
     if (params.collapse)
         addCollapses(anatomy, params.seed);
     if (params.fluid)
         addFluidPools(anatomy, params.seed);
 
     Phantom out;
-    out.ct.geometry = out.truthLumen.geometry = phantomGeometry(params.size);
+    out.ct.geometry = out.truthLumen.geometry = geometry;
     const auto& g = out.ct.geometry;
     out.ct.voxels.assign(std::size_t(g.voxelCount()), 0);
     out.truthLumen.voxels.assign(std::size_t(g.voxelCount()), 0);
 
     const Voxeliser voxeliser(anatomy, g, params);
-    // Fluid voxel counts per slice, summed in slice order afterwards (thread-count free).
-    std::vector<int64_t> fluidPerSlice(std::size_t(g.size[2]), 0);
+    // Voxel counts per slice, summed in slice order afterwards (thread-count free).
+    std::vector<SliceCounts> perSlice(std::size_t(g.size[2]));
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, g.size[2], 1),
                       [&](const tbb::blocked_range<int64_t>& r) {
-                          voxeliser.run(r.begin(), r.end(), out.ct, out.truthLumen, fluidPerSlice.data());
+                          voxeliser.run(r.begin(), r.end(), out.ct, out.truthLumen, perSlice.data());
                       });
 
     PhantomTruth& truth = out.truth;
@@ -339,15 +408,48 @@ Phantom makePhantom(const PhantomParams& params)
         truth.polyps = anatomy.polyps;
         truth.collapsed = anatomy.collapsed;
         truth.fluidPools = anatomy.fluidPools;
+        truth.contacts = anatomy.contacts;
+        truth.hasRectalTube = anatomy.hasRectalTube;
+        truth.rectalTube = anatomy.rectalTube;
     }
     const double voxelMl = g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
     const auto lumenVoxels = std::count(out.truthLumen.voxels.begin(), out.truthLumen.voxels.end(), uint8_t(1));
     truth.lumenVolumeMl = double(lumenVoxels) * voxelMl;
-    int64_t fluidVoxels = 0;
-    for (int64_t n : fluidPerSlice)
-        fluidVoxels += n;
-    truth.fluidVolumeMl = double(fluidVoxels) * voxelMl;
+    SliceCounts total;
+    for (const SliceCounts& c : perSlice) {
+        total.fluid += c.fluid;
+        total.colonLumen += c.colonLumen;
+        total.tubeLumen += c.tubeLumen;
+    }
+    truth.fluidVolumeMl = double(total.fluid) * voxelMl;
+    truth.colonLumenVolumeMl = double(total.colonLumen) * voxelMl;
+    truth.tubeLumenVolumeMl = double(total.tubeLumen) * voxelMl;
     return out;
+}
+
+ImageGeometry phantomImageGeometry(const PhantomParams& params)
+{
+    const Vec3d& s = params.spacingMm;
+    if (s.x == 0.0 && s.y == 0.0 && s.z == 0.0)
+        return phantomGeometry(params.size);
+    for (int c = 0; c < 3; ++c)
+        if (!std::isfinite(s[c]) || s[c] < PHANTOM_MIN_SPACING_MM || s[c] > PHANTOM_MAX_SPACING_MM) {
+            std::ostringstream msg;
+            msg << "phantom spacing: expected three voxel sizes in [" << PHANTOM_MIN_SPACING_MM << ", "
+                << PHANTOM_MAX_SPACING_MM << "] mm, got " << s.x << "," << s.y << "," << s.z;
+            throw ParameterError(msg.str());
+        }
+    // The same field of view as every size: 400 x 400 x 375 mm centred on the origin.
+    const ImageGeometry reference = phantomGeometry(PhantomSize::Small);
+    ImageGeometry g;
+    for (int c = 0; c < 3; ++c) {
+        const double fov = double(reference.size[std::size_t(c)]) * reference.spacingMm[c];
+        g.size[std::size_t(c)] = std::max<int64_t>(1, std::llround(fov / s[c]));
+        g.spacingMm[c] = s[c];
+        g.originMm[c] = -0.5 * double(g.size[std::size_t(c)] - 1) * s[c];
+    }
+    g.direction = identityMat3();
+    return g;
 }
 
 } // namespace flyover

@@ -18,6 +18,16 @@
 ///   the full path and the truth lists the collapsed arc ranges.
 /// - colon = false: no colon at all (body, lungs, small-bowel gas, spine): a scan on which
 ///   segmentation must refuse with a clear message.
+/// - redundant: a longer colon (about 2.1 m: an extra sigmoid loop, a transverse colon that
+///   sags deep into the right lower abdomen) still clear of itself and of the body.
+/// - touching = N (0..6): N places where two loops far apart along the colon (>= 150 mm of
+///   arc) are bent against each other until their walls meet, and the walls between them
+///   vanish over a patch 1-3 voxels wide: lumen A and lumen B are face-connected there, in
+///   the CT and in the truth mask. The truth lists each contact.
+/// - rectalTube: an air-filled catheter (plastic wall) from the air outside the body through
+///   the anal verge into the rectum; its lumen joins the colon's air to the outside air.
+/// - spacingMm: other voxel sizes over the same field of view (anisotropic slices); the
+///   world geometry of the anatomy is the same.
 #pragma once
 
 #include "volume/image.h"
@@ -42,6 +52,37 @@ struct PhantomParams {
     bool fluid = false;      ///< tagged fluid pools with flat air-fluid levels
     bool collapse = false;   ///< one or two collapsed stretches of the sigmoid
     bool colon = true;       ///< false: no colon (lungs, gas pockets, body only)
+    int touching = 0;        ///< contacts between far-apart loops, 0..PHANTOM_MAX_CONTACTS
+    bool redundant = false;  ///< extra sigmoid and transverse loops (about 2.1 m of colon)
+    bool rectalTube = false; ///< an air-filled rectal catheter open to the outside air
+    /// Voxel size (mm) along i, j, k; all zero: the size's own spacing. The field of view
+    /// stays 400 x 400 x 375 mm centred on the origin (sizes rounded to whole voxels).
+    Vec3d spacingMm{0, 0, 0};
+};
+
+inline constexpr int PHANTOM_MAX_CONTACTS = 6;
+inline constexpr double PHANTOM_MIN_SPACING_MM = 0.5;
+inline constexpr double PHANTOM_MAX_SPACING_MM = 5.0;
+
+/// Where two loops of the colon, far apart along it, press together and their lumens join
+/// through a hole in the walls (a square channel `widthMm` wide along a world axis).
+struct PhantomContact {
+    Vec3d positionMm;        ///< centre of the contact patch, midway between the two lumens
+    double widthMm = 0;      ///< side of the channel through the walls
+    double arcAMm = 0;       ///< arc length of the nearer-to-rectum loop's centerline point
+    double arcBMm = 0;       ///< arc length of the other loop's point (arcBMm > arcAMm)
+    Vec3d axis;              ///< unit world axis (+-x, y or z) of the channel, from A towards B
+    double halfLengthAMm = 0, halfLengthBMm = 0;  ///< channel reach from positionMm into A / B
+};
+
+/// An air-filled rectal catheter: a tube along a polyline from its outer end (outside the
+/// body) to its open tip in the rectum.
+struct PhantomRectalTube {
+    std::vector<Vec3d> axisMm;   ///< outer end first, tip last
+    double innerRadiusMm = 0;    ///< air lumen
+    double outerRadiusMm = 0;    ///< plastic wall outside it
+    double wallHu = 0;
+    Vec3d tipMm() const { return axisMm.empty() ? Vec3d{} : axisMm.back(); }
 };
 
 struct PhantomPolyp {
@@ -74,8 +115,15 @@ struct PhantomTruth {
     std::vector<PhantomPolyp> polyps;
     std::vector<PhantomCollapse> collapsed;   ///< sorted by arc; empty unless params.collapse
     std::vector<PhantomFluidPool> fluidPools; ///< sorted by arc; empty unless params.fluid
+    std::vector<PhantomContact> contacts;     ///< sorted by arcAMm; empty unless touching
+    bool hasRectalTube = false;
+    PhantomRectalTube rectalTube;             ///< when hasRectalTube
     double lumenVolumeMl = 0;          ///< volume of the true lumen mask (air and fluid)
     double fluidVolumeMl = 0;          ///< part of it whose voxel centres hold fluid
+    /// The colon's lumen alone: the mask less the rectal tube's air lumen and with the
+    /// lumen the tube's wall displaces (equals lumenVolumeMl without a tube).
+    double colonLumenVolumeMl = 0;
+    double tubeLumenVolumeMl = 0;      ///< mask voxels that are the tube's air lumen
 };
 
 struct Phantom {
@@ -84,6 +132,11 @@ struct Phantom {
     PhantomTruth truth;
 };
 
+/// @throw ParameterError for touching outside 0..PHANTOM_MAX_CONTACTS, a spacing that is not
+///        all zero or all in [PHANTOM_MIN_SPACING_MM, PHANTOM_MAX_SPACING_MM], or a negative noise.
 Phantom makePhantom(const PhantomParams& params);
+
+/// The image geometry of a phantom: the size's, or the field of view at params.spacingMm.
+ImageGeometry phantomImageGeometry(const PhantomParams& params);
 
 } // namespace flyover

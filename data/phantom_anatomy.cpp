@@ -1,5 +1,7 @@
 #include "data/phantom_anatomy.h"
 
+#include "volume/error.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -91,7 +93,37 @@ const ControlPoint COLON_CONTROL_POINTS[] = {
 };
 // clang-format on
 
-constexpr int CONTROL_POINT_COUNT = int(sizeof(COLON_CONTROL_POINTS) / sizeof(ControlPoint));
+/// A colon path: its control points, rectum -> cecum.
+struct ControlTable {
+    const ControlPoint* points;
+    int count;
+};
+
+const ControlTable DEFAULT_COLON{COLON_CONTROL_POINTS,
+                                 int(sizeof(COLON_CONTROL_POINTS) / sizeof(ControlPoint))};
+
+// clang-format off
+/// The `redundant` colon: the same rectum, descending and ascending colon, with an extra
+/// sigmoid loop into the right lower pelvis and a long transverse colon.
+const ControlPoint REDUNDANT_CONTROL_POINTS[] = {
+#include "phantom_redundant_colon.inc"
+};
+// clang-format on
+
+// clang-format off
+/// The `touching` colon: the default one with loops moved nearer each other (the cecum
+/// towards the rectum, the sigmoid's loops towards the descending colon), so that bends
+/// can press them together at six or more places.
+const ControlPoint TOUCHING_CONTROL_POINTS[] = {
+#include "phantom_touching_colon.inc"
+};
+// clang-format on
+
+const ControlTable TOUCHING_COLON{TOUCHING_CONTROL_POINTS,
+                                  int(sizeof(TOUCHING_CONTROL_POINTS) / sizeof(ControlPoint))};
+
+const ControlTable REDUNDANT_COLON{REDUNDANT_CONTROL_POINTS,
+                                   int(sizeof(REDUNDANT_CONTROL_POINTS) / sizeof(ControlPoint))};
 
 /// Folds, their spacing and depth are part of the fixed anatomy: same for every seed.
 constexpr uint64_t ANATOMY_SEED = 0x0C010A11A70D1ull;
@@ -154,27 +186,27 @@ double smoothstep(double u) { return u * u * (3.0 - 2.0 * u); }
 /// Samples the spline through the control points at a uniform arc-length step, with a
 /// radius that eases between the control radii (no overshoot) and a gentle haustral-scale
 /// modulation, clamped to the anatomical range.
-void buildCenterline(PhantomAnatomy& a)
+void buildCenterline(PhantomAnatomy& a, const ControlTable& table)
 {
     constexpr int DENSE_PER_SPAN = 512;
     std::vector<Vec3d> dense;
     std::vector<double> denseRadius, denseArc;
     std::vector<int> denseSpan;
     std::vector<Vec3d> controls;
-    for (const ControlPoint& c : COLON_CONTROL_POINTS)
-        controls.push_back(c.positionMm);
+    for (int c = 0; c < table.count; ++c)
+        controls.push_back(table.points[c].positionMm);
     const ChordCubicSpline spline(controls);
-    for (int span = 0; span + 1 < CONTROL_POINT_COUNT; ++span) {
+    for (int span = 0; span + 1 < table.count; ++span) {
         const int first = span == 0 ? 0 : 1;
         for (int k = first; k <= DENSE_PER_SPAN; ++k) {
             const double u = double(k) / DENSE_PER_SPAN;
             const Vec3d p = spline.at(std::size_t(span), u);
-            const double r0 = COLON_CONTROL_POINTS[span].radiusMm;
-            const double r1 = COLON_CONTROL_POINTS[span + 1].radiusMm;
+            const double r0 = table.points[span].radiusMm;
+            const double r1 = table.points[span + 1].radiusMm;
             denseArc.push_back(dense.empty() ? 0.0 : denseArc.back() + distance(dense.back(), p));
             dense.push_back(p);
             denseRadius.push_back(r0 + (r1 - r0) * smoothstep(u));
-            denseSpan.push_back(std::min(span, CONTROL_POINT_COUNT - 2));
+            denseSpan.push_back(std::min(span, table.count - 2));
         }
     }
     const double totalMm = denseArc.back();
@@ -192,7 +224,7 @@ void buildCenterline(PhantomAnatomy& a)
         a.centerlineMm[i] = dense[d] * (1.0 - w) + dense[d + 1] * w;
         const double r = denseRadius[d] * (1.0 - w) + denseRadius[d + 1] * w;
         a.radiusMm[i] = std::clamp(r * (1.0 + 0.04 * std::sin(2.0 * PI * s / 90.0 + 0.6)), 12.0, 28.0);
-        a.segment[i] = COLON_CONTROL_POINTS[denseSpan[w < 0.5 ? d : d + 1]].segment;
+        a.segment[i] = table.points[denseSpan[w < 0.5 ? d : d + 1]].segment;
     }
 }
 
@@ -259,6 +291,19 @@ void buildFolds(PhantomAnatomy& a)
         f.halfSectorRad = uniform(rng, 0.95, 1.05) * (2.0 * PI / 3.0);
         a.folds.push_back(f);
     }
+}
+
+/// Arc clearance (mm) of polyps, folds and collapsed stretches from the loops at a contact.
+constexpr double POLYP_CONTACT_CLEARANCE_MM = 30.0;
+constexpr double FOLD_CONTACT_CLEARANCE_MM = 20.0;
+
+/// True when arc s lies within `marginMm` of either loop of a contact.
+bool nearContact(const PhantomAnatomy& a, double s, double marginMm)
+{
+    for (const PhantomContact& c : a.contacts)
+        if (std::abs(s - c.arcAMm) < marginMm || std::abs(s - c.arcBMm) < marginMm)
+            return true;
+    return false;
 }
 
 /// True when the polyp's sphere stays clear (in arc length) of the folds on both sides.
@@ -328,6 +373,8 @@ void buildPolyps(PhantomAnatomy& a, std::mt19937_64& rng)
             if (s < END_MARGIN_MM || s > lengthMm - END_MARGIN_MM)
                 continue;
             if (radius > 0.5 * a.radiusMm[i])
+                continue;
+            if (nearContact(a, s, radius + POLYP_CONTACT_CLEARANCE_MM))
                 continue;
             if (designated[std::size_t(k)] && !isBetweenFolds(a, s, radius))
                 continue;
@@ -434,19 +481,30 @@ double distanceToOutlineMm(const std::vector<std::array<double, 2>>& outline, do
     return std::sqrt(best);
 }
 
-/// The invariants later tests rely on; a failure is a bug in the tables above.
-void checkAnatomy(const PhantomAnatomy& a)
+/// Least gap (mm) between non-adjacent walls outside the contacts of a variant with
+/// contacts (the bends that make them bring other parts a little nearer too).
+constexpr double MIN_WALL_GAP_WITH_CONTACTS_MM = 10.0;
+
+/// The invariants later tests rely on, as text (empty: all hold).
+std::string anatomyProblems(const PhantomAnatomy& a)
 {
     std::ostringstream msg;
-    const ColonClearance c = colonSelfClearance(a);
-    if (c.gapMm < MIN_WALL_GAP_MM)
-        msg << "non-adjacent colon walls " << c.gapMm << " mm apart at arc " << c.i << " and "
-            << c.j << " mm; ";
+    if (a.contacts.empty()) {
+        const ColonClearance c = colonSelfClearance(a);
+        if (c.gapMm < MIN_WALL_GAP_MM)
+            msg << "non-adjacent colon walls " << c.gapMm << " mm apart at arc " << c.i << " and "
+                << c.j << " mm; ";
+    } else {
+        const ColonClearance c = colonClearanceOutsideContacts(a);
+        if (c.gapMm < MIN_WALL_GAP_WITH_CONTACTS_MM)
+            msg << "non-adjacent colon walls " << c.gapMm << " mm apart at arc " << c.i << " and "
+                << c.j << " mm, away from the contacts; ";
+    }
     const std::size_t n = a.centerlineMm.size();
     for (std::size_t i = 1; i + 1 < n; ++i) {
         // The tube must not fold over on the inside of a bend.
         const double turn = length(a.tangent[i + 1] - a.tangent[i - 1]) / (2.0 * a.stepMm);
-        if (turn * (a.radiusMm[i] + COLON_WALL_MM) > 0.8) {
+        if (turn * (a.radiusMm[i] + COLON_WALL_MM) > (a.contacts.empty() ? 0.8 : 0.9)) {
             msg << "bend too tight at arc " << i << " mm (curvature radius " << 1.0 / turn
                 << " mm); ";
             break;
@@ -476,7 +534,13 @@ void checkAnatomy(const PhantomAnatomy& a)
                 break;
             }
     }
-    const std::string problems = msg.str();
+    return msg.str();
+}
+
+/// The invariants later tests rely on; a failure is a bug in the tables above.
+void checkAnatomy(const PhantomAnatomy& a)
+{
+    const std::string problems = anatomyProblems(a);
     if (!problems.empty())
         throw std::logic_error("phantom anatomy: " + problems);
 }
@@ -486,6 +550,284 @@ std::size_t sampleAt(const PhantomAnatomy& a, double arcMm)
 {
     const long last = long(a.centerlineMm.size()) - 1;
     return std::size_t(std::clamp(std::lround(arcMm / a.stepMm), 0L, last));
+}
+
+
+// ---------------------------------------------------------------------------------------
+// Contacts: loops far apart along the colon bent against each other.
+
+constexpr double CONTACT_MIN_ARC_MM = 150.0;      ///< least arc between the two loops (truth)
+constexpr double CONTACT_PICK_ARC_MM = 175.0;     ///< the same before bending (bends lengthen)
+constexpr double CONTACT_MAX_GAP_MM = 90.0;       ///< wall gap a bend may close
+constexpr double CONTACT_MAX_BEND_CURVATURE = 1.0 / 120.0;  ///< curvature a bend adds (1/mm)
+constexpr double CONTACT_END_MARGIN_MM = 30.0;    ///< from either end of the colon
+constexpr int CONTACT_ATTEMPTS = 300;
+constexpr double CONTACT_SITE_SPACING_MM = 45.0;
+constexpr double CONTACT_LOCAL_MM = 20.0;  ///< neighbourhood in which a site's gap is least  ///< least arc between loops of two contacts
+
+/// Wall-to-wall gap (mm) between two centerline samples: negative when the walls overlap.
+double wallGapMm(const std::vector<Vec3d>& c, const std::vector<double>& r, std::size_t i, std::size_t j)
+{
+    return distance(c[i], c[j]) - r[i] - r[j] - 2.0 * COLON_WALL_MM;
+}
+
+/// Arc half-width (mm) of a bend that moves a loop sideways by shiftMm: a cos^2 bump whose
+/// added curvature shift * pi^2 / (2 L^2) stays under CONTACT_MAX_BEND_CURVATURE.
+double bendHalfWidthMm(double shiftMm, double curvature = CONTACT_MAX_BEND_CURVATURE)
+{
+    return std::clamp(PI * std::sqrt(std::max(shiftMm, 0.0) / (2.0 * curvature)), 30.0, 170.0);
+}
+
+/// Curvatures (1/mm) a bend may add, gentlest first: a site near a tight turn of the colon
+/// needs a short bend that stays off the turn.
+constexpr double BEND_CURVATURES[] = {1.0 / 120.0, 1.0 / 80.0, 1.0 / 55.0, 1.0 / 40.0};
+
+struct ContactSite {
+    std::size_t i = 0, j = 0;   ///< centerline samples (i < j)
+    double gapMm = 0;
+    double windowMm = 0;        ///< bend half-width
+    double curvature = CONTACT_MAX_BEND_CURVATURE;  ///< that the bend may add
+};
+
+/// Closest pair (least wall gap) with i, j within `reach` samples of (i0, j0).
+ContactSite closestPairNear(const std::vector<Vec3d>& c, const std::vector<double>& r, std::size_t i0,
+                            std::size_t j0, std::size_t reach)
+{
+    ContactSite best{i0, j0, 1e300, 0, CONTACT_MAX_BEND_CURVATURE};
+    const std::size_t n = c.size();
+    for (std::size_t i = i0 > reach ? i0 - reach : 0; i <= std::min(n - 1, i0 + reach); ++i)
+        for (std::size_t j = j0 > reach ? j0 - reach : 0; j <= std::min(n - 1, j0 + reach); ++j) {
+            const double g = wallGapMm(c, r, i, j);
+            if (g < best.gapMm)
+                best = {i, j, g, 0, CONTACT_MAX_BEND_CURVATURE};
+        }
+    return best;
+}
+
+/// Places where two loops far apart along the colon come within CONTACT_MAX_GAP_MM of each
+/// other, best (smallest gap) first, their bends' windows apart from each other.
+std::vector<ContactSite> contactCandidates(const PhantomAnatomy& a)
+{
+    const std::vector<Vec3d>& c = a.centerlineMm;
+    const std::size_t n = c.size();
+    const auto pick = std::size_t(CONTACT_PICK_ARC_MM / a.stepMm);
+    const auto margin = std::size_t(CONTACT_END_MARGIN_MM / a.stepMm);
+    // Local minima of the gap over pairs (within +-CONTACT_LOCAL_MM of arc on both loops),
+    // so that the bend does not slide along a valley of near pairs.
+    const auto local = long(CONTACT_LOCAL_MM / a.stepMm);
+    std::vector<ContactSite> pairs;
+    for (std::size_t i = margin; i + margin < n; i += 2)
+        for (std::size_t j = i + pick; j + margin < n; j += 2) {
+            const double g = wallGapMm(c, a.radiusMm, i, j);
+            if (g >= CONTACT_MAX_GAP_MM)
+                continue;
+            bool minimum = true;
+            for (long di = -local; di <= local && minimum; di += 2)
+                for (long dj = -local; dj <= local && minimum; dj += 2) {
+                    const long ii = long(i) + di, jj = long(j) + dj;
+                    if (ii < 0 || jj < 0 || ii >= long(n) || jj >= long(n) || jj - ii < long(NON_ADJACENT_ARC_MM))
+                        continue;
+                    minimum = wallGapMm(c, a.radiusMm, std::size_t(ii), std::size_t(jj)) >= g;
+                }
+            if (minimum)
+                pairs.push_back({i, j, g, bendHalfWidthMm(g), CONTACT_MAX_BEND_CURVATURE});
+        }
+    std::stable_sort(pairs.begin(), pairs.end(),
+                     [](const ContactSite& p, const ContactSite& q) { return p.gapMm < q.gapMm; });
+    std::vector<ContactSite> sites;
+    for (const ContactSite& p : pairs) {
+        bool apart = true;
+        for (const ContactSite& q : sites)
+            for (std::size_t u : {p.i, p.j})
+                for (std::size_t v : {q.i, q.j}) {
+                    const double d = std::abs(double(u) - double(v)) * a.stepMm;
+                    apart = apart && d > CONTACT_SITE_SPACING_MM;
+                }
+        if (apart)
+            sites.push_back(p);
+    }
+    return sites;
+}
+
+/// Resamples a dense polyline (with radii and segment names) at the anatomy's arc step.
+/// `oldToNew` receives the new sample index of every old sample.
+void resampleCenterline(PhantomAnatomy& a, const std::vector<Vec3d>& p, const std::vector<double>& r,
+                        const std::vector<std::string>& seg, std::vector<std::size_t>& oldToNew)
+{
+    std::vector<double> arc(p.size(), 0.0);
+    for (std::size_t k = 1; k < p.size(); ++k)
+        arc[k] = arc[k - 1] + distance(p[k - 1], p[k]);
+    const auto count = std::size_t(std::floor(arc.back() / a.stepMm)) + 1;
+    a.centerlineMm.resize(count);
+    a.radiusMm.resize(count);
+    a.segment.resize(count);
+    std::size_t d = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+        const double s = double(i) * a.stepMm;
+        while (d + 2 < p.size() && arc[d + 1] < s)
+            ++d;
+        const double len = arc[d + 1] - arc[d];
+        const double w = len > 0 ? std::clamp((s - arc[d]) / len, 0.0, 1.0) : 0.0;
+        a.centerlineMm[i] = p[d] * (1.0 - w) + p[d + 1] * w;
+        a.radiusMm[i] = r[d] * (1.0 - w) + r[d + 1] * w;
+        a.segment[i] = seg[w < 0.5 ? d : d + 1];
+    }
+    oldToNew.resize(p.size());
+    for (std::size_t k = 0; k < p.size(); ++k)
+        oldToNew[k] = std::min(count - 1, std::size_t(std::lround(arc[k] / a.stepMm)));
+}
+
+double mobility(const std::string& segment)
+{
+    return segment == "sigmoid" || segment == "transverse" ? 1.0 : 0.0;
+}
+
+/// Moves the loops of each site towards each other with cos^2 bumps until their walls meet
+/// (three passes: the closest pair shifts a little as the loops bend).
+std::vector<Vec3d> bendTogether(const PhantomAnatomy& a, std::vector<ContactSite>& sites)
+{
+    std::vector<Vec3d> p = a.centerlineMm;
+    const std::size_t n = p.size();
+    for (int pass = 0; pass < 5; ++pass)
+        for (ContactSite& site : sites) {
+            const ContactSite now = closestPairNear(p, a.radiusMm, site.i, site.j, 25);
+            // The mobile parts (on a mesentery: sigmoid, transverse) move; the fixed ones
+            // (rectum, descending, ascending, cecum) only when both are fixed.
+            const double ma = mobility(a.segment[now.i]), mb = mobility(a.segment[now.j]);
+            const double fa = ma + mb > 0 ? ma / (ma + mb) : 0.5;
+            const double shift[2] = {now.gapMm * fa, -now.gapMm * (1.0 - fa)};
+            if (pass == 0)
+                site.windowMm = bendHalfWidthMm(std::max(std::abs(shift[0]), std::abs(shift[1])), site.curvature);
+            site.i = now.i;
+            site.j = now.j;
+            const Vec3d dir = normalize(p[now.j] - p[now.i]);
+            const double half = site.windowMm;
+            for (std::size_t k = 0; k < n; ++k) {
+                for (int side = 0; side < 2; ++side) {
+                    const double t = (double(k) - double(side == 0 ? now.i : now.j)) * a.stepMm;
+                    if (std::abs(t) >= half)
+                        continue;
+                    const double w = std::cos(0.5 * PI * t / half);
+                    p[k] += dir * (shift[side] * w * w);
+                }
+            }
+        }
+    return p;
+}
+
+/// Fills contact.axis, widthMm and the half-lengths of the channel from the sampled loops.
+/// Returns false when the channel would not reach both lumens.
+bool shapeContactChannel(const PhantomAnatomy& a, PhantomContact& contact, std::size_t ia, std::size_t ib,
+                         const Vec3d& voxelMm, std::mt19937_64& rng)
+{
+    const Vec3d u = normalize(a.centerlineMm[ib] - a.centerlineMm[ia]);
+    int k = 0;
+    for (int c = 1; c < 3; ++c)
+        if (std::abs(u[c]) > std::abs(u[k]))
+            k = c;
+    contact.axis = Vec3d{0, 0, 0};
+    contact.axis[k] = u[k] > 0 ? 1.0 : -1.0;
+    const double across = std::max(voxelMm[(k + 1) % 3], voxelMm[(k + 2) % 3]);
+    contact.widthMm = std::round(uniform(rng, 1.3, 1.7) * across * 100.0) / 100.0;
+    const double deep = std::max({voxelMm.x, voxelMm.y, voxelMm.z});
+    // How far along -axis (towards A) or +axis (towards B) until a point lies `deep` inside
+    // that loop's lumen.
+    const auto reach = [&](std::size_t centre, double sign, double& out) {
+        for (double t = 0.0; t <= 40.0; t += 0.05) {
+            const Vec3d q = contact.positionMm + contact.axis * (sign * t);
+            double sd = 1e300;
+            for (std::size_t i = centre > 40 ? centre - 40 : 0; i < std::min(a.centerlineMm.size(), centre + 41); ++i)
+                sd = std::min(sd, distance(q, a.centerlineMm[i]) - a.radiusMm[i]);
+            if (sd < -deep) {
+                out = t;
+                return true;
+            }
+        }
+        return false;
+    };
+    return reach(ia, -1.0, contact.halfLengthAMm) && reach(ib, 1.0, contact.halfLengthBMm);
+}
+
+/// Bends the base colon at the sites; the anatomy with its contacts, or the problem.
+bool tryContacts(const PhantomAnatomy& base, std::vector<ContactSite> sites, const Vec3d& voxelMm,
+                 std::mt19937_64& rng, PhantomAnatomy& out, std::string& problem)
+{
+    std::sort(sites.begin(), sites.end(), [](const ContactSite& p, const ContactSite& q) { return p.i < q.i; });
+    PhantomAnatomy trial = base;
+    const std::vector<Vec3d> bent = bendTogether(base, sites);
+    std::vector<std::size_t> oldToNew;
+    resampleCenterline(trial, bent, base.radiusMm, base.segment, oldToNew);
+    buildFrames(trial);
+    bool ok = true;
+    for (const ContactSite& site : sites) {
+        const ContactSite now = closestPairNear(trial.centerlineMm, trial.radiusMm, oldToNew[site.i],
+                                                oldToNew[site.j], 12);
+        const double lumenGap = now.gapMm + 2.0 * COLON_WALL_MM;
+        PhantomContact contact;
+        contact.arcAMm = double(now.i) * trial.stepMm;
+        contact.arcBMm = double(now.j) * trial.stepMm;
+        const Vec3d ca = trial.centerlineMm[now.i], cb = trial.centerlineMm[now.j];
+        contact.positionMm = ca + normalize(cb - ca) * (trial.radiusMm[now.i] + 0.5 * lumenGap);
+        ok = ok && std::abs(now.gapMm) < 0.75 && contact.arcBMm - contact.arcAMm >= CONTACT_MIN_ARC_MM &&
+             shapeContactChannel(trial, contact, now.i, now.j, voxelMm, rng);
+        trial.contacts.push_back(contact);
+        trial.contactWindowMm.push_back(site.windowMm);
+    }
+    // Distinct places: no two contacts share a loop within the site spacing.
+    for (std::size_t x = 0; x < trial.contacts.size(); ++x)
+        for (std::size_t y = x + 1; y < trial.contacts.size(); ++y)
+            for (double u : {trial.contacts[x].arcAMm, trial.contacts[x].arcBMm})
+                for (double v : {trial.contacts[y].arcAMm, trial.contacts[y].arcBMm})
+                    ok = ok && std::abs(u - v) >= CONTACT_SITE_SPACING_MM;
+    if (!ok) {
+        problem = "a bend did not close its gap, or two contacts merged";
+        return false;
+    }
+    problem = anatomyProblems(trial);
+    if (!problem.empty())
+        return false;
+    out = trial;
+    return true;
+}
+
+/// The `touching` variant: `count` contacts, chosen among the sites where a bend alone
+/// keeps every invariant, by a random stream of their own; the first choice whose bent
+/// colon keeps them all.
+void addContacts(PhantomAnatomy& a, int count, uint64_t seed, const Vec3d& voxelMm)
+{
+    std::mt19937_64 rng(splitmix64(seed ^ 0xC0117AC75ull));
+    std::vector<ContactSite> viable;
+    for (ContactSite site : contactCandidates(a))
+        for (double curvature : BEND_CURVATURES) {
+            site.curvature = curvature;
+            PhantomAnatomy single;
+            std::string problem;
+            std::mt19937_64 scratch(0);
+            if (tryContacts(a, {site}, voxelMm, scratch, single, problem)) {
+                viable.push_back(site);
+                break;
+            }
+        }
+    if (int(viable.size()) < count) {
+        std::ostringstream msg;
+        msg << "phantom touching: this colon has room for at most " << viable.size() << " contacts, "
+            << count << " asked";
+        throw ParameterError(msg.str());
+    }
+    std::string lastProblem;
+    for (int attempt = 0; attempt < CONTACT_ATTEMPTS; ++attempt) {
+        std::vector<std::size_t> order(viable.size());
+        for (std::size_t k = 0; k < order.size(); ++k)
+            order[k] = k;
+        std::shuffle(order.begin(), order.end(), rng);
+        std::vector<ContactSite> sites;
+        for (int k = 0; k < count; ++k)
+            sites.push_back(viable[order[std::size_t(k)]]);
+        if (tryContacts(a, sites, voxelMm, rng, a, lastProblem))
+            return;
+    }
+    throw std::logic_error("phantom anatomy: could not place " + std::to_string(count) +
+                           " contacts (" + lastProblem + ")");
 }
 
 } // namespace
@@ -515,8 +857,13 @@ void addCollapses(PhantomAnatomy& a, uint64_t seed)
             stretches.push_back(second);
         }
         bool ok = stretches.back().arcEndMm < descendingStart - 40.0;
-        for (const PhantomCollapse& c : stretches)
+        for (const PhantomCollapse& c : stretches) {
             ok = ok && clearOfPolyps(c.arcStartMm, c.arcEndMm);
+            for (const PhantomContact& k : a.contacts)
+                for (double arc : {k.arcAMm, k.arcBMm})
+                    ok = ok && (arc < c.arcStartMm - POLYP_CONTACT_CLEARANCE_MM ||
+                                arc > c.arcEndMm + POLYP_CONTACT_CLEARANCE_MM);
+        }
         if (ok) {
             a.collapsed = stretches;
             return;
@@ -634,6 +981,84 @@ ColonClearance colonSelfClearance(const PhantomAnatomy& a)
     return best;
 }
 
+ColonClearance colonClearanceOutsideContacts(const PhantomAnatomy& a)
+{
+    ColonClearance best;
+    const std::size_t n = a.centerlineMm.size();
+    const auto skip = std::size_t(std::ceil(NON_ADJACENT_ARC_MM / a.stepMm)) + 1;
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = i + skip; j < n; ++j) {
+            const double gap = distance(a.centerlineMm[i], a.centerlineMm[j]) - a.radiusMm[i] -
+                               a.radiusMm[j] - 2.0 * COLON_WALL_MM;
+            if (gap >= best.gapMm)
+                continue;
+            bool inWindow = false;
+            for (std::size_t c = 0; c < a.contacts.size() && !inWindow; ++c) {
+                const double w = a.contactWindowMm[c] + 10.0;
+                inWindow = std::abs(double(i) * a.stepMm - a.contacts[c].arcAMm) <= w &&
+                           std::abs(double(j) * a.stepMm - a.contacts[c].arcBMm) <= w;
+            }
+            // Inside a window the walls may meet, but the lumens stay two walls apart.
+            if (inWindow && gap > -0.75)
+                continue;
+            best = {gap, i, j};
+        }
+    return best;
+}
+
+double contactSignedDistanceMm(const PhantomContact& c, const Vec3d& p)
+{
+    const Vec3d d = p - c.positionMm;
+    const double along = dot(d, c.axis);
+    const Vec3d acrossV = d - c.axis * along;
+    // Box: along in [-halfLengthA, halfLengthB], the two across coordinates in +-width/2.
+    // The axis is a world axis, so the across components are the other two coordinates.
+    double e[3] = {0.5 * (c.halfLengthAMm + c.halfLengthBMm) - 0.0, 0.5 * c.widthMm, 0.5 * c.widthMm};
+    const double mid = 0.5 * (c.halfLengthBMm - c.halfLengthAMm);
+    int k = 0;
+    for (int a = 1; a < 3; ++a)
+        if (std::abs(c.axis[a]) > std::abs(c.axis[k]))
+            k = a;
+    const double q[3] = {std::abs(along - mid) - e[0], std::abs(acrossV[(k + 1) % 3]) - e[1],
+                         std::abs(acrossV[(k + 2) % 3]) - e[2]};
+    const double outside = std::sqrt(std::max(q[0], 0.0) * std::max(q[0], 0.0) +
+                                     std::max(q[1], 0.0) * std::max(q[1], 0.0) +
+                                     std::max(q[2], 0.0) * std::max(q[2], 0.0));
+    return outside + std::min(std::max({q[0], q[1], q[2]}), 0.0);
+}
+
+TubeDistance rectalTubeDistance(const PhantomRectalTube& tube, const Vec3d& p)
+{
+    TubeDistance out;
+    const std::vector<Vec3d>& c = tube.axisMm;
+    double best2 = 1e300;
+    for (std::size_t i = 0; i + 1 < c.size(); ++i) {
+        const Vec3d d = c[i + 1] - c[i];
+        const double t = std::clamp(dot(p - c[i], d) / dot(d, d), 0.0, 1.0);
+        const Vec3d q = p - (c[i] + d * t);
+        best2 = std::min(best2, dot(q, q));
+    }
+    out.axisMm = std::sqrt(best2);
+    if (c.size() >= 2)
+        out.beyondTipMm = dot(p - c.back(), normalize(c.back() - c[c.size() - 2]));
+    return out;
+}
+
+PhantomRectalTube makeRectalTube(const PhantomAnatomy& a)
+{
+    // From the outer end, out in the air behind the buttocks (posterior, to the right of
+    // the spine), forwards and up through the pelvic floor to the anal verge (the first
+    // centerline point), then up the rectum's axis to the tip, 40 mm above the verge.
+    PhantomRectalTube tube;
+    const Vec3d verge = a.centerlineMm.front();
+    const Vec3d tip = a.centerlineMm[std::size_t(std::lround(40.0 / a.stepMm))];
+    tube.axisMm = {{-50.0, 150.0, -180.0}, {-45.0, 85.0, -180.0}, {-22.0, 35.0, -171.0}, verge, tip};
+    tube.innerRadiusMm = 3.0;
+    tube.outerRadiusMm = 5.0;
+    tube.wallHu = 200.0;
+    return tube;
+}
+
 ImageGeometry phantomGeometry(PhantomSize size)
 {
     ImageGeometry g;
@@ -659,16 +1084,35 @@ ImageGeometry phantomGeometry(PhantomSize size)
     return g;
 }
 
-PhantomAnatomy buildPhantomAnatomy(uint64_t seed)
+PhantomAnatomy buildPhantomAnatomy(uint64_t seed) { return buildPhantomAnatomy(seed, AnatomyOptions{}); }
+
+PhantomAnatomy buildPhantomAnatomy(uint64_t seed, const AnatomyOptions& options)
 {
+    if (options.touching < 0 || options.touching > PHANTOM_MAX_CONTACTS)
+        throw ParameterError("phantom touching: expected 0.." + std::to_string(PHANTOM_MAX_CONTACTS) +
+                             ", got " + std::to_string(options.touching));
     PhantomAnatomy a;
-    buildCenterline(a);
-    buildFrames(a);
-    buildFolds(a);
     // Lungs: bases of the lower lobes, posterior-lateral, above the colon's flexures.
     a.lungs[0].centerMm = {-85, 15, 152};
     a.lungs[1].centerMm = {85, 15, 152};
     a.lungs[0].semiAxesMm = a.lungs[1].semiAxesMm = {55, 60, 27};
+    buildCenterline(a, options.redundant ? REDUNDANT_COLON : options.touching > 0 ? TOUCHING_COLON : DEFAULT_COLON);
+    buildFrames(a);
+    if (options.touching > 0)
+        addContacts(a, options.touching, seed, options.voxelMm);
+    buildFolds(a);
+    if (!a.contacts.empty()) {
+        // No fold where a contact's channel opens into a lumen.
+        std::vector<HaustralFold> kept;
+        for (const HaustralFold& f : a.folds)
+            if (!nearContact(a, f.arcMm, FOLD_CONTACT_CLEARANCE_MM + 0.5 * f.thicknessMm))
+                kept.push_back(f);
+        a.folds = kept;
+    }
+    if (options.rectalTube) {
+        a.hasRectalTube = true;
+        a.rectalTube = makeRectalTube(a);
+    }
     checkAnatomy(a);
 
     std::mt19937_64 rng(splitmix64(seed ^ 0x9E1F0C5EEDull));

@@ -92,6 +92,12 @@ struct PhantomAnatomy {
     // Variants (empty for the default phantom): see addCollapses() and addFluidPools().
     std::vector<PhantomCollapse> collapsed;   ///< sorted by arc
     std::vector<PhantomFluidPool> fluidPools; ///< sorted by arc
+    std::vector<PhantomContact> contacts;     ///< sorted by arcAMm; see AnatomyOptions
+    /// Arc half-widths (mm) of the bends that brought each contact's loops together:
+    /// non-adjacent walls may meet only inside these windows.
+    std::vector<double> contactWindowMm;
+    bool hasRectalTube = false;
+    PhantomRectalTube rectalTube;
 
     double lengthMm() const { return stepMm * double(centerlineMm.size() - 1); }
 };
@@ -99,6 +105,36 @@ struct PhantomAnatomy {
 /// The anatomy for a seed. Same body, colon and folds for every seed.
 /// @throw std::logic_error when a built-in invariant fails (a programming error).
 PhantomAnatomy buildPhantomAnatomy(uint64_t seed);
+
+/// Variants that change the colon itself (its path, its folds, where polyps may go).
+struct AnatomyOptions {
+    bool redundant = false;   ///< the longer colon (REDUNDANT control points)
+    int touching = 0;         ///< contacts, 0..PHANTOM_MAX_CONTACTS
+    /// Voxel size (mm) along x, y, z of the image the anatomy will be sampled on: contact
+    /// channels are 1.3-1.7 of the coarser voxel across them, so 1-3 voxels wide.
+    Vec3d voxelMm{1, 1, 1};
+    bool rectalTube = false;
+};
+
+/// With all options off this is buildPhantomAnatomy(seed), bit for bit. Contacts are drawn
+/// from a random stream of their own.
+/// @throw std::logic_error when a built-in invariant fails (a programming error).
+PhantomAnatomy buildPhantomAnatomy(uint64_t seed, const AnatomyOptions& options);
+
+/// Signed distance (mm) to the channel of a contact (a box along contact.axis), negative inside.
+double contactSignedDistanceMm(const PhantomContact& contact, const Vec3d& p);
+
+/// Distance (mm) from p to the rectal tube's axis polyline, and the signed distance to the
+/// plane that cuts the tube open at its tip (positive beyond the tip). The tube's wall is
+/// max(distance - outer radius, cut) < 0; its air lumen max(distance - inner radius, cut) < 0.
+struct TubeDistance {
+    double axisMm = 1e9;
+    double beyondTipMm = 0;
+};
+TubeDistance rectalTubeDistance(const PhantomRectalTube& tube, const Vec3d& p);
+
+/// The rectal tube of the `rectalTube` variant for an anatomy's centerline.
+PhantomRectalTube makeRectalTube(const PhantomAnatomy& anatomy);
 
 /// The `collapse` variant: one or two stretches of 20-40 mm of the sigmoid lose their lumen,
 /// at least 10 mm (plus the polyp radius) away from every polyp; with two, the middle piece
@@ -126,6 +162,9 @@ struct ColonClearance {
     std::size_t i = 0, j = 0;
 };
 ColonClearance colonSelfClearance(const PhantomAnatomy& anatomy);
+/// The same, skipping the pairs inside a contact's windows (|i - arcA|, |j - arcB| within
+/// contactWindowMm): the clearance of the parts that must not touch.
+ColonClearance colonClearanceOutsideContacts(const PhantomAnatomy& anatomy);
 
 /// splitmix64 finaliser: a counter-based hash used for all per-voxel randomness.
 inline uint64_t splitmix64(uint64_t x)

@@ -65,6 +65,17 @@ int main(int argc, char** argv)
                                                   "(supine: posterior); truth lumen = air + fluid");
     phantomCmd->add_flag("--collapse", phantomCollapse, "one or two collapsed 20-40 mm stretches of the sigmoid "
                                                         "(2 or 3 lumen pieces); the truth lists them");
+    int phantomTouching = 0;
+    bool phantomRedundant = false, phantomTube = false;
+    std::string phantomSpacing;
+    phantomCmd->add_option("--touching", phantomTouching, "N (0-6) places where loops far apart along the colon "
+                                                          "press together and their air joins; the truth lists them")
+        ->check(CLI::Range(0, PHANTOM_MAX_CONTACTS));
+    phantomCmd->add_flag("--redundant", phantomRedundant, "a redundant colon (extra sigmoid and transverse loops, "
+                                                          "about 2 m)");
+    phantomCmd->add_flag("--rectal-tube", phantomTube, "an air-filled rectal catheter from the outside air into the rectum");
+    phantomCmd->add_option("--spacing", phantomSpacing, "SX,SY,SZ voxel size in mm (same field of view), e.g. "
+                                                        "0.8,0.8,1.25; default: the size's");
 
     // flyover run
     auto* runCmd = app.add_subcommand("run", "run ingest -> segment -> centerline + mesh -> render into a study folder");
@@ -181,6 +192,10 @@ int main(int argc, char** argv)
             pp.noiseHu = noiseHu;
             pp.fluid = phantomFluid;
             pp.collapse = phantomCollapse;
+            pp.touching = phantomTouching;
+            pp.redundant = phantomRedundant;
+            pp.rectalTube = phantomTube;
+            if (!phantomSpacing.empty()) pp.spacingMm = parsePhantomSpacing(phantomSpacing);
             if (!(noiseHu >= 0)) throw ParameterError("--noise-hu: must be >= 0");
             const auto t0 = std::chrono::steady_clock::now();
             const Phantom ph = makePhantom(pp);

@@ -16,6 +16,10 @@ nlohmann::json phantomTruthToJson(const Phantom& phantom, const PhantomParams& p
 /// Reads back the truth centerline and polyps (for tests and evaluation).
 PhantomTruth phantomTruthFromJson(const nlohmann::json& j, const std::string& source);
 
+/// Parses "SX,SY,SZ" (mm) for `flyover phantom --spacing`.
+/// @throw ParameterError naming --spacing for anything else (the range is checked by makePhantom)
+Vec3d parsePhantomSpacing(const std::string& text);
+
 /// @param maskPath empty: no mask written
 void writePhantom(const Phantom& phantom, const PhantomParams& params, const std::string& ctPath,
                   const std::string& truthPath, const std::string& maskPath);
