@@ -40,6 +40,9 @@ int main(int argc, char** argv)
                  "(OST) fly-over images.\nWorld coordinates are LPS millimetres (as in DICOM and ITK) "
                  "in every artifact."};
     app.require_subcommand(1);
+    // Global options are accepted after the subcommand too ("flyover run CT --study S --log-json"):
+    // a subcommand hands the options it does not know to the app (inherited by every subcommand).
+    app.fallthrough();
     app.set_version_flag("--version", "flyover 0.1.0");
     int threads = 0;
     app.add_option("--threads", threads, "worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);

@@ -124,3 +124,19 @@ TEST(Cli, StatusAndCleanOnAStudy)
     EXPECT_EQ(lineCount(r.err), 1) << r.err;
     fs::remove_all(dir);
 }
+
+TEST(Cli, GlobalOptionsAreAcceptedAfterTheSubcommand)
+{
+    // What a newcomer types first: the global options after the subcommand and its arguments.
+    const fs::path study = fs::temp_directory_path() / ("flyover-cli-global-" + std::to_string(::getpid()));
+    const Result r = runFlyover("run /nonexistent/scan.nii.gz --study " + study.string() + " --log-json --threads 1");
+    EXPECT_EQ(r.exitCode, 1) << "expected the missing-file error (exit 1), not a parse error (exit 2): " << r.err;
+    EXPECT_EQ(r.err.find("--log-json"), std::string::npos) << "--log-json was refused after 'run': " << r.err;
+    EXPECT_NE(r.err.find("/nonexistent/scan.nii.gz"), std::string::npos) << r.err;
+    const Result q = runFlyover("params --quiet");
+    EXPECT_EQ(q.exitCode, 0) << q.err;
+    const Result bad = runFlyover("params --no-such-option");
+    EXPECT_EQ(bad.exitCode, 2) << "an unknown option after a subcommand must still be refused: " << bad.err;
+    EXPECT_EQ(lineCount(bad.err), 1) << bad.err;
+    fs::remove_all(study);
+}
