@@ -20,8 +20,6 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <cstdio>
-#include <cstdlib>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -357,12 +355,11 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         const double straight = distance(nodeMm[l.a], nodeMm[l.b]);
         const double detour = detourMm(l);
         const bool loop = detour >= params.minDetourRatio * straight && detour >= straight + params.minDetourMm;
-        if (std::getenv("FLYOVER_CONTACTS_DEBUG") && l.ratio < params.maxNeckRatio) {  // TEMP
-            const Vec3d p = (worldOf(l.sa) + worldOf(l.sb)) * 0.5;
-            std::fprintf(stderr, "DBG narrow cycle link at %.1f %.1f %.1f saddle %.2f peaks %.1f %.1f ratio %.2f straight %.1f detour %.1f\n",
-                         p.x, p.y, p.z, l.saddle, peak[l.a], peak[l.b], l.ratio, straight, detour);
-        }
         if (!loop) continue;  // a small cycle of regions meeting three at a time, or a pocket
+        if (!narrow(l)) {
+            ++report.wideCycles;
+            continue;
+        }
         ContactInfo c;
         c.positionMm = (worldOf(l.sa) + worldOf(l.sb)) * 0.5;
         c.widthMm = 2.0 * double(l.saddle);
@@ -372,13 +369,9 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         c.sideRadiusMm[1] = peak[l.b];
         c.straightMm = straight;
         c.detourMm = detour;
-        if (narrow(l)) {
-            c.cut = true;
-            c.reason = "narrowest link of a cycle through the lumen: a contact between loops";
-            toCut.push_back(&l);
-        } else {
-            c.reason = "a cycle whose narrowest link is too wide to cut (loops fused over a large area?)";
-        }
+        c.cut = true;
+        c.reason = "narrowest link of a cycle through the lumen: a contact between loops";
+        toCut.push_back(&l);
         report.contacts.push_back(c);
     }
     reportProgress(progress, 0.7, "contacts: cut");
@@ -454,7 +447,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                             if (bound > value) acc.setValueOnly(q, bound);
                         }
         }
-        // Reported: cut contacts first, then the rest; each group narrowest first.
+        // Reported: cut contacts first, then those kept; each group narrowest first.
         std::stable_sort(report.contacts.begin(), report.contacts.end(),
                          [](const ContactInfo& x, const ContactInfo& y) {
             if (x.cut != y.cut) return x.cut;

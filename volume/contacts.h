@@ -21,13 +21,16 @@
 ///    smaller radius of the two sides) keeps the widest way through the lumen; each edge left
 ///    out closes a cycle and is its narrowest link.
 /// 5. Contact: such an edge is cut when it is narrow (relative width < maxNeckRatio) and the
-///    way round without it and without any other narrow link is long (the detour through the
-///    region graph >= minDetourRatio x and >= minDetourMm more than the straight distance
-///    between the two sides): a loop, not a pocket beside a fold (regions meeting three at a
-///    time make small cycles with short detours, which are left alone). A narrow link that
+///    way round without it and without any other narrow link is longer than the straight way
+///    (the detour through the region graph >= minDetourRatio x and >= minDetourMm more than
+///    the straight distance between the two sides): a loop, not regions meeting three at a
+///    time around a bend (small cycles whose way round is about as long as the straight one,
+///    which are left alone). On a real colon a tight flexure whose limbs touch skips only
+///    ~40 mm of colon, so the detour asked for is modest; a narrow link closing a small cycle
+///    is harmless to cut anyway (the path keeps to the wide way round). A narrow link that
 ///    closes no cycle (a collapse, a stricture, a haustral fold) is never cut: the lumen stays
 ///    connected there, and pieces that are already apart stay bridged as before. A cycle whose
-///    narrowest link is wide (loops fused over a large area) is reported, not cut.
+///    narrowest link is wide (loops fused over a large area) is counted, not cut.
 /// Cutting removes the voxels on both sides of the two regions' interface (a wall about two
 /// voxels thick: no 26-neighbour of one region is left in the other) from the mask and sets
 /// the sdf there to +half a voxel; the lumen voxels nearby get sdf = max(sdf, -(distance to
@@ -52,13 +55,13 @@ namespace flyover {
 struct ContactParams {
     bool enabled = true;          ///< false: find nothing, cut nothing
     double maxNeckRatio = 0.5;    ///< a contact's saddle D / the smaller side radius is below this
-    double minDetourRatio = 4.0;  ///< the way round / the straight distance, at least
-    double minDetourMm = 40.0;    ///< the way round minus the straight distance, at least (mm)
+    double minDetourRatio = 1.5;  ///< the way round / the straight distance, at least
+    double minDetourMm = 20.0;    ///< the way round minus the straight distance, at least (mm)
     double chunkMm = 10.0;        ///< length of the core chunks (mm, > 0)
     static constexpr int VERSION = 1;
 };
 
-/// One cycle-closing link of the lumen: a contact that was cut, or a wide fusion reported only.
+/// A contact: the narrow, cycle-closing link of the lumen that was cut (or kept, see reason).
 struct ContactInfo {
     Vec3d positionMm;             ///< the saddle (LPS mm): the narrowest place of the link
     double widthMm = 0;           ///< 2 x D at the saddle: the neck's diameter (mm)
@@ -76,6 +79,9 @@ struct ContactReport {
     std::size_t regions = 0;            ///< nodes of the region graph
     std::size_t links = 0;              ///< edges of the region graph
     std::size_t cycleLinks = 0;         ///< edges left out of its maximum spanning tree
+    /// Cycles with a long way round whose narrowest link is too wide to cut (loops fused over a
+    /// large area, or a wide fold bridging the lumen): counted, not cut.
+    std::size_t wideCycles = 0;
     std::size_t pieces = 0;             ///< 26-connected lumen pieces (unchanged by the cuts)
 };
 
