@@ -110,18 +110,6 @@ const ControlPoint REDUNDANT_CONTROL_POINTS[] = {
 };
 // clang-format on
 
-// clang-format off
-/// The `touching` colon: the default one with loops moved nearer each other (the cecum
-/// towards the rectum, the sigmoid's loops towards the descending colon), so that bends
-/// can press them together at six or more places.
-const ControlPoint TOUCHING_CONTROL_POINTS[] = {
-#include "phantom_touching_colon.inc"
-};
-// clang-format on
-
-const ControlTable TOUCHING_COLON{TOUCHING_CONTROL_POINTS,
-                                  int(sizeof(TOUCHING_CONTROL_POINTS) / sizeof(ControlPoint))};
-
 const ControlTable REDUNDANT_COLON{REDUNDANT_CONTROL_POINTS,
                                    int(sizeof(REDUNDANT_CONTROL_POINTS) / sizeof(ControlPoint))};
 
@@ -504,7 +492,7 @@ std::string anatomyProblems(const PhantomAnatomy& a)
     for (std::size_t i = 1; i + 1 < n; ++i) {
         // The tube must not fold over on the inside of a bend.
         const double turn = length(a.tangent[i + 1] - a.tangent[i - 1]) / (2.0 * a.stepMm);
-        if (turn * (a.radiusMm[i] + COLON_WALL_MM) > (a.contacts.empty() ? 0.8 : 0.9)) {
+        if (turn * (a.radiusMm[i] + COLON_WALL_MM) > (a.variantPath ? 0.95 : 0.8)) {
             msg << "bend too tight at arc " << i << " mm (curvature radius " << 1.0 / turn
                 << " mm); ";
             break;
@@ -562,7 +550,7 @@ constexpr double CONTACT_MAX_GAP_MM = 90.0;       ///< wall gap a bend may close
 constexpr double CONTACT_MAX_BEND_CURVATURE = 1.0 / 120.0;  ///< curvature a bend adds (1/mm)
 constexpr double CONTACT_END_MARGIN_MM = 30.0;    ///< from either end of the colon
 constexpr int CONTACT_ATTEMPTS = 300;
-constexpr double CONTACT_SITE_SPACING_MM = 45.0;
+constexpr double CONTACT_SITE_SPACING_MM = 35.0;
 constexpr double CONTACT_LOCAL_MM = 20.0;  ///< neighbourhood in which a site's gap is least  ///< least arc between loops of two contacts
 
 /// Wall-to-wall gap (mm) between two centerline samples: negative when the walls overlap.
@@ -634,19 +622,18 @@ std::vector<ContactSite> contactCandidates(const PhantomAnatomy& a)
         }
     std::stable_sort(pairs.begin(), pairs.end(),
                      [](const ContactSite& p, const ContactSite& q) { return p.gapMm < q.gapMm; });
-    std::vector<ContactSite> sites;
-    for (const ContactSite& p : pairs) {
-        bool apart = true;
-        for (const ContactSite& q : sites)
-            for (std::size_t u : {p.i, p.j})
-                for (std::size_t v : {q.i, q.j}) {
-                    const double d = std::abs(double(u) - double(v)) * a.stepMm;
-                    apart = apart && d > CONTACT_SITE_SPACING_MM;
-                }
-        if (apart)
-            sites.push_back(p);
-    }
-    return sites;
+    return pairs;
+}
+
+/// True when the site's loops are CONTACT_SITE_SPACING_MM clear of every kept site's.
+bool apartFrom(const PhantomAnatomy& a, const ContactSite& p, const std::vector<ContactSite>& kept)
+{
+    for (const ContactSite& q : kept)
+        for (std::size_t u : {p.i, p.j})
+            for (std::size_t v : {q.i, q.j})
+                if (std::abs(double(u) - double(v)) * a.stepMm <= CONTACT_SITE_SPACING_MM)
+                    return false;
+    return true;
 }
 
 /// Resamples a dense polyline (with radii and segment names) at the anatomy's arc step.
@@ -721,31 +708,40 @@ bool shapeContactChannel(const PhantomAnatomy& a, PhantomContact& contact, std::
                          const Vec3d& voxelMm, std::mt19937_64& rng)
 {
     const Vec3d u = normalize(a.centerlineMm[ib] - a.centerlineMm[ia]);
-    int k = 0;
-    for (int c = 1; c < 3; ++c)
-        if (std::abs(u[c]) > std::abs(u[k]))
-            k = c;
-    contact.axis = Vec3d{0, 0, 0};
-    contact.axis[k] = u[k] > 0 ? 1.0 : -1.0;
-    const double across = std::max(voxelMm[(k + 1) % 3], voxelMm[(k + 2) % 3]);
-    contact.widthMm = std::round(uniform(rng, 1.3, 1.7) * across * 100.0) / 100.0;
     const double deep = std::max({voxelMm.x, voxelMm.y, voxelMm.z});
-    // How far along -axis (towards A) or +axis (towards B) until a point lies `deep` inside
-    // that loop's lumen.
+    const double fraction = uniform(rng, 1.3, 1.7);
+    // How far along -axis (towards A) or +axis (towards B) the channel goes: a voxel past
+    // the first point half a voxel inside that loop's lumen (and still inside it there).
+    const auto lumenSd = [&](std::size_t centre, const Vec3d& q) {
+        double sd = 1e300;
+        for (std::size_t i = centre > 40 ? centre - 40 : 0; i < std::min(a.centerlineMm.size(), centre + 41); ++i)
+            sd = std::min(sd, distance(q, a.centerlineMm[i]) - a.radiusMm[i]);
+        return sd;
+    };
     const auto reach = [&](std::size_t centre, double sign, double& out) {
-        for (double t = 0.0; t <= 40.0; t += 0.05) {
-            const Vec3d q = contact.positionMm + contact.axis * (sign * t);
-            double sd = 1e300;
-            for (std::size_t i = centre > 40 ? centre - 40 : 0; i < std::min(a.centerlineMm.size(), centre + 41); ++i)
-                sd = std::min(sd, distance(q, a.centerlineMm[i]) - a.radiusMm[i]);
-            if (sd < -deep) {
-                out = t;
-                return true;
+        for (double t = 0.0; t <= 30.0; t += 0.05) {
+            if (lumenSd(centre, contact.positionMm + contact.axis * (sign * t)) < -0.5 * deep) {
+                out = t + deep;
+                return lumenSd(centre, contact.positionMm + contact.axis * (sign * out)) < -0.5 * deep;
             }
         }
         return false;
     };
-    return reach(ia, -1.0, contact.halfLengthAMm) && reach(ib, 1.0, contact.halfLengthBMm);
+    // The world axes, nearest to the line between the loops first; the first whose channel
+    // reaches into both lumens.
+    int order[3] = {0, 1, 2};
+    std::sort(order, order + 3, [&](int p, int q) { return std::abs(u[p]) > std::abs(u[q]); });
+    for (int k : order) {
+        if (std::abs(u[k]) < 0.3)
+            break;
+        contact.axis = Vec3d{0, 0, 0};
+        contact.axis[k] = u[k] > 0 ? 1.0 : -1.0;
+        const double across = std::max(voxelMm[(k + 1) % 3], voxelMm[(k + 2) % 3]);
+        contact.widthMm = std::round(fraction * across * 100.0) / 100.0;
+        if (reach(ia, -1.0, contact.halfLengthAMm) && reach(ib, 1.0, contact.halfLengthBMm))
+            return true;
+    }
+    return false;
 }
 
 /// Bends the base colon at the sites; the anatomy with its contacts, or the problem.
@@ -797,7 +793,11 @@ void addContacts(PhantomAnatomy& a, int count, uint64_t seed, const Vec3d& voxel
 {
     std::mt19937_64 rng(splitmix64(seed ^ 0xC0117AC75ull));
     std::vector<ContactSite> viable;
-    for (ContactSite site : contactCandidates(a))
+    for (ContactSite site : contactCandidates(a)) {
+        // At least one of the two loops must be mobile (sigmoid, transverse), and the site
+        // a place of its own.
+        if (mobility(a.segment[site.i]) + mobility(a.segment[site.j]) == 0.0 || !apartFrom(a, site, viable))
+            continue;
         for (double curvature : BEND_CURVATURES) {
             site.curvature = curvature;
             PhantomAnatomy single;
@@ -808,10 +808,11 @@ void addContacts(PhantomAnatomy& a, int count, uint64_t seed, const Vec3d& voxel
                 break;
             }
         }
+    }
     if (int(viable.size()) < count) {
         std::ostringstream msg;
         msg << "phantom touching: this colon has room for at most " << viable.size() << " contacts, "
-            << count << " asked";
+            << count << " asked (the default colon has room for 2, the redundant one for 5)";
         throw ParameterError(msg.str());
     }
     std::string lastProblem;
@@ -1013,7 +1014,7 @@ double contactSignedDistanceMm(const PhantomContact& c, const Vec3d& p)
     const Vec3d acrossV = d - c.axis * along;
     // Box: along in [-halfLengthA, halfLengthB], the two across coordinates in +-width/2.
     // The axis is a world axis, so the across components are the other two coordinates.
-    double e[3] = {0.5 * (c.halfLengthAMm + c.halfLengthBMm) - 0.0, 0.5 * c.widthMm, 0.5 * c.widthMm};
+    const double e[3] = {0.5 * (c.halfLengthAMm + c.halfLengthBMm), 0.5 * c.widthMm, 0.5 * c.widthMm};
     const double mid = 0.5 * (c.halfLengthBMm - c.halfLengthAMm);
     int k = 0;
     for (int a = 1; a < 3; ++a)
@@ -1053,8 +1054,8 @@ PhantomRectalTube makeRectalTube(const PhantomAnatomy& a)
     const Vec3d verge = a.centerlineMm.front();
     const Vec3d tip = a.centerlineMm[std::size_t(std::lround(40.0 / a.stepMm))];
     tube.axisMm = {{-50.0, 150.0, -180.0}, {-45.0, 85.0, -180.0}, {-22.0, 35.0, -171.0}, verge, tip};
-    tube.innerRadiusMm = 3.0;
-    tube.outerRadiusMm = 5.0;
+    tube.innerRadiusMm = 3.5;
+    tube.outerRadiusMm = 5.5;
     tube.wallHu = 200.0;
     return tube;
 }
@@ -1096,7 +1097,8 @@ PhantomAnatomy buildPhantomAnatomy(uint64_t seed, const AnatomyOptions& options)
     a.lungs[0].centerMm = {-85, 15, 152};
     a.lungs[1].centerMm = {85, 15, 152};
     a.lungs[0].semiAxesMm = a.lungs[1].semiAxesMm = {55, 60, 27};
-    buildCenterline(a, options.redundant ? REDUNDANT_COLON : options.touching > 0 ? TOUCHING_COLON : DEFAULT_COLON);
+    a.variantPath = options.redundant || options.touching > 0;
+    buildCenterline(a, options.redundant ? REDUNDANT_COLON : DEFAULT_COLON);
     buildFrames(a);
     if (options.touching > 0)
         addContacts(a, options.touching, seed, options.voxelMm);

@@ -98,6 +98,9 @@ struct PhantomAnatomy {
     std::vector<double> contactWindowMm;
     bool hasRectalTube = false;
     PhantomRectalTube rectalTube;
+    /// The redundant or touching colon: its bends may be a little tighter (curvature times
+    /// outer radius up to 0.95 instead of 0.8; the wall still never folds over).
+    bool variantPath = false;
 
     double lengthMm() const { return stepMm * double(centerlineMm.size() - 1); }
 };

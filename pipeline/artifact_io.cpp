@@ -7,6 +7,7 @@
 #include <png.h>
 #include <xxhash.h>
 
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -14,6 +15,8 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <new>
+#include <system_error>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -44,6 +47,7 @@ void writeAtomically(const std::string& path, const std::function<void(const std
     const fs::path tmp = target.parent_path() /
                          (".tmp-" + std::to_string(::getpid()) + "-" + target.filename().string());
     try {
+        errno = 0;  // what a failing writer leaves here says why (see the catch below)
         write(tmp.string());
         // Flush the data to disk before the rename makes it visible: a crash must never leave
         // a renamed but empty file.
@@ -53,10 +57,33 @@ void writeAtomically(const std::string& path, const std::function<void(const std
         }
         crashPoint("atomic-write:before-rename");
         fs::rename(tmp, target);
-    } catch (...) {
+    } catch (const TransientError&) {
         std::error_code ec;
         fs::remove(tmp, ec);
         throw;
+    } catch (const std::exception& e) {
+        // Writers report "cannot write" without the cause: errno still holds it (a full disk
+        // is not a bad input, and a workflow engine should retry it).
+        const int error = errno;
+        const auto* sys = dynamic_cast<const std::system_error*>(&e);
+        const int code = sys ? sys->code().value() : error;
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        if (isTransientErrno(code) || dynamic_cast<const std::bad_alloc*>(&e))
+            throw TransientError(path + ": cannot write: " + (dynamic_cast<const std::bad_alloc*>(&e)
+                                                                  ? std::string("out of memory")
+                                                                  : std::strerror(code)));
+        throw;
+    }
+}
+
+bool isTransientErrno(int error)
+{
+    switch (error) {
+    case ENOSPC: case EDQUOT: case EIO: case ENOMEM: case ESTALE: case ETIMEDOUT:
+        return true;
+    default:
+        return false;
     }
 }
 

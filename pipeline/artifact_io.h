@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include <functional>
+#include <stdexcept>
 #include <string>
 
 namespace flyover {
@@ -21,9 +22,21 @@ namespace flyover {
 /// otherwise.
 void crashPoint(const char* point);
 
+/// The machine, not the input, failed while storing a result (disk full, quota, I/O error,
+/// out of memory, a stale network file handle): worth retrying, possibly elsewhere.
+/// `flyover` exits with EX_TEMPFAIL (75) for it (see pipeline/stage_command.h).
+struct TransientError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+/// True for errno values that say the machine, not the input, failed (ENOSPC, EDQUOT, EIO,
+/// ENOMEM, ESTALE, ETIMEDOUT).
+bool isTransientErrno(int error);
+
 /// Writes a file atomically: `write` receives a temporary path in the same folder (with the
 /// same extension, for writers that pick the format by extension), which is then renamed
-/// onto `path`. On any exception the temporary file is removed and the exception rethrown.
+/// onto `path`. On any exception the temporary file is removed and the exception rethrown, as a
+/// TransientError naming `path` when errno says the disk or the machine failed (full, I/O).
 void writeAtomically(const std::string& path, const std::function<void(const std::string& tmpPath)>& write);
 
 /// xxHash3-128 of a file's content as 32 hex digits. @throw InputError if unreadable.

@@ -7,6 +7,7 @@
 #include "pipeline/export.h"
 #include "pipeline/phantom_io.h"
 #include "pipeline/params.h"
+#include "pipeline/stage_command.h"
 #include "pipeline/study.h"
 #include "volume/error.h"
 
@@ -71,11 +72,12 @@ int main(int argc, char** argv)
     int phantomTouching = 0;
     bool phantomRedundant = false, phantomTube = false;
     std::string phantomSpacing;
-    phantomCmd->add_option("--touching", phantomTouching, "N (0-6) places where loops far apart along the colon "
-                                                          "press together and their air joins; the truth lists them")
+    phantomCmd->add_option("--touching", phantomTouching, "N places where loops far apart along the colon press "
+                                                          "together and their air joins (at most 2, with --redundant 5); "
+                                                          "the truth lists them")
         ->check(CLI::Range(0, PHANTOM_MAX_CONTACTS));
     phantomCmd->add_flag("--redundant", phantomRedundant, "a redundant colon (extra sigmoid and transverse loops, "
-                                                          "about 2 m)");
+                                                          "about 1.8-1.9 m)");
     phantomCmd->add_flag("--rectal-tube", phantomTube, "an air-filled rectal catheter from the outside air into the rectum");
     phantomCmd->add_option("--spacing", phantomSpacing, "SX,SY,SZ voxel size in mm (same field of view), e.g. "
                                                         "0.8,0.8,1.25; default: the size's");
@@ -153,6 +155,22 @@ int main(int argc, char** argv)
                                                                 "VTK polyline (.vtk), LPS mm, bridged points marked");
     exportCmd->add_option("--lumen", exportLumenPath, "lumen mask (uint8, 1 inside) on the original scan's grid "
                                                       "and geometry: .nii.gz, .nii, .nrrd or .mha");
+
+    // flyover stage (for workflow engines; see pipeline/stage_command.h for the exit codes)
+    auto* stageCmd = app.add_subcommand("stage", "run one stage from the study's existing results (upstream stages must be "
+                                                 "fresh); writes DIR/stages/NAME.json; exit 1 bad input, 2 bad parameter, "
+                                                 "4 upstream not ready, 75 temporary failure (retry)");
+    StageCommandOptions stageOpt;
+    std::vector<std::string> stageAssignments;
+    std::string stageConfig;
+    stageCmd->add_option("name", stageOpt.stage, "ingest, segment, centerline, mesh or render")->required();
+    stageCmd->add_option("--study", stageOpt.studyDir, "study folder")->required();
+    stageCmd->add_option("--ct", stageOpt.ctPath, "CT scan (default: the one recorded in the study)");
+    stageCmd->add_option("--mask", stageOpt.maskPath, "lumen mask (default: the one recorded in the study, if any)");
+    stageCmd->add_option("--config", stageConfig, "parameters as 'run' takes them");
+    stageCmd->add_option("--set", stageAssignments, "stage.param=value, as for 'run' (this stage's and those upstream)");
+    stageCmd->add_flag("--wait", stageOpt.waitForLock, "wait for another run on the same study instead of exiting 75");
+    stageCmd->add_option("--cache-max-gb", stageOpt.cacheMaxGb, "cap on the study's cache")->capture_default_str();
 
     // flyover params
     auto* paramsCmd = app.add_subcommand("params", "list every stage parameter with its default");
@@ -260,21 +278,28 @@ int main(int argc, char** argv)
             if (!any) throw ParameterError("export: name at least one output (--mesh, --lumen, --centerline)");
             return 0;
         }
+        if (*stageCmd) {
+            if (!stageConfig.empty()) applyParamsJson(stageOpt.params, readConfigFile(stageConfig), stageConfig);
+            for (const auto& a : stageAssignments) applyParamAssignment(stageOpt.params, a);
+            stageOpt.log = &runLog;
+            const auto receipt = runStageCommand(stageOpt);
+            log("study " + fs::absolute(stageOpt.studyDir).string() + ": " + stageOpt.stage + " " +
+                (receipt.value("computed", false) ? "computed" : "reused"));
+            return 0;
+        }
         if (*cleanCmd) {
             cleanStudy(cleanDir);
             log("study " + cleanDir + " cleaned");
             return 0;
         }
-    } catch (const StageError& e) {
-        return fail(e.what(), 1);
-    } catch (const StudyBusy& e) {
-        return fail(e.what(), 3);
-    } catch (const ParameterError& e) {
-        return fail(e.what(), 2);
-    } catch (const InputError& e) {
-        return fail(e.what(), 1);
     } catch (const std::exception& e) {
-        return fail(e.what(), 1);
+        // 1 bad input, 2 bad parameter, 3 busy study, 4 upstream not ready, 75 retry (stage_command.h)
+        const int code = exitCodeFor(std::current_exception());
+        if (*stageCmd) {
+            writeFailedReceipt(stageOpt.studyDir, stageOpt.stage, e.what(), code);
+            return fail(e.what(), code == EXIT_STUDY_BUSY ? EXIT_TEMPFAIL : code);
+        }
+        return fail(e.what(), code);
     }
     return 0;
 }

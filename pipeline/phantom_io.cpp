@@ -5,6 +5,7 @@
 #include "volume/image_io.h"
 
 #include <cmath>
+#include <sstream>
 #include <string>
 
 namespace flyover {
@@ -174,9 +175,12 @@ Vec3d parsePhantomSpacing(const std::string& text)
         start = end + 1;
     }
     for (int c = 0; c < 3; ++c)
-        if (out[c] < PHANTOM_MIN_SPACING_MM || out[c] > PHANTOM_MAX_SPACING_MM)
-            throw ParameterError("--spacing: each voxel size must be in [" + std::to_string(PHANTOM_MIN_SPACING_MM) +
-                                 ", " + std::to_string(PHANTOM_MAX_SPACING_MM) + "] mm, got \"" + text + "\"");
+        if (out[c] < PHANTOM_MIN_SPACING_MM || out[c] > PHANTOM_MAX_SPACING_MM) {
+            std::ostringstream msg;
+            msg << "--spacing: each voxel size must be in [" << PHANTOM_MIN_SPACING_MM << ", "
+                << PHANTOM_MAX_SPACING_MM << "] mm, got \"" << text << "\"";
+            throw ParameterError(msg.str());
+        }
     return out;
 }
 

@@ -8,6 +8,7 @@
 #include <tbb/flow_graph.h>
 
 #include <chrono>
+#include <exception>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -220,7 +221,8 @@ nlohmann::json runPipeline(const RunOptions& options)
         try {
             report = spec.body(run, &progress);
         } catch (const std::exception& e) {
-            throw StageError(spec.name, e.what());
+            // Nested: the cause's type stays visible (out of memory, a full disk: retryable).
+            std::throw_with_nested(StageError(spec.name, e.what()));
         }
         const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         json outputs = json::object();

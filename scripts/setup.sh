@@ -12,6 +12,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev libpng-dev libtoml11-dev
   ffmpeg time
+  snakemake bc                           # workflows/cohort/Snakefile and its test; bench/cohort_bench.sh
 )
 
 missing=()

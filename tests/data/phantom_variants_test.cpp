@@ -1,0 +1,471 @@
+// Tests of the harder phantom variants (data/phantom.h): loops touching through a narrow
+// contact, the redundant colon, the rectal tube, anisotropic voxels, and all of them together;
+// checked on the voxels of the small size (2.5 mm) and on the truth JSON's round trip.
+#include "data/phantom.h"
+#include "data/phantom_anatomy.h"
+#include "pipeline/phantom_io.h"
+#include "truth_arc.h"
+#include "volume/error.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace flyover;
+namespace ph = flyover::phantom;
+using test::nearestArcMm;
+
+constexpr double NOISE_HU = 15.0;
+
+std::string describe(const PhantomParams& p)
+{
+    std::ostringstream s;
+    s << "phantom size=" << phantomSizeName(p.size) << " seed=" << p.seed << " touching=" << p.touching
+      << (p.redundant ? " redundant" : "") << (p.rectalTube ? " rectal-tube" : "") << (p.fluid ? " fluid" : "")
+      << (p.collapse ? " collapse" : "") << " spacing=" << p.spacingMm.x << "," << p.spacingMm.y << ","
+      << p.spacingMm.z;
+    return s.str();
+}
+
+using Index = std::array<int64_t, 3>;
+
+Index nearestVoxel(const ImageGeometry& g, const Vec3d& worldMm)
+{
+    const Vec3d ijk = g.indexFromWorld(worldMm);
+    Index v{};
+    for (int c = 0; c < 3; ++c)
+        v[std::size_t(c)] = std::clamp<int64_t>(std::llround(ijk[c]), 0, g.size[std::size_t(c)] - 1);
+    return v;
+}
+
+bool inside(const ImageGeometry& g, const Index& v)
+{
+    for (int c = 0; c < 3; ++c)
+        if (v[std::size_t(c)] < 0 || v[std::size_t(c)] >= g.size[std::size_t(c)])
+            return false;
+    return true;
+}
+
+constexpr int FACE[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+
+/// Face-connected flood fill from `start` over the voxels `pass` accepts; true when it reaches `goal`.
+template <typename Pass>
+bool faceConnected(const ImageGeometry& g, const Index& start, const Index& goal, Pass pass)
+{
+    if (!pass(start) || !pass(goal))
+        return false;
+    std::vector<uint8_t> seen(std::size_t(g.voxelCount()), 0);
+    const auto lin = [&](const Index& v) { return std::size_t(v[0] + g.size[0] * (v[1] + g.size[1] * v[2])); };
+    std::deque<Index> queue{start};
+    seen[lin(start)] = 1;
+    while (!queue.empty()) {
+        const Index v = queue.front();
+        queue.pop_front();
+        if (v == goal)
+            return true;
+        for (const auto& f : FACE) {
+            const Index w{v[0] + f[0], v[1] + f[1], v[2] + f[2]};
+            if (!inside(g, w) || seen[lin(w)] || !pass(w))
+                continue;
+            seen[lin(w)] = 1;
+            queue.push_back(w);
+        }
+    }
+    return false;
+}
+
+/// The world axis (0, 1, 2) of a contact's channel.
+int axisOf(const PhantomContact& c)
+{
+    int k = 0;
+    for (int a = 1; a < 3; ++a)
+        if (std::abs(c.axis[a]) > std::abs(c.axis[k]))
+            k = a;
+    return k;
+}
+
+/// Every contact: far apart along the colon, its arcs on the truth centerline next to it, the
+/// truth mask face-connected through it within 25 mm of it, 1-3 voxels wide across it, and
+/// both loops of their full radius beside it.
+void expectContactsHold(const Phantom& phantom, const std::string& what)
+{
+    SCOPED_TRACE(what);
+    const auto& g = phantom.truthLumen.geometry;
+    const auto& t = phantom.truth;
+    const auto mask = [&](const Index& v) { return phantom.truthLumen.at(v[0], v[1], v[2]) != 0; };
+    for (std::size_t n = 0; n < t.contacts.size(); ++n) {
+        const PhantomContact& c = t.contacts[n];
+        SCOPED_TRACE("contact " + std::to_string(n) + " at arcs " + std::to_string(c.arcAMm) + " / " +
+                     std::to_string(c.arcBMm) + " mm");
+        EXPECT_GE(c.arcBMm - c.arcAMm, 150.0) << "the loops must be far apart along the colon";
+        if (n > 0) {
+            EXPECT_GE(c.arcAMm, t.contacts[n - 1].arcAMm) << "contacts sorted by arc_a";
+        }
+        // The position lies between the two loops, a wall thickness from each lumen.
+        const auto ia = std::size_t(std::lround(c.arcAMm)), ib = std::size_t(std::lround(c.arcBMm));
+        const double da = distance(t.centerlineMm[ia], c.positionMm) - t.radiusMm[ia];
+        const double db = distance(t.centerlineMm[ib], c.positionMm) - t.radiusMm[ib];
+        EXPECT_NEAR(da, ph::COLON_WALL_MM, 1.0) << "contact to lumen A (mm)";
+        EXPECT_NEAR(db, ph::COLON_WALL_MM, 1.0) << "contact to lumen B (mm)";
+
+        // Connected through the contact: from a voxel in lumen A to one in lumen B, inside a
+        // 25 mm ball around the contact.
+        // 12 mm inside each lumen, on the line between the loops' centres: clear of the
+        // channel, which reaches a voxel or so into each lumen.
+        const Vec3d toB = normalize(t.centerlineMm[ib] - t.centerlineMm[ia]);
+        const Index inA = nearestVoxel(g, c.positionMm - toB * (ph::COLON_WALL_MM + 12.0));
+        const Index inB = nearestVoxel(g, c.positionMm + toB * (ph::COLON_WALL_MM + 12.0));
+        const auto nearContact = [&](const Index& v) {
+            const Vec3d w = g.worldFromIndex({double(v[0]), double(v[1]), double(v[2])});
+            return distance(w, c.positionMm) < 25.0 && mask(v);
+        };
+        EXPECT_TRUE(mask(inA)) << "a point 12 mm inside lumen A is not truth lumen";
+        EXPECT_TRUE(mask(inB)) << "a point 12 mm inside lumen B is not truth lumen";
+        EXPECT_TRUE(faceConnected(g, inA, inB, nearContact))
+            << "truth lumen of loop A and loop B not face-connected within 25 mm of the contact";
+        // ... and only through it: not connected when the contact's voxels are left out.
+        const auto awayFromChannel = [&](const Index& v) {
+            const Vec3d w = g.worldFromIndex({double(v[0]), double(v[1]), double(v[2])});
+            return nearContact(v) && ph::contactSignedDistanceMm(c, w) > 0.0;
+        };
+        EXPECT_FALSE(faceConnected(g, inA, inB, awayFromChannel))
+            << "loops A and B are connected near the contact but outside its channel";
+
+        // 1-3 voxels wide: runs of truth lumen across the channel through its centre voxel.
+        const Index centre = nearestVoxel(g, c.positionMm);
+        EXPECT_TRUE(mask(centre)) << "the voxel at the contact's centre is not truth lumen";
+        const int k = axisOf(c);
+        for (int across : {(k + 1) % 3, (k + 2) % 3}) {
+            int run = mask(centre) ? 1 : 0;
+            for (int dir : {-1, 1})
+                for (Index v = centre;;) {
+                    v[std::size_t(across)] += dir;
+                    if (!inside(g, v) || !mask(v)) break;
+                    ++run;
+                }
+            EXPECT_GE(run, 1) << "channel width along axis " << across << " (voxels)";
+            EXPECT_LE(run, 3) << "channel width along axis " << across << " (voxels)";
+        }
+        EXPECT_LE(c.widthMm, 3.0 * std::min({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z}) + 1e-9);
+
+        // Full radius beside the contact: across each loop, perpendicular to its tangent and to
+        // the direction of the other loop, the lumen spans the truth radius (within a voxel).
+        const double h = std::max({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z});
+        for (std::size_t i : {ia, ib}) {
+            const std::size_t lo = i > 0 ? i - 1 : i, hi = std::min(i + 1, t.centerlineMm.size() - 1);
+            const Vec3d tangent = normalize(t.centerlineMm[hi] - t.centerlineMm[lo]);
+            const Vec3d side = normalize(cross(tangent, toB));
+            for (double sign : {-1.0, 1.0}) {
+                const Vec3d in = t.centerlineMm[i] + side * (sign * (t.radiusMm[i] - 1.5 * h));
+                const Vec3d out = t.centerlineMm[i] + side * (sign * (t.radiusMm[i] + 1.5 * h));
+                EXPECT_TRUE(mask(nearestVoxel(g, in))) << "lumen narrower than its radius beside arc " << i;
+                EXPECT_FALSE(mask(nearestVoxel(g, out))) << "lumen wider than its radius beside arc " << i;
+            }
+        }
+    }
+}
+
+/// Arc (mm) of the truth centerline sample whose tube surface is nearest to p (least
+/// distance - radius): unlike the nearest centerline point, this does not put a voxel of a
+/// wide loop into a narrow one pressed against it.
+double nearestTubeArcMm(const PhantomTruth& t, const Vec3d& p)
+{
+    const auto sd = [&](std::size_t i) { return distance(t.centerlineMm[i], p) - t.radiusMm[i]; };
+    const std::size_t n = t.centerlineMm.size();
+    std::size_t best = 0;
+    for (std::size_t i = 0; i < n; i += 8)
+        if (sd(i) < sd(best)) best = i;
+    const std::size_t lo = best >= 8 ? best - 8 : 0, hi = std::min(n - 1, best + 8);
+    for (std::size_t i = lo; i <= hi; ++i)
+        if (sd(i) < sd(best)) best = i;
+    return double(best);
+}
+
+/// Face-adjacent truth lumen voxels whose nearest centerline points are non-adjacent parts of
+/// the colon (> 100 mm of arc apart) and that lie farther than 20 mm from every contact.
+int64_t undeclaredTouches(const Phantom& phantom)
+{
+    const auto& g = phantom.truthLumen.geometry;
+    const auto& t = phantom.truth;
+    std::map<int64_t, double> arcOf;  // linear index -> nearest arc, for mask voxels
+    const auto arc = [&](int64_t i, int64_t j, int64_t k) {
+        const int64_t lin = i + g.size[0] * (j + g.size[1] * k);
+        auto it = arcOf.find(lin);
+        if (it == arcOf.end())
+            it = arcOf.emplace(lin, nearestTubeArcMm(t, g.worldFromIndex({double(i), double(j), double(k)}))).first;
+        return it->second;
+    };
+    int64_t touches = 0;
+    for (int64_t k = 0; k + 1 < g.size[2]; ++k)
+        for (int64_t j = 0; j + 1 < g.size[1]; ++j)
+            for (int64_t i = 0; i + 1 < g.size[0]; ++i) {
+                if (!phantom.truthLumen.at(i, j, k)) continue;
+                for (int d = 0; d < 3; ++d) {
+                    const int64_t i2 = i + (d == 0), j2 = j + (d == 1), k2 = k + (d == 2);
+                    if (!phantom.truthLumen.at(i2, j2, k2)) continue;
+                    if (std::abs(arc(i, j, k) - arc(i2, j2, k2)) <= ph::NON_ADJACENT_ARC_MM) continue;
+                    const Vec3d w = g.worldFromIndex({double(i), double(j), double(k)});
+                    bool declared = false;
+                    for (const PhantomContact& c : t.contacts)
+                        declared = declared || distance(w, c.positionMm) < 20.0;
+                    // The rectal tube's lumen is not colon: its voxels have no meaningful arc.
+                    if (t.hasRectalTube &&
+                        ph::rectalTubeDistance(t.rectalTube, w).axisMm < t.rectalTube.outerRadiusMm + 5.0)
+                        declared = true;
+                    touches += declared ? 0 : 1;
+                }
+            }
+    return touches;
+}
+
+double truthLengthMm(const PhantomTruth& t)
+{
+    double s = 0;
+    for (std::size_t i = 1; i < t.centerlineMm.size(); ++i)
+        s += distance(t.centerlineMm[i - 1], t.centerlineMm[i]);
+    return s;
+}
+
+// ---------------------------------------------------------------------------------------
+
+TEST(PhantomContacts, DefaultColonTouchesAtTwoPlacesForTwoSeeds)
+{
+    for (uint64_t seed : {1u, 2u}) {
+        for (int n : {1, 2}) {
+            PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+            p.touching = n;
+            const Phantom phantom = makePhantom(p);
+            ASSERT_EQ(int(phantom.truth.contacts.size()), n) << describe(p);
+            expectContactsHold(phantom, describe(p));
+            EXPECT_EQ(undeclaredTouches(phantom), 0) << describe(p);
+        }
+    }
+}
+
+TEST(PhantomContacts, RefusesMoreThanTheColonHasRoomFor)
+{
+    PhantomParams p{PhantomSize::Small, 1, NOISE_HU};
+    p.touching = 3;
+    try {
+        makePhantom(p);
+        FAIL() << "3 contacts on the default colon: expected a ParameterError";
+    } catch (const ParameterError& e) {
+        EXPECT_NE(std::string(e.what()).find("at most 2"), std::string::npos) << e.what();
+    }
+    p.touching = PHANTOM_MAX_CONTACTS + 1;
+    EXPECT_THROW(makePhantom(p), ParameterError);
+    p.touching = -1;
+    EXPECT_THROW(makePhantom(p), ParameterError);
+}
+
+TEST(PhantomRedundant, LongerColonClearOfItselfWithAndWithoutContacts)
+{
+    PhantomParams plain{PhantomSize::Small, 1, NOISE_HU};
+    const double defaultLength = truthLengthMm(makePhantom(plain).truth);
+    for (uint64_t seed : {1u, 2u}) {
+        PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+        p.redundant = true;
+        const Phantom phantom = makePhantom(p);
+        SCOPED_TRACE(describe(p));
+        const double length = truthLengthMm(phantom.truth);
+        EXPECT_GE(length, 1750.0) << "redundant colon length (mm)";
+        EXPECT_LE(length, 2350.0) << "redundant colon length (mm)";
+        EXPECT_GE(length, defaultLength + 350.0) << "default colon " << defaultLength << " mm";
+        EXPECT_TRUE(phantom.truth.contacts.empty());
+        EXPECT_EQ(ph::colonSelfClearance(ph::buildPhantomAnatomy(seed, {true, 0, {2.5, 2.5, 2.5}, false})).gapMm >= ph::MIN_WALL_GAP_MM, true);
+        EXPECT_EQ(undeclaredTouches(phantom), 0) << "lumen voxels of non-adjacent parts touch";
+        // Still the anatomical order of segments, rectum to cecum.
+        EXPECT_EQ(phantom.truth.segment.front(), "rectum");
+        EXPECT_EQ(phantom.truth.segment.back(), "cecum");
+        EXPECT_GE(phantom.truth.polyps.size(), 6u);
+
+        PhantomParams touching = p;
+        touching.touching = seed == 1 ? 5 : 4;
+        const Phantom bent = makePhantom(touching);
+        ASSERT_EQ(int(bent.truth.contacts.size()), touching.touching) << describe(touching);
+        EXPECT_GE(truthLengthMm(bent.truth), 1750.0);
+        expectContactsHold(bent, describe(touching));
+        EXPECT_EQ(undeclaredTouches(bent), 0) << describe(touching);
+    }
+}
+
+/// Face-connected voxels below -400 HU in the CT, from the image corner (outside air) to `goal`.
+bool airConnectedToOutside(const Phantom& phantom, const Vec3d& goalMm)
+{
+    const auto& g = phantom.ct.geometry;
+    return faceConnected(g, Index{0, 0, g.size[2] / 2}, nearestVoxel(g, goalMm),
+                         [&](const Index& v) { return phantom.ct.at(v[0], v[1], v[2]) < -400; });
+}
+
+TEST(PhantomRectalTube, JoinsTheRectumToOutsideAirAndStartsBelowTheColon)
+{
+    for (uint64_t seed : {1u, 3u}) {
+        PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+        p.rectalTube = true;
+        const Phantom phantom = makePhantom(p);
+        SCOPED_TRACE(describe(p));
+        const PhantomTruth& t = phantom.truth;
+        ASSERT_TRUE(t.hasRectalTube);
+        const PhantomRectalTube& tube = t.rectalTube;
+        EXPECT_GE(2.0 * tube.outerRadiusMm, 8.0);
+        EXPECT_LE(2.0 * tube.outerRadiusMm, 12.0);
+        EXPECT_GE(2.0 * tube.innerRadiusMm, 5.0);
+        EXPECT_LE(2.0 * tube.innerRadiusMm, 8.0);
+        // Outer end outside the body; tip in the rectum's lumen, a few cm above the verge.
+        EXPECT_GT(ph::bodySignedDistanceMm(tube.axisMm.front().x, tube.axisMm.front().y), 10.0);
+        const double tipArc = nearestArcMm(t.centerlineMm, tube.tipMm());
+        EXPECT_EQ(t.segment[std::size_t(tipArc)], "rectum");
+        EXPECT_LT(distance(tube.tipMm(), t.centerlineMm[std::size_t(tipArc)]), 2.0);
+        EXPECT_GE(tipArc, 20.0);
+        EXPECT_LE(tipArc, 60.0);
+        // The truth centerline starts at the anal verge, below the tip, on the tube's axis.
+        EXPECT_LT(t.centerlineMm.front().z, tube.tipMm().z - 20.0);
+        EXPECT_LT(ph::rectalTubeDistance(tube, t.centerlineMm.front()).axisMm, 0.5);
+
+        // CT: the colon's air is joined to the outside air through the tube's lumen (not
+        // without the tube), and the tube's wall is plastic.
+        const Vec3d aboveTip = t.centerlineMm[std::size_t(tipArc) + 25];
+        EXPECT_TRUE(airConnectedToOutside(phantom, aboveTip)) << "rectum air not joined to outside air";
+        PhantomParams noTube = p;
+        noTube.rectalTube = false;
+        const Phantom plain = makePhantom(noTube);
+        EXPECT_FALSE(airConnectedToOutside(plain, aboveTip)) << "without a tube the colon must be closed";
+
+        // Mask: the tube's air lumen inside the body is in it, connected to the rectum; the
+        // colon's own lumen is that of the phantom without the tube, voxel for voxel.
+        const auto& g = phantom.truthLumen.geometry;
+        const Vec3d inBody = (tube.axisMm[2] + tube.axisMm[3]) * 0.5;
+        const auto mask = [&](const Index& v) { return phantom.truthLumen.at(v[0], v[1], v[2]) != 0; };
+        EXPECT_TRUE(faceConnected(g, nearestVoxel(g, inBody), nearestVoxel(g, aboveTip), mask))
+            << "the tube's lumen in the mask is not connected to the rectum";
+        EXPECT_DOUBLE_EQ(t.colonLumenVolumeMl, plain.truth.lumenVolumeMl);
+        EXPECT_GT(t.tubeLumenVolumeMl, 0.5);
+        EXPECT_LT(t.tubeLumenVolumeMl, 10.0);
+        EXPECT_FALSE(phantom.truthLumen.voxels == plain.truthLumen.voxels);
+        // The same anatomy otherwise: polyps and centerline are those of the plain phantom.
+        EXPECT_EQ(t.centerlineMm.size(), plain.truth.centerlineMm.size());
+        EXPECT_EQ(t.polyps.size(), plain.truth.polyps.size());
+    }
+}
+
+TEST(PhantomSpacing, AnisotropicVoxelsKeepTheWorldGeometry)
+{
+    PhantomParams iso{PhantomSize::Small, 1, NOISE_HU};
+    PhantomParams aniso = iso;
+    aniso.spacingMm = {2.0, 2.0, 3.0};
+    const Phantom a = makePhantom(iso), b = makePhantom(aniso);
+    const auto& g = b.truthLumen.geometry;
+    EXPECT_EQ(g.spacingMm.x, 2.0);
+    EXPECT_EQ(g.spacingMm.y, 2.0);
+    EXPECT_EQ(g.spacingMm.z, 3.0);
+    EXPECT_EQ(g.size[0], 200);
+    EXPECT_EQ(g.size[1], 200);
+    EXPECT_EQ(g.size[2], 125);
+    EXPECT_TRUE(b.ct.geometry.spacingMm == g.spacingMm);
+    // Same centred field of view.
+    for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(g.originMm[c] + 0.5 * double(g.size[std::size_t(c)] - 1) * g.spacingMm[c], 0.0, 1e-9);
+    const auto centroid = [](const Image3<uint8_t>& m) {
+        Vec3d s{0, 0, 0};
+        double n = 0;
+        const auto& gg = m.geometry;
+        for (int64_t k = 0; k < gg.size[2]; ++k)
+            for (int64_t j = 0; j < gg.size[1]; ++j)
+                for (int64_t i = 0; i < gg.size[0]; ++i)
+                    if (m.at(i, j, k)) {
+                        s += gg.worldFromIndex({double(i), double(j), double(k)});
+                        n += 1;
+                    }
+        return s / n;
+    };
+    const Vec3d ca = centroid(a.truthLumen), cb = centroid(b.truthLumen);
+    for (int c = 0; c < 3; ++c)
+        EXPECT_LT(std::abs(ca[c] - cb[c]), 0.5 * g.spacingMm[c]) << "mask centroid moved along axis " << c;
+    EXPECT_NEAR(a.truth.lumenVolumeMl, b.truth.lumenVolumeMl, 0.03 * a.truth.lumenVolumeMl);
+    EXPECT_EQ(a.truth.centerlineMm.size(), b.truth.centerlineMm.size());
+    EXPECT_EQ(a.truth.polyps.size(), b.truth.polyps.size());
+    // Default spacing: the size's own geometry, byte for byte.
+    EXPECT_EQ(phantomImageGeometry(iso).size, ph::phantomGeometry(PhantomSize::Small).size);
+
+    for (const Vec3d bad : {Vec3d{0.1, 1, 1}, Vec3d{1, 1, 6}, Vec3d{1, -1, 1}, Vec3d{1, 1, std::nan("")}}) {
+        PhantomParams p = iso;
+        p.spacingMm = bad;
+        EXPECT_THROW(phantomImageGeometry(p), ParameterError);
+    }
+    EXPECT_THROW(parsePhantomSpacing("0.8,0.8"), ParameterError);
+    EXPECT_THROW(parsePhantomSpacing("0.8,0.8,x"), ParameterError);
+    EXPECT_THROW(parsePhantomSpacing("0.8,0.8,1.25,1"), ParameterError);
+    EXPECT_THROW(parsePhantomSpacing("0.8,0.8,100"), ParameterError);
+    EXPECT_TRUE(parsePhantomSpacing("0.8,0.8,1.25") == (Vec3d{0.8, 0.8, 1.25}));
+}
+
+TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
+{
+    PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
+    p.redundant = true;
+    p.touching = 3;
+    p.rectalTube = true;
+    p.fluid = true;
+    p.collapse = true;
+    p.spacingMm = {2.0, 2.0, 3.0};
+    const Phantom phantom = makePhantom(p);
+    SCOPED_TRACE(describe(p));
+    ASSERT_EQ(phantom.truth.contacts.size(), 3u);
+    EXPECT_TRUE(phantom.truth.hasRectalTube);
+    EXPECT_FALSE(phantom.truth.collapsed.empty());
+    EXPECT_EQ(phantom.truth.fluidPools.size(), 3u);
+    EXPECT_GE(truthLengthMm(phantom.truth), 1750.0);
+    expectContactsHold(phantom, describe(p));
+    for (const PhantomCollapse& c : phantom.truth.collapsed)
+        for (const PhantomContact& k : phantom.truth.contacts)
+            for (double arc : {k.arcAMm, k.arcBMm})
+                EXPECT_TRUE(arc < c.arcStartMm || arc > c.arcEndMm) << "a contact inside a collapsed stretch";
+    EXPECT_TRUE(airConnectedToOutside(phantom, phantom.truth.centerlineMm[70]));
+    // The tube's air lumen in the mask stays face-connected to the rectum on 3 mm slices.
+    {
+        const auto& g = phantom.truthLumen.geometry;
+        const auto& axis = phantom.truth.rectalTube.axisMm;
+        const auto mask = [&](const Index& v) { return phantom.truthLumen.at(v[0], v[1], v[2]) != 0; };
+        EXPECT_TRUE(faceConnected(g, nearestVoxel(g, (axis[2] + axis[3]) * 0.5),
+                                  nearestVoxel(g, phantom.truth.centerlineMm[70]), mask))
+            << "the tube's lumen in the mask is not connected to the rectum";
+    }
+
+    // The truth JSON carries every variant and reads back.
+    const nlohmann::json j = phantomTruthToJson(phantom, p);
+    EXPECT_EQ(j.at("world_frame"), "LPS");
+    EXPECT_EQ(j.at("contacts").size(), 3u);
+    EXPECT_TRUE(j.contains("rectal_tube"));
+    EXPECT_TRUE(j.at("centerline").contains("length_mm"));
+    const PhantomTruth back = phantomTruthFromJson(j, "test");
+    ASSERT_EQ(back.contacts.size(), phantom.truth.contacts.size());
+    for (std::size_t n = 0; n < back.contacts.size(); ++n) {
+        EXPECT_TRUE(back.contacts[n].positionMm == phantom.truth.contacts[n].positionMm);
+        EXPECT_EQ(back.contacts[n].widthMm, phantom.truth.contacts[n].widthMm);
+        EXPECT_EQ(back.contacts[n].arcAMm, phantom.truth.contacts[n].arcAMm);
+        EXPECT_EQ(back.contacts[n].arcBMm, phantom.truth.contacts[n].arcBMm);
+    }
+    EXPECT_TRUE(back.hasRectalTube);
+    EXPECT_EQ(back.rectalTube.axisMm.size(), phantom.truth.rectalTube.axisMm.size());
+    EXPECT_EQ(back.collapsed.size(), phantom.truth.collapsed.size());
+    EXPECT_EQ(back.fluidPools.size(), phantom.truth.fluidPools.size());
+    EXPECT_EQ(back.colonLumenVolumeMl, phantom.truth.colonLumenVolumeMl);
+
+    // The default truth JSON has none of the variant keys (unchanged for existing readers).
+    PhantomParams plain{PhantomSize::Small, 2, NOISE_HU};
+    const nlohmann::json d = phantomTruthToJson(makePhantom(plain), plain);
+    for (const char* key : {"contacts", "rectal_tube", "variants", "colon_lumen_volume_ml"})
+        EXPECT_FALSE(d.contains(key)) << key;
+}
+
+} // namespace
