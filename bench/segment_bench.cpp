@@ -4,7 +4,10 @@
 // lumen mask written as .nii.gz (read from the file, as `flyover run --mask` does), with the
 // time of each step.
 //
-//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask]
+//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask | --centerline]
+//
+// --centerline: instead, segment + centerline as before contacts were cut ("centerline") against
+// segment + contact cutting + centerline ("contacts", volume/contacts.h), time and peak memory.
 //
 // The phantom is generated and ingested once and saved as a temporary .vdb; each measured
 // pass then runs in a fresh child process (this program with --grid FILE --mode MODE) that
@@ -15,6 +18,8 @@
 #include "bench/process_memory.h"
 #include "data/phantom.h"
 #include "volume/image_io.h"
+#include "volume/centerline.h"
+#include "volume/contacts.h"
 #include "volume/ingest.h"
 #include "volume/lumen_mask.h"
 #include "volume/segment.h"
@@ -159,6 +164,19 @@ int child(const std::string& gridPath, const std::string& mode, int runs)
             s << seg.pieces.size() << " piece(s), lumen " << seg.lumenVolumeMl << " mL, fluid "
               << seg.fluidVolumeMl << " mL";
             what = s.str();
+        } else if (mode == "centerline" || mode == "contacts") {
+            steps.last = t0;
+            steps.current = "start";
+            LumenSegmentation seg = segmentLumen(*hu, SegmentParams{}, &steps);
+            ContactParams cp;
+            cp.enabled = mode == "contacts";
+            const ContactReport cr = cutContacts(*seg.sdf, seg.mask.get(), cp, &steps);
+            const Centerline cl = extractCenterline(*seg.sdf, CenterlineParams{}, &steps);
+            std::size_t cut = 0;
+            for (const ContactInfo& c : cr.contacts) cut += c.cut;
+            std::ostringstream s;
+            s << " path " << cl.lengthMm() << " mm, " << cut << " contact(s) cut";
+            what = s.str();
         } else {
             what = std::to_string(thresholdAndComponents(*hu)) + " air components";
         }
@@ -208,7 +226,7 @@ int main(int argc, char** argv)
 {
     std::string size = "full", grid, mode;
     int runs = 5;
-    bool fluid = false, collapse = false, mask = false;
+    bool fluid = false, collapse = false, mask = false, centerline = false;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         if (a == "--size" && i + 1 < argc) size = argv[++i];
@@ -218,8 +236,9 @@ int main(int argc, char** argv)
         else if (a == "--fluid") fluid = true;
         else if (a == "--collapse") collapse = true;
         else if (a == "--mask") mask = true;
+        else if (a == "--centerline") centerline = true;
         else {
-            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask]\n";
+            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask | --centerline]\n";
             return 2;
         }
     }
@@ -274,6 +293,20 @@ int main(int argc, char** argv)
                         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
         }
         const std::string self = fs::read_symlink("/proc/self/exe").string();
+        if (centerline) {
+            const Measure before = runChild(self, tmp.string(), "centerline", runs);
+            const Measure after = runChild(self, tmp.string(), "contacts", runs);
+            fs::remove(tmp);
+            for (const auto& [name, m] : {std::pair<const char*, const Measure&>{"segment + centerline", before},
+                                          std::pair<const char*, const Measure&>{"+ contacts", after}})
+                std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS %.0f MB "
+                            "after loading the grid, peak %.0f MB;%s\n",
+                            name, m.median, m.min, m.max, runs, m.cpuMedian, m.loadedMb, m.peakMb, m.what.c_str());
+            std::printf("%-24s: %.2f x the wall time without contacts, %.2f x its CPU time, %.2f x its peak memory\n",
+                        "ratio", after.median / before.median, after.cpuMedian / before.cpuMedian,
+                        after.peakMb / before.peakMb);
+            return 0;
+        }
         const Measure seg = runChild(self, tmp.string(), "segment", runs);
         const Measure plain = runChild(self, tmp.string(), "threshold", runs);
         fs::remove(tmp);

@@ -36,6 +36,8 @@ template <typename V> void visit(SegmentParams& p, V&& v)
     v("wall_hu", p.wallHu, "colon wall (HU): the surface in fluid lies midway between it and the fluid");
     v("mask_label", p.maskLabel, "--mask: the label that is lumen (0 = every non-zero voxel)");
     v("mask_smoothing_voxels", p.maskSmoothingVoxels, "--mask: constrained smoothing of the mask's staircase (mask voxels, 0 = none)");
+    v("cut_contacts", p.contacts.enabled, "find contacts between touching loops (a narrow link closing a cycle) and cut them");
+    v("contact_neck_ratio", p.contacts.maxNeckRatio, "a contact's neck radius / the lumen radius either side is below this (0..1]");
 }
 template <typename V> void visit(CenterlineParams& p, V&& v)
 {
@@ -246,6 +248,8 @@ void validateParams(const PipelineParams& p)
     require(p.segment.maskLabel >= 0, "segment.mask_label", "must be >= 0 (0 = every non-zero voxel)");
     require(p.segment.maskSmoothingVoxels >= 0 && p.segment.maskSmoothingVoxels <= 8,
             "segment.mask_smoothing_voxels", "must be in [0, 8]");
+    require(p.segment.contacts.maxNeckRatio > 0 && p.segment.contacts.maxNeckRatio <= 1,
+            "segment.contact_neck_ratio", "must be in (0, 1]");
     require(p.centerline.stepMm > 0, "centerline.step_mm", "must be > 0");
     require(p.centerline.wallPenalty >= 0, "centerline.wall_penalty", "must be >= 0");
     require(p.centerline.smoothingMm >= 0, "centerline.smoothing_mm", "must be >= 0");

@@ -5,6 +5,8 @@
 #include "volume/segment.h"
 
 #include <filesystem>
+#include <iomanip>
+#include <sstream>
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -22,15 +24,44 @@ json runCenterline(StudyRun& run, Progress* progress)
             params.rectumMm = Vec3d{tip->value()[0], tip->value()[1], tip->value()[2]};
             fromTube = true;
         }
-    Centerline c = extractCenterline(*sdf, params, progress);
+    CenterlineReport cr;
+    Centerline c = extractCenterline(*sdf, params, progress, &cr);
     writeJson(run.path("centerline.json"), centerlineToJson(c));
     run.state.centerline = std::move(c);
-    const auto& pts = run.state.centerline->points;
+    const Centerline& cl = *run.state.centerline;
+    const auto& pts = cl.points;
+
+    // What the path squeezes through, and what was cut on its way (segment stage).
+    json nearWall = json::array();
+    for (const CenterlineNearWall& w : cr.nearWall) {
+        nearWall.push_back(json{{"from_arc_mm", w.fromArcMm},
+                                {"to_arc_mm", w.toArcMm},
+                                {"min_radius_mm", w.minRadiusMm},
+                                {"position_mm", vec3Json(w.positionMm)}});
+        if (run.opt.log) {
+            std::ostringstream msg;
+            msg << std::fixed << std::setprecision(1) << "centerline: warning: the path passes "
+                << w.minRadiusMm << " mm from the wall (under " << run.opt.params.centerline.nearWallMm
+                << " mm, not a bridged gap) at arc " << w.fromArcMm << "-" << w.toArcMm << " mm, ("
+                << w.positionMm.x << ", " << w.positionMm.y << ", " << w.positionMm.z << ") mm";
+            run.opt.log->message(msg.str());
+        }
+    }
+    json bridges = json::array();
+    for (const CenterlineBridgeInfo& b : cr.bridges)
+        bridges.push_back(json{{"gap_mm", b.gapMm}, {"length_mm", b.lengthMm}});
+    const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
     return json{{"points", pts.size()},
-                {"length_mm", run.state.centerline->lengthMm()},
+                {"length_mm", cl.lengthMm()},
+                {"world_frame", "LPS"},
                 {"rectum_mm", pts.empty() ? json() : vec3Json(pts.front().positionMm)},
                 {"cecum_mm", pts.empty() ? json() : vec3Json(pts.back().positionMm)},
-                {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")}};
+                {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")},
+                {"rectum_rule", cr.rectumRule},
+                {"rectum_above_lowest_lumen_mm", aboveLowest},
+                {"bridges", bridges},
+                {"near_wall", nearWall},
+                {"contacts", contactsAlongPath(*sdf, cl)}};
 }
 
 } // namespace flyover

@@ -83,6 +83,14 @@ nlohmann::json runSegment(StudyRun& run, Progress* progress);
 /// the mask's geometry, which `flyover export --lumen` uses when the study has no CT.
 nlohmann::json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* progress);
 nlohmann::json runCenterline(StudyRun& run, Progress* progress);
+struct LumenSegmentation;
+/// Finds and cuts the contacts between touching loops in seg's mask and sdf (volume/contacts.h),
+/// records them in the sdf's metadata (read by the centerline stage), logs them, returns the
+/// report.
+nlohmann::json cutLumenContacts(StudyRun& run, LumenSegmentation& seg);
+/// The contacts recorded in the lumen level set's metadata by cutLumenContacts, with the arcs
+/// of `centerline` nearest to their two sides; null when there are none recorded.
+nlohmann::json contactsAlongPath(const openvdb::FloatGrid& sdf, const Centerline& centerline);
 nlohmann::json runMesh(StudyRun& run, Progress* progress);
 // The render steps: each its own cached step of the graph, side by side after the frames.
 /// Fly-over pairs in frames/; the first pair is rendered, written and announced before the

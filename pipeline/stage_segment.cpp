@@ -100,10 +100,13 @@ void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
 {
+    json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
     writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
     run.state.sdf = seg.sdf;
     reportPieces(run, seg);
-    return segmentationJson(seg);
+    json report = segmentationJson(seg);
+    report["contacts"] = std::move(contacts);
+    return report;
 }
 
 } // namespace

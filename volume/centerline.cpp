@@ -14,6 +14,7 @@
 
 #include "volume/centerline_bridge.h"
 #include "volume/error.h"
+#include "volume/lumen_index.h"
 
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tree/LeafManager.h>
@@ -40,141 +41,7 @@ namespace flyover {
 
 namespace {
 
-using openvdb::Coord;
-using openvdb::FloatTree;
-using FloatLeaf = FloatTree::LeafNodeType;
-
-constexpr int LEAF_LOG2 = 3;  // FloatTree leaves are 8^3
-constexpr int LEAF_DIM = 1 << LEAF_LOG2;
-constexpr int LEAF_VOXELS = LEAF_DIM * LEAF_DIM * LEAF_DIM;
-static_assert(FloatLeaf::DIM == LEAF_DIM, "FloatTree leaves are expected to be 8^3");
-static_assert(LEAF_DIM % 2 == 0, "leaf origins must have even coordinates for the coarse lattice");
-
-using Slot = std::uint32_t;
-constexpr Slot NO_SLOT = std::numeric_limits<Slot>::max();
-
-/// The 26 neighbour offsets with their step lengths in voxels (1, sqrt2, sqrt3).
-struct Step {
-    int dx, dy, dz;
-    double lengthVoxels;
-};
-
-std::array<Step, 26> makeSteps()
-{
-    std::array<Step, 26> steps{};
-    int n = 0;
-    for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-            for (int dz = -1; dz <= 1; ++dz) {
-                if (dx == 0 && dy == 0 && dz == 0) continue;
-                steps[n++] = {dx, dy, dz, std::sqrt(double(dx * dx + dy * dy + dz * dz))};
-            }
-    return steps;
-}
-
-const std::array<Step, 26> STEPS = makeSteps();
-
-/// Flat, leaf-blocked index of the lumen voxels: every sdf leaf holding lumen voxels gets a
-/// block of 512 slots (slot = block * 512 + leaf offset), so that per-voxel data lives in flat
-/// arrays and a neighbour is found by arithmetic plus one table lookup per block instead of a
-/// tree traversal. Slots of non-lumen voxels are holes (depth < 0); leaves of a tube are
-/// typically half full, so the holes cost less than a hash map would.
-struct LumenIndex {
-    std::vector<Coord> blockOrigin;                      ///< index-space leaf origin per block
-    std::vector<std::array<std::int32_t, 27>> neighbour;  ///< block of the (dx,dy,dz) leaf, or -1
-    std::vector<float> depthMm;                          ///< D = -sdf (> 0) per slot; -1: not lumen
-
-    std::size_t slotCount() const { return depthMm.size(); }
-    bool isLumen(Slot s) const { return depthMm[s] >= 0.0f; }
-    Coord coord(Slot s) const
-    {
-        const int off = static_cast<int>(s % LEAF_VOXELS);
-        return blockOrigin[s / LEAF_VOXELS] +
-               Coord(off >> (2 * LEAF_LOG2), (off >> LEAF_LOG2) & (LEAF_DIM - 1), off & (LEAF_DIM - 1));
-    }
-
-    /// Calls fn(neighbourSlot, stepIndex) for each 26-neighbour of `s` that is a lumen voxel;
-    /// with STRIDE 2, for the neighbours two voxels away (the lattice of even coordinates).
-    template<int STRIDE = 1, typename Fn>
-    void forEachNeighbour(Slot s, Fn&& fn) const
-    {
-        const std::size_t block = s / LEAF_VOXELS;
-        const int off = static_cast<int>(s % LEAF_VOXELS);
-        const int x = off >> (2 * LEAF_LOG2), y = (off >> LEAF_LOG2) & (LEAF_DIM - 1),
-                  z = off & (LEAF_DIM - 1);
-        const auto& nb = neighbour[block];
-        for (int k = 0; k < 26; ++k) {
-            const Step& st = STEPS[k];
-            const int nx = x + STRIDE * st.dx, ny = y + STRIDE * st.dy, nz = z + STRIDE * st.dz;
-            // nx in [-2, 9]: the arithmetic shift gives -1, 0 or +1 for the neighbouring leaf.
-            const int b = nb[((nx >> LEAF_LOG2) + 1) * 9 + ((ny >> LEAF_LOG2) + 1) * 3 +
-                             ((nz >> LEAF_LOG2) + 1)];
-            if (b < 0) continue;
-            const Slot t = static_cast<Slot>(b) * LEAF_VOXELS +
-                           static_cast<Slot>(((nx & (LEAF_DIM - 1)) << (2 * LEAF_LOG2)) |
-                                             ((ny & (LEAF_DIM - 1)) << LEAF_LOG2) |
-                                             (nz & (LEAF_DIM - 1)));
-            if (depthMm[t] >= 0.0f) fn(t, k);
-        }
-    }
-};
-
-LumenIndex buildIndex(const FloatTree& sdf)
-{
-    openvdb::tree::LeafManager<const FloatTree> leaves(sdf);
-    std::vector<char> hasLumen(leaves.leafCount(), 0);
-    leaves.foreach([&](const FloatLeaf& leaf, std::size_t n) {
-        for (auto it = leaf.cbeginValueOn(); it; ++it)
-            if (*it < 0.0f) {
-                hasLumen[n] = 1;
-                return;
-            }
-    });
-    LumenIndex index;
-    std::vector<const FloatLeaf*> blockLeaf;
-    for (std::size_t n = 0; n < leaves.leafCount(); ++n)
-        if (hasLumen[n]) {
-            blockLeaf.push_back(&leaves.leaf(n));
-            index.blockOrigin.push_back(leaves.leaf(n).origin());
-        }
-    const std::size_t blocks = blockLeaf.size();
-    if (blocks >= (std::size_t(NO_SLOT) / LEAF_VOXELS)) {
-        std::ostringstream msg;
-        msg << "extractCenterline: the lumen spans " << blocks
-            << " leaf nodes, more than the 32-bit voxel index supports";
-        throw InputError(msg.str());
-    }
-    openvdb::Int32Tree blockId(-1);
-    for (std::size_t b = 0; b < blocks; ++b)
-        blockId.setValueOn(index.blockOrigin[b], static_cast<std::int32_t>(b));
-
-    index.neighbour.resize(blocks);
-    index.depthMm.assign(blocks * LEAF_VOXELS, -1.0f);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(blockId);
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            int k = 0;
-            for (int dx = -1; dx <= 1; ++dx)
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dz = -1; dz <= 1; ++dz) {
-                        std::int32_t id = -1;
-                        const Coord o = index.blockOrigin[b] + Coord(dx * LEAF_DIM, dy * LEAF_DIM, dz * LEAF_DIM);
-                        if (!acc.probeValue(o, id)) id = -1;
-                        index.neighbour[b][k++] = id;
-                    }
-            float* depth = &index.depthMm[b * LEAF_VOXELS];
-            for (auto it = blockLeaf[b]->cbeginValueOn(); it; ++it)
-                if (*it < 0.0f) depth[it.pos()] = -*it;
-        }
-    });
-    return index;
-}
-
-void checkCancelled(Progress* progress)
-{
-    if (progress && progress->cancelled()) throw Cancelled();
-}
+using namespace lumen_index;
 
 /// 26-connected lumen pieces: a label per slot, and per piece its voxel count and the voxel
 /// its breadth-first labelling search reached last (farthest in steps from the seed: for a
@@ -319,30 +186,6 @@ bool dijkstra(const LumenIndex& index, const std::vector<std::uint8_t>& allowed,
     return false;
 }
 
-/// Per block, the largest D over the block and its 26 neighbouring blocks: the depth of the
-/// lumen's middle near each voxel, to which the core of a piece is relative.
-std::vector<float> nearbyMaxDepth(const LumenIndex& index)
-{
-    const std::size_t blocks = index.blockOrigin.size();
-    std::vector<float> own(blocks, 0.0f), nearby(blocks, 0.0f);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            const float* d = &index.depthMm[b * LEAF_VOXELS];
-            own[b] = *std::max_element(d, d + LEAF_VOXELS);
-        }
-    });
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            float m = 0.0f;
-            for (std::int32_t nb : index.neighbour[b])
-                if (nb >= 0) m = std::max(m, own[static_cast<std::size_t>(nb)]);
-            nearby[b] = m;
-        }
-    });
-    return nearby;
-}
 Vec3d toVec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
 
 /// Arc length at each vertex of a polyline.
@@ -513,8 +356,10 @@ void validate(const openvdb::FloatGrid& sdf, const CenterlineParams& p)
                         std::isfinite(p.rectumMm->z)))
         bad("rectumMm must be a finite point");
     if (!(p.minPieceMl >= 0) || !std::isfinite(p.minPieceMl)) bad("minPieceMl must be finite and >= 0");
+    if (!(p.minPieceFraction >= 0 && p.minPieceFraction <= 1)) bad("minPieceFraction must be in [0, 1]");
     if (!(p.bridgeTurnMmPerRad >= 0) || !std::isfinite(p.bridgeTurnMmPerRad))
         bad("bridgeTurnMmPerRad must be finite and >= 0");
+    if (!(p.nearWallMm >= 0) || !std::isfinite(p.nearWallMm)) bad("nearWallMm must be finite and >= 0");
     const auto& xf = sdf.transform();
     if (!xf.isLinear()) throw InputError("extractCenterline: the sdf grid's transform is not linear");
     const openvdb::Vec3d vs = xf.voxelSize();
@@ -905,6 +750,11 @@ Vec3d frontOutward(const std::vector<Vec3d>& path, double voxelMm)
     return backOutward(r, voxelMm);
 }
 
+/// Without rectumMm, the rectum is the lowest piece end; when that lies more than this above
+/// the lowest lumen voxel (mm), the farthest pair missed the rectum (the path end stops about a
+/// lumen radius short of the cap wall; a distended rectum is up to ~25 mm in radius).
+constexpr double LOWEST_END_SLACK_MM = 40.0;
+
 /// One piece's centerline and where it came from.
 struct PiecePath {
     std::int32_t label = -1;
@@ -944,8 +794,34 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                      [&](std::int32_t a, std::int32_t b) { return pieces.size[a] > pieces.size[b]; });
     std::vector<std::int32_t> used;
     for (std::size_t r = 0; r < bySize.size(); ++r)
-        if (r == 0 || double(pieces.size[bySize[r]]) * voxelMl >= params.minPieceMl)
+        if (r == 0 || (double(pieces.size[bySize[r]]) * voxelMl >= params.minPieceMl &&
+                       double(pieces.size[bySize[r]]) >= params.minPieceFraction * double(pieces.size[bySize[0]])))
             used.push_back(bySize[r]);
+
+    // With rectumMm: the lumen voxel nearest to it over the pieces used (the seed); its piece's
+    // path runs from the end of the tube nearest to the seed (the voxel farthest from the
+    // seed's farthest voxel) to the voxel farthest from that end along the lumen (the cecum).
+    // Without: each piece's farthest pair, and the lowest end in world z is the rectum (step 4).
+    // The lowest lumen voxel is reported either way.
+    Slot rectumSeed = NO_SLOT, lowestSlot = NO_SLOT;
+    {
+        std::vector<std::uint8_t> isUsed(pieces.size.size(), 0);
+        for (std::int32_t l : used) isUsed[l] = 1;
+        double best = std::numeric_limits<double>::infinity(), lowest = best;
+        for (Slot s = 0; s < index.slotCount(); ++s) {
+            if (!index.isLumen(s) || !isUsed[pieces.label[s]]) continue;
+            const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
+            if (w.z < lowest) {
+                lowest = w.z;
+                lowestSlot = s;
+            }
+            if (params.rectumMm && distance(w, *params.rectumMm) < best) {
+                best = distance(w, *params.rectumMm);
+                rectumSeed = s;
+            }
+        }
+    }
+    const std::int32_t rectumPiece = rectumSeed == NO_SLOT ? -1 : pieces.label[rectumSeed];
 
     // 3. Per piece: ends, minimal path through the core, refinement. A step of length l
     // between voxels u and v costs l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid
@@ -1012,13 +888,25 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     std::vector<double> dist;
     std::vector<Slot> prev;
     std::vector<PiecePath> paths;
-    for (std::size_t u = 0; u < used.size(); ++u) {
-        const std::int32_t label = used[u];
-        reportProgress(progress, 0.2 + 0.6 * double(u) / double(used.size()), "minimal path");
+    // One piece's path; from the end of the tube nearest to `seed` when one is given.
+    auto tracePiece = [&](std::int32_t label, Slot seed) {
         // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches
         // the other end last. Both lie on the wall of the blind ends; the path runs between
         // the core voxels nearest to them in steps.
-        const Slot a = pieces.lastReached[label];
+        auto reset = [&] {
+            for (Slot s = 0; s < index.slotCount(); ++s)
+                if (pieces.label[s] == label) steps[s] = -1;
+        };
+        reset();  // a piece may be traced twice
+        Slot a = pieces.lastReached[label];
+        if (seed != NO_SLOT) {
+            // The end of the tube nearest to the seed: the voxel farthest from the seed's
+            // farthest voxel (the seed itself when it lies at an end).
+            const Slot far = stepsFrom(index, seed, steps, progress);
+            reset();
+            a = stepsFrom(index, far, steps, progress);
+            reset();
+        }
         const Slot b = stepsFrom(index, a, steps, progress);
         // The search runs on the coarsest set that connects the ends: the core's voxels of even
         // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
@@ -1077,12 +965,17 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         PiecePath path;
         path.label = label;
         path.pointsMm = refinePath(raw, *grid, voxelMm, fineMm, params);
-        paths.push_back(std::move(path));
+        return path;
+    };
+    for (std::size_t u = 0; u < used.size(); ++u) {
+        reportProgress(progress, 0.2 + 0.6 * double(u) / double(used.size()), "minimal path");
+        paths.push_back(tracePiece(used[u], used[u] == rectumPiece ? rectumSeed : NO_SLOT));
     }
     reportProgress(progress, 0.8, "order and bridge pieces");
 
     // 4. The rectum end: the lowest piece end in world z (LPS: +z is superior), or the end
-    // nearest to rectumMm; its piece comes first, entered there.
+    // nearest to rectumMm (the front of the path from rectumSeed); its piece comes first,
+    // entered there.
     std::vector<PieceEnds> ends(paths.size());
     for (std::size_t i = 0; i < paths.size(); ++i) {
         const auto& p = paths[i].pointsMm;
@@ -1104,6 +997,26 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                     firstReversed = back;
                 }
             }
+    }
+    // The lowest end far above the lowest lumen voxel: the farthest pair of its piece missed
+    // the rectum (a shortcut left through an uncut contact, a branch): trace the lowest voxel's
+    // piece again from the end of the tube nearest to that voxel, and start there.
+    const Vec3d lowestMm = toVec(xf.indexToWorld(index.coord(lowestSlot)));
+    bool reseeded = false;
+    if (!params.rectumMm) {
+        const Vec3d start = firstReversed ? ends[first].backMm : ends[first].frontMm;
+        if (start.z - lowestMm.z > LOWEST_END_SLACK_MM) {
+            const std::int32_t label = pieces.label[lowestSlot];
+            for (std::size_t i = 0; i < paths.size(); ++i)
+                if (paths[i].label == label) {
+                    paths[i] = tracePiece(label, lowestSlot);
+                    const auto& p = paths[i].pointsMm;
+                    ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+                    first = static_cast<int>(i);
+                    firstReversed = false;
+                    reseeded = true;
+                }
+        }
     }
     const PieceChain chain = orderPieces(ends, first, firstReversed, params.bridgeTurnMmPerRad);
 
@@ -1175,10 +1088,32 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     }
     computeTangentsAndNormals(cl);
 
+    // Stretches of the path closer to the wall than nearWallMm outside bridges.
+    std::vector<CenterlineNearWall> nearWall;
+    for (std::size_t i = 0; i < cl.points.size(); ++i) {
+        const CenterlinePoint& p = cl.points[i];
+        if (p.bridged || !(p.radiusMm < params.nearWallMm)) continue;
+        const double arc = double(i) * params.stepMm;
+        if (!nearWall.empty() && nearWall.back().toArcMm + 1.5 * params.stepMm >= arc) {
+            CenterlineNearWall& w = nearWall.back();
+            w.toArcMm = arc;
+            if (p.radiusMm < w.minRadiusMm) {
+                w.minRadiusMm = p.radiusMm;
+                w.positionMm = p.positionMm;
+            }
+        } else {
+            nearWall.push_back({arc, arc, p.radiusMm, p.positionMm});
+        }
+    }
+
     if (report) {
         report->pieces.clear();
         report->bridges = bridgeInfo;
-        report->rectumRule = params.rectumMm ? "nearest to rectum_mm" : "lowest end";
+        report->rectumRule = params.rectumMm ? "nearest to rectum_mm"
+                             : reseeded      ? "end nearest to the lowest lumen voxel"
+                                             : "lowest end";
+        report->lowestLumenMm = lowestMm;
+        report->nearWall = nearWall;
         std::vector<int> infoOf(pieces.size.size(), -1);
         for (std::size_t r = 0; r < bySize.size(); ++r) {
             CenterlinePieceInfo info;

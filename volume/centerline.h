@@ -10,8 +10,10 @@
 /// 3. the path is moved to the centroids of the lumen's cross-sections perpendicular to it
 ///    (sections cut by a haustral fold or a large polyp are recognised by their area and
 ///    skipped), smoothed along its arc length, and continued straight into the blind ends.
-/// Pieces are then joined into one chain starting at the rectum end (the lowest end in world
-/// z, or the end nearest rectumMm), in the order and directions that minimise the total
+/// The rectum is the lowest piece end in world z, or the end of the tube nearest to the lumen
+/// voxel nearest rectumMm (the voxel farthest from that voxel's farthest voxel; the path of its
+/// piece runs from there to the farthest voxel along the lumen, the cecum). Pieces are joined
+/// into one chain starting at the rectum, in the order and directions that minimise the total
 /// bridge length plus a turning penalty; each gap is bridged by a smooth curve whose points
 /// are flagged `bridged`.
 ///
@@ -34,22 +36,29 @@ struct CenterlineParams {
     double stepMm = 1.0;            ///< arc-length step of the output (mm, > 0)
     double wallPenalty = 2.0;       ///< exponent p of the cost 1/D^p (D: distance to wall, mm; >= 0)
     double smoothingMm = 4.0;       ///< Gaussian smoothing sigma along the path (mm, >= 0)
-    std::optional<Vec3d> rectumMm;  ///< the path starts at the lumen end nearest this point (LPS mm)
+    std::optional<Vec3d> rectumMm;  ///< the path starts at the lumen end nearest this point (LPS mm;
+                                    ///< e.g. the anus, or the rectal tube's entry)
     /// Move the path to the centroids of the lumen cross-sections (robust to haustral folds and
     /// polyps); false: keep it on the ridge of D (the medial axis).
     bool centerSections = true;
     /// Lumen pieces smaller than this are ignored (mL, >= 0); the largest piece is always used.
     double minPieceMl = 0.5;
+    /// ... and so are pieces smaller than this fraction of the largest ([0, 1]): crumbs, gas in
+    /// small bowel, a mask's stray parts. A stretch of colon between two collapses holds a few
+    /// per cent of the lumen or more (the CT segmentation keeps air components of 2% and up).
+    double minPieceFraction = 0.01;
     /// Bridge cost added per radian that a bridge turns away from the piece ends' directions,
     /// when choosing the order of the pieces (mm per radian, >= 0).
     double bridgeTurnMmPerRad = 20.0;
-    static constexpr int VERSION = 2;
+    /// Path points closer than this to the wall outside bridges are reported (mm, >= 0).
+    double nearWallMm = 1.0;
+    static constexpr int VERSION = 3;
 };
 
 /// One lumen piece as the centerline saw it.
 struct CenterlinePieceInfo {
     double volumeMl = 0;            ///< voxel count x voxel volume
-    bool used = false;              ///< false: smaller than minPieceMl
+    bool used = false;              ///< false: smaller than minPieceMl or minPieceFraction
     int chainIndex = -1;            ///< position in the travel order (0: rectum piece), -1 if unused
     double pathLengthMm = 0;        ///< length of its own path (before resampling)
     Vec3d entryMm, exitMm;          ///< where the path enters and leaves it (LPS mm)
@@ -62,10 +71,21 @@ struct CenterlineBridgeInfo {
     double lengthMm = 0;            ///< length of the bridge curve
 };
 
+/// A stretch of the path closer to the wall than CenterlineParams::nearWallMm (not bridged):
+/// the path squeezes through a narrow place of the lumen there (a contact left uncut, a
+/// stricture, a collapse that kept a thread of lumen).
+struct CenterlineNearWall {
+    double fromArcMm = 0, toArcMm = 0;  ///< arc lengths from the rectum end (mm)
+    double minRadiusMm = 0;             ///< smallest D along it
+    Vec3d positionMm;                   ///< where D is smallest (LPS mm)
+};
+
 struct CenterlineReport {
     std::vector<CenterlinePieceInfo> pieces;   ///< largest first
     std::vector<CenterlineBridgeInfo> bridges; ///< in travel order
     std::string rectumRule;                    ///< "lowest end" or "nearest to rectum_mm"
+    Vec3d lowestLumenMm;                       ///< the lowest lumen voxel in world z (LPS mm)
+    std::vector<CenterlineNearWall> nearWall;  ///< in path order
 };
 
 /// @param sdf      lumen signed distance grid in world mm, negative inside the lumen, with

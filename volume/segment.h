@@ -26,6 +26,7 @@
 /// does not know the patient's orientation beyond what the air-fluid levels tell.
 #pragma once
 
+#include "volume/contacts.h"
 #include "volume/progress.h"
 #include "volume/rectal_tube.h"
 #include "volume/vec3.h"
@@ -62,6 +63,8 @@ struct SegmentParams {
     /// constrained smoothing that removes the staircase of a binary mask; 0 = none. The
     /// surface never crosses a mask voxel centre, and the volume is restored afterwards.
     double maskSmoothingVoxels = 1.0;
+    /// Contacts between touching loops, cut at the end of the segment stage (contacts.h).
+    ContactParams contacts;
     static constexpr int VERSION = 2;
 };
 
