@@ -15,6 +15,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/render_settings.h"
 #include "render/camera.h"
 #include "render/coverage.h"
 #include "render/flyover_path.h"
@@ -60,30 +61,6 @@ json cameraJson(const Camera& c)
     return json{{"position_mm", vec3Json(c.position)}, {"forward", vec3Json(c.forward)},
                 {"up", vec3Json(c.up)},                {"right", vec3Json(c.right)},
                 {"fov_deg", c.fovDeg},                 {"near_mm", c.nearMm}};
-}
-
-FlyoverParams flyoverParamsOf(const RenderParams& rp)
-{
-    FlyoverParams fp;
-    fp.fovDeg = rp.fovDeg;
-    fp.rollDeg = rp.rollDeg;
-    fp.leftToRight = rp.direction == "right";
-    fp.clipOffsetFraction = rp.clipOffsetFraction;
-    fp.clipOffsetMm = rp.clipOffsetMm;
-    return fp;
-}
-
-RenderOptions frameOptionsOf(const RenderParams& rp)
-{
-    RenderOptions ro;
-    ro.widthPx = rp.widthPx;
-    ro.heightPx = rp.heightPx;
-    ro.ost = rp.ost;
-    ro.supersample = rp.supersample;
-    ro.smoothShading = rp.smoothShading;
-    ro.depthCue = rp.depthCue;
-    ro.depthCueRangeMm = rp.depthCueMm;
-    return ro;
 }
 
 /// How a frame was rendered, so that any frame can be reproduced from the JSON alone.

@@ -1,6 +1,7 @@
 #include "view/view_study.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/render_settings.h"
 #include "render/flyover_path.h"
 #include "render/overview.h"
 #include "volume/error.h"
@@ -279,14 +280,10 @@ std::size_t ViewStudy::indexOfArc(double arcMm) const
 
 FlyoverParams ViewStudy::flyoverParams(const ViewPose& pose) const
 {
-    FlyoverParams fp;
-    fp.fovDeg = mParams.fovDeg;
+    FlyoverParams fp = flyoverParamsOf(mParams);
     fp.rollDeg = pose.rollDeg;
     fp.leftToRight = pose.direction != "left";
-    if (pose.clipOffsetFraction < 0) {
-        fp.clipOffsetFraction = mParams.clipOffsetFraction;
-        fp.clipOffsetMm = mParams.clipOffsetMm;
-    } else {
+    if (pose.clipOffsetFraction >= 0) {
         fp.clipOffsetFraction = pose.clipOffsetFraction;
         fp.clipOffsetMm = -1.0;
     }
@@ -295,13 +292,8 @@ FlyoverParams ViewStudy::flyoverParams(const ViewPose& pose) const
 
 RenderOptions ViewStudy::renderOptions(int px) const
 {
-    RenderOptions ro;
+    RenderOptions ro = frameOptionsOf(mParams);
     ro.widthPx = ro.heightPx = px;
-    ro.ost = mParams.ost;
-    ro.supersample = mParams.supersample;
-    ro.smoothShading = mParams.smoothShading;
-    ro.depthCue = mParams.depthCue;
-    ro.depthCueRangeMm = mParams.depthCueMm;
     return ro;
 }
 
