@@ -358,7 +358,6 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
                   const std::vector<double>& frameRadii, const CoverageResult& cov, const RenderParams& rp,
                   const RenderOptions& ro, StagedFolder& folder, Progress* progress)
 {
-    const auto t0 = Clock::now();
     const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
     json poses = json::array();
     json out{{"flyover_with_review", nullptr}, {"review_views", 0}};
@@ -374,7 +373,6 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
     params.targetFraction = rp.reviewTarget;
     params.minRegionMm2 = cp.minRegionMm2;
     const ReviewResult review = planReview(scene, cl, cp, frameRadii, cov, params, progress);
-    const double planSeconds = secondsSince(t0);
 
     std::vector<json> views(review.views.size());
     tbb::parallel_for(std::size_t(0), review.views.size(), [&](std::size_t k) {
@@ -429,8 +427,6 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
                          {"candidates_evaluated", review.candidatesEvaluated},
                          {"rounds", review.rounds},
                          {"rays", review.rays},
-                         {"plan_seconds", planSeconds},
-                         {"seconds", secondsSince(t0)},
                          {"poses", "review/poses.json"}};
     return out;
 }

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <set>
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -43,7 +44,11 @@ RenderParams renderParamsOf(const fs::path& dir)
     const json m = readJson(manifest.string());
     if (m.contains("stages") && m["stages"].is_array())
         for (const auto& e : m["stages"])
-            if (e.is_object() && e.value("stage", "") == "render" && e.contains("parameters"))
+            // "render" in studies made before the render steps; each step records the render
+            // parameters it uses (frames: cameras and image; coverage; ...): together they are all.
+            if (e.is_object() && e.contains("parameters") &&
+                std::set<std::string>{"render", "frames", "flythrough", "overviews", "video", "coverage"}.count(
+                    e.value("stage", "")))
                 applyParamsJson(params, json{{"render", e["parameters"]}}, manifest.string());
     return params.render;
 }

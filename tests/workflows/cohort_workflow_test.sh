@@ -112,7 +112,9 @@ smk "$RENDER2" > run3.log 2>&1
 check "render change: run exits 0" 0 "$?"
 check "render change: jobs run" "all:1 render:4 report:1 " "$(jobstats run3.log)"
 for id in p1 p2 p3; do
-  check "$id: flyover computed render, reused the rest" "render" "$(computed_in_manifest $id)"
+  # render.coverage_px is a parameter of the render's coverage step alone: only that step is
+  # recomputed (frames, fly-through, overviews and video are reused from the study's cache).
+  check "$id: flyover computed the coverage step, reused the rest" "coverage" "$(computed_in_manifest $id)"
   check "$id: receipts of the other stages untouched" "$(cat receipts-$id.txt)" "$(receipts $id)"
 done
 phase "render change done"
