@@ -171,6 +171,22 @@ private:
 
 double smoothstep(double u) { return u * u * (3.0 - 2.0 * u); }
 
+/// Walks the samples s = i * stepMm (i < count) of a polyline whose cumulative arc lengths are
+/// `arc` (at least two points): f(i, d, w, s) with s between points d and d + 1 at fraction w.
+template <class F>
+void forEachArcSample(const std::vector<double>& arc, double stepMm, std::size_t count, F&& f)
+{
+    std::size_t d = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+        const double s = double(i) * stepMm;
+        while (d + 2 < arc.size() && arc[d + 1] < s)
+            ++d;
+        const double len = arc[d + 1] - arc[d];
+        const double w = len > 0 ? std::clamp((s - arc[d]) / len, 0.0, 1.0) : 0.0;
+        f(i, d, w, s);
+    }
+}
+
 /// Samples the spline through the control points at a uniform arc-length step, with a
 /// radius that eases between the control radii (no overshoot) and a gentle haustral-scale
 /// modulation, clamped to the anatomical range.
@@ -202,18 +218,12 @@ void buildCenterline(PhantomAnatomy& a, const ControlTable& table)
     a.centerlineMm.resize(count);
     a.radiusMm.resize(count);
     a.segment.resize(count);
-    std::size_t d = 0;
-    for (std::size_t i = 0; i < count; ++i) {
-        const double s = double(i) * a.stepMm;
-        while (d + 2 < dense.size() && denseArc[d + 1] < s)
-            ++d;
-        const double len = denseArc[d + 1] - denseArc[d];
-        const double w = len > 0 ? std::clamp((s - denseArc[d]) / len, 0.0, 1.0) : 0.0;
+    forEachArcSample(denseArc, a.stepMm, count, [&](std::size_t i, std::size_t d, double w, double s) {
         a.centerlineMm[i] = dense[d] * (1.0 - w) + dense[d + 1] * w;
         const double r = denseRadius[d] * (1.0 - w) + denseRadius[d + 1] * w;
         a.radiusMm[i] = std::clamp(r * (1.0 + 0.04 * std::sin(2.0 * PI * s / 90.0 + 0.6)), 12.0, 28.0);
         a.segment[i] = table.points[denseSpan[w < 0.5 ? d : d + 1]].segment;
-    }
+    });
 }
 
 /// Tangents by central differences; normal/binormal by the double-reflection
@@ -648,17 +658,11 @@ void resampleCenterline(PhantomAnatomy& a, const std::vector<Vec3d>& p, const st
     a.centerlineMm.resize(count);
     a.radiusMm.resize(count);
     a.segment.resize(count);
-    std::size_t d = 0;
-    for (std::size_t i = 0; i < count; ++i) {
-        const double s = double(i) * a.stepMm;
-        while (d + 2 < p.size() && arc[d + 1] < s)
-            ++d;
-        const double len = arc[d + 1] - arc[d];
-        const double w = len > 0 ? std::clamp((s - arc[d]) / len, 0.0, 1.0) : 0.0;
+    forEachArcSample(arc, a.stepMm, count, [&](std::size_t i, std::size_t d, double w, double) {
         a.centerlineMm[i] = p[d] * (1.0 - w) + p[d + 1] * w;
         a.radiusMm[i] = r[d] * (1.0 - w) + r[d + 1] * w;
         a.segment[i] = seg[w < 0.5 ? d : d + 1];
-    }
+    });
     oldToNew.resize(p.size());
     for (std::size_t k = 0; k < p.size(); ++k)
         oldToNew[k] = std::min(count - 1, std::size_t(std::lround(arc[k] / a.stepMm)));
