@@ -19,23 +19,7 @@ namespace {
 
 using test::FoldedTube;
 using test::PI;
-
-/// Circle of radius R in the xy plane, 1 mm steps, radius r: the centerline of a torus lumen.
-Centerline circleCenterline(double R, double r)
-{
-    Centerline c;
-    c.stepMm = 1.0;
-    const int n = int(std::floor(2.0 * PI * R));
-    for (int i = 0; i < n; ++i) {
-        const double a = double(i) / R;
-        CenterlinePoint p;
-        p.positionMm = {R * std::cos(a), R * std::sin(a), 0.0};
-        p.radiusMm = r;
-        c.points.push_back(p);
-    }
-    computeTangentsAndNormals(c);
-    return c;
-}
+using test::circleCenterline;
 
 TEST(CenterlineLocator, AgreesWithBruteForce)
 {

@@ -21,6 +21,23 @@ namespace flyover::test {
 
 constexpr double PI = 3.14159265358979323846;
 
+/// Circle of radius R in the xy plane, 1 mm steps, radius r: the centerline of a torus lumen.
+inline Centerline circleCenterline(double R, double r)
+{
+    Centerline c;
+    c.stepMm = 1.0;
+    const int n = int(std::floor(2.0 * PI * R));
+    for (int i = 0; i < n; ++i) {
+        const double a = double(i) / R;
+        CenterlinePoint p;
+        p.positionMm = {R * std::cos(a), R * std::sin(a), 0.0};
+        p.radiusMm = r;
+        c.points.push_back(p);
+    }
+    computeTangentsAndNormals(c);
+    return c;
+}
+
 inline TriMesh::Point toPoint(const Vec3d& v) { return TriMesh::Point(float(v.x), float(v.y), float(v.z)); }
 inline Vec3d toVec(const TriMesh::Point& p) { return {p[0], p[1], p[2]}; }
 
