@@ -17,6 +17,7 @@
 #include <tbb/global_control.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
@@ -134,6 +135,31 @@ int main(int argc, char** argv)
     auto* stepOpt = runCmd->add_option("--step-mm", stepMm, "arc-length step of the centerline (mm, default 1)")
                         ->check(CLI::PositiveNumber);
 
+    // flyover inspect (industrial CT of a solid part; pipeline/stage_inspect.cpp)
+    auto* inspectCmd = app.add_subcommand("inspect", "industrial CT of a solid part: ingest -> voids (pores, cracks) -> "
+                                                     "surfaces -> OST overviews and turntable, into a study folder");
+    RunOptions inspect;
+    inspect.kind = StudyKind::Part;
+    std::vector<std::string> inspectAssignments;
+    std::string inspectConfig;
+    double inspectThreshold = 0, inspectVoxelMm = 0;
+    inspectCmd->add_option("ct", inspect.ctPath, "CT scan of the part (NIfTI, NRRD, MetaImage, DICOM; any scalar "
+                                                 "grey values, e.g. uint16)")->required();
+    inspectCmd->add_option("--study", inspect.studyDir, "study folder for artifacts and manifest.json")->required();
+    auto* thresholdOpt = inspectCmd->add_option("--threshold", inspectThreshold, "material is grey value >= this "
+                                                                                 "(default: Otsu's threshold)");
+    auto* inspectVoxelOpt = inspectCmd->add_option("--voxel-mm", inspectVoxelMm, "isotropic voxel size in mm "
+                                                                                 "(default: the smallest input spacing)")
+                                ->check(CLI::PositiveNumber);
+    inspectCmd->add_option("--config", inspectConfig, "JSON or TOML file {\"stage\": {\"param\": value}} (see 'flyover params')");
+    inspectCmd->add_option("--set", inspectAssignments, "stage.param=value (repeatable; inspect stages: ingest, voids, "
+                                                        "surfaces, render; see 'flyover params')");
+    inspectCmd->add_option("--until", inspect.untilStage, "run only this stage and what it needs (ingest, voids, surfaces, "
+                                                          "overviews, turntable; render = both render steps)");
+    inspectCmd->add_option("--force", inspect.forceStage, "recompute this stage and everything downstream");
+    inspectCmd->add_flag("--wait", inspect.waitForLock, "wait for another run on the same study instead of refusing");
+    inspectCmd->add_option("--cache-max-gb", inspect.cacheMaxGb, "cap on the study's cache")->capture_default_str();
+
     // flyover status / clean
     auto* statusCmd = app.add_subcommand("status", "list each stage of a study as fresh, stale or missing, and why");
     StatusOptions status;
@@ -214,7 +240,9 @@ int main(int argc, char** argv)
         openvdb::initialize();
         if (*paramsCmd) {
             std::cout << "Stage parameters (set with --set stage.param=value or --config FILE):\n"
-                      << describeParams();
+                      << describeParams()
+                      << "\nflyover inspect's stage parameters (same syntax, for 'flyover inspect'):\n"
+                      << describeInspectParams();
             return 0;
         }
         if (*phantomCmd) {
@@ -257,6 +285,25 @@ int main(int argc, char** argv)
             for (const auto& s : manifest["stages"]) computed += s.value("computed", false) ? 1 : 0;
             const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             log("study " + fs::absolute(run.studyDir).string() + ": " + std::to_string(computed) + " of " +
+                std::to_string(manifest["stages"].size()) + " stages computed, " + std::to_string(s).substr(0, 5) + " s");
+            return 0;
+        }
+        if (*inspectCmd) {
+            if (!inspectConfig.empty())
+                applyInspectParamsJson(inspect.inspect, readConfigFile(inspectConfig), inspectConfig);
+            for (const auto& a : inspectAssignments) applyInspectAssignment(inspect.inspect, a);
+            if (*thresholdOpt) {
+                if (!std::isfinite(inspectThreshold)) throw ParameterError("--threshold: must be finite");
+                inspect.inspect.voids.threshold = inspectThreshold;
+            }
+            if (*inspectVoxelOpt) inspect.inspect.ingest.voxelMm = inspectVoxelMm;
+            inspect.log = &runLog;
+            const auto t0 = std::chrono::steady_clock::now();
+            const auto manifest = runPipeline(inspect);
+            int computed = 0;
+            for (const auto& s : manifest["stages"]) computed += s.value("computed", false) ? 1 : 0;
+            const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            log("study " + fs::absolute(inspect.studyDir).string() + ": " + std::to_string(computed) + " of " +
                 std::to_string(manifest["stages"].size()) + " stages computed, " + std::to_string(s).substr(0, 5) + " s");
             return 0;
         }

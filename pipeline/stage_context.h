@@ -26,6 +26,8 @@
 namespace flyover {
 
 class RayScene;
+struct PartAnalysis;
+struct PartSurface;
 
 /// What every render step renders from: the Embree scene of the surface, the centerline and
 /// the framed half-width R(p) of every centerline point for the run's fly-over cameras. Built
@@ -44,6 +46,8 @@ struct StudyState {
     openvdb::FloatGrid::Ptr sdf;
     std::optional<Centerline> centerline;
     std::optional<TriMesh> mesh;
+    std::shared_ptr<PartAnalysis> part;          ///< flyover inspect: the voids stage's analysis
+    std::shared_ptr<PartSurface> partSurface;    ///< flyover inspect: the surfaces stage's mesh
 };
 
 class StudyRun {
@@ -100,5 +104,12 @@ nlohmann::json runFlythrough(StudyRun& run, Progress* progress);
 nlohmann::json runOverviews(StudyRun& run, Progress* progress);
 nlohmann::json runVideo(StudyRun& run, Progress* progress);
 nlohmann::json runCoverage(StudyRun& run, Progress* progress);
+
+// The stages of a part study (`flyover inspect`), in stage_inspect.cpp.
+nlohmann::json runPartIngest(StudyRun& run, Progress* progress);
+nlohmann::json runVoids(StudyRun& run, Progress* progress);
+nlohmann::json runPartSurfaces(StudyRun& run, Progress* progress);
+nlohmann::json runPartOverviews(StudyRun& run, Progress* progress);
+nlohmann::json runTurntable(StudyRun& run, Progress* progress);
 
 } // namespace flyover

@@ -52,6 +52,8 @@ struct StageSpec {
     /// them. The artifacts are hashed before, in their temporaries, so that keys stay content
     /// digests.
     bool writeBehind = false;
+    /// A stage of a part study (`flyover inspect`): its parameters are InspectParams'.
+    bool part = false;
 };
 
 /// The segment stage: from the CT's air, or from the external mask when the run has one.
@@ -95,37 +97,59 @@ const std::vector<StageSpec>& stageSpecs()
 #undef FLYOVER_CAMERA
 #undef FLYOVER_IMAGE
 
+/// The stage graph of a part study (`flyover inspect`, pipeline/stage_inspect.cpp).
+const std::vector<StageSpec>& partStageSpecs()
+{
+    static const std::vector<StageSpec> specs{
+        {"ingest", {}, {"input"}, {"ct.vdb"}, runPartIngest, "", {}, {}, true, true},
+        {"voids", {"ingest"}, {"ct.vdb"}, {"voids.csv", "voids.json", "voids.vdb"}, runVoids, "", {}, {}, false, true},
+        {"surfaces", {"voids"}, {"ct.vdb", "voids.vdb", "voids.json"}, {"part_surface.ply", "surfaces.json"},
+         runPartSurfaces, "", {}, {}, false, true},
+        {"overviews", {"surfaces"}, {"part_surface.ply", "surfaces.json", "voids.json"}, {"overview.png", "overviews"},
+         runPartOverviews, RENDER_GROUP, {"overview_px", "supersample", "smooth_shading", "depth_cue"}, {}, false, true},
+        {"turntable", {"surfaces"}, {"part_surface.ply", "surfaces.json", "voids.json"}, {"turntable"}, runTurntable,
+         RENDER_GROUP, {"video", "turntable_frames", "video_fps", "video_px", "supersample", "smooth_shading", "depth_cue"},
+         {"overviews"}, false, true},
+    };
+    return specs;
+}
+
+const std::vector<StageSpec>& stageSpecs(StudyKind kind) { return kind == StudyKind::Part ? partStageSpecs() : stageSpecs(); }
+
 const std::string& paramStageOf(const StageSpec& spec) { return spec.paramStage.empty() ? spec.name : spec.paramStage; }
 
 /// The canonical parameters a stage's key covers.
-json stageParams(const StageSpec& spec, const PipelineParams& params)
+json stageParams(const StageSpec& spec, const PipelineParams& params, const InspectParams& inspect)
 {
-    const json all = stageParamsToJson(params, paramStageOf(spec));
+    const json all = spec.part ? inspectParamsToJson(inspect, paramStageOf(spec)) : stageParamsToJson(params, paramStageOf(spec));
     if (spec.paramNames.empty()) return all;
     json subset = json::object();
     for (const auto& n : spec.paramNames) subset[n] = all.at(n);
     return subset;
 }
 
-int stageVersionOf(const StageSpec& spec) { return stageVersion(paramStageOf(spec)); }
-
-const StageSpec& specOf(const std::string& name)
+int stageVersionOf(const StageSpec& spec)
 {
-    for (const auto& s : stageSpecs())
+    return spec.part ? inspectSectionVersion(paramStageOf(spec)) : stageVersion(paramStageOf(spec));
+}
+
+const StageSpec& specOf(const std::string& name, StudyKind kind)
+{
+    for (const auto& s : stageSpecs(kind))
         if (s.name == name) return s;
     std::string known;
-    for (const auto& s : stageSpecs()) known += (known.empty() ? "" : ", ") + s.name;
+    for (const auto& s : stageSpecs(kind)) known += (known.empty() ? "" : ", ") + s.name;
     throw ParameterError("unknown stage '" + name + "' (stages: " + known + ", or " + RENDER_GROUP +
                          " for all render steps)");
 }
 
 /// The stages a name stands for: itself, or every render step for "render".
-std::vector<std::string> stagesNamed(const std::string& name)
+std::vector<std::string> stagesNamed(const std::string& name, StudyKind kind)
 {
     std::vector<std::string> out;
-    for (const auto& s : stageSpecs())
+    for (const auto& s : stageSpecs(kind))
         if (s.paramStage == name && name == RENDER_GROUP) out.push_back(s.name);
-    if (out.empty()) out.push_back(specOf(name).name);
+    if (out.empty()) out.push_back(specOf(name, kind).name);
     return out;
 }
 
@@ -196,42 +220,46 @@ std::string studyFilesProblem(const ArtifactStore& store, const fs::path& dir, c
 
 } // namespace
 
-std::vector<std::string> stagesNeededFor(const std::string& stage)
+std::vector<std::string> stagesNeededFor(const std::string& stage, StudyKind kind)
 {
-    const auto named = stagesNamed(stage);
+    const auto named = stagesNamed(stage, kind);
     std::set<std::string> needed(named.begin(), named.end());
-    for (auto it = stageSpecs().rbegin(); it != stageSpecs().rend(); ++it)
+    for (auto it = stageSpecs(kind).rbegin(); it != stageSpecs(kind).rend(); ++it)
         if (needed.count(it->name))
             for (const auto& u : it->upstream) needed.insert(u);
     std::vector<std::string> out;
-    for (const auto& s : stageSpecs())
+    for (const auto& s : stageSpecs(kind))
         if (needed.count(s.name)) out.push_back(s.name);
     return out;
 }
 
-std::vector<std::string> stagesAffectedBy(const std::string& stage)
+std::vector<std::string> stagesAffectedBy(const std::string& stage, StudyKind kind)
 {
-    const auto named = stagesNamed(stage);
+    const auto named = stagesNamed(stage, kind);
     std::set<std::string> affected(named.begin(), named.end());
-    for (const auto& s : stageSpecs())
+    for (const auto& s : stageSpecs(kind))
         for (const auto& u : s.upstream)
             if (affected.count(u)) affected.insert(s.name);
     std::vector<std::string> out;
-    for (const auto& s : stageSpecs())
+    for (const auto& s : stageSpecs(kind))
         if (affected.count(s.name)) out.push_back(s.name);
     return out;
 }
 
 nlohmann::json runPipeline(const RunOptions& options)
 {
-    validateParams(options.params);
+    const StudyKind kind = options.kind;
+    const auto& specs = stageSpecs(kind);
+    if (kind == StudyKind::Part) validateInspectParams(options.inspect);
+    else validateParams(options.params);
+    if (kind == StudyKind::Part && !options.maskPath.empty()) throw ParameterError("inspect: takes no --mask");
     std::set<std::string> wanted, forced;
     if (options.untilStage.empty())
-        for (const auto& s : stageSpecs()) wanted.insert(s.name);
+        for (const auto& s : specs) wanted.insert(s.name);
     else
-        for (const auto& s : stagesNeededFor(options.untilStage)) wanted.insert(s);
+        for (const auto& s : stagesNeededFor(options.untilStage, kind)) wanted.insert(s);
     if (!options.forceStage.empty())
-        for (const auto& s : stagesAffectedBy(options.forceStage)) forced.insert(s);
+        for (const auto& s : stagesAffectedBy(options.forceStage, kind)) forced.insert(s);
     if (!(options.cacheMaxGb > 0)) throw ParameterError("--cache-max-gb: must be > 0");
 
     const bool hasCt = !options.ctPath.empty(), hasMask = !options.maskPath.empty();
@@ -273,7 +301,7 @@ nlohmann::json runPipeline(const RunOptions& options)
             std::lock_guard<std::mutex> g(mutex);
             for (const auto& a : stageInputs(spec, hasCt, hasMask)) inputs[a] = digests.at(a);
         }
-        const json params = stageParams(spec, options.params);
+        const json params = stageParams(spec, options.params, options.inspect);
         const int version = stageVersionOf(spec);
         const std::string key = stageKey(spec.name, version, params, inputs);
         json entry{{"stage", spec.name}, {"version", version}, {"key", key},
@@ -351,10 +379,10 @@ nlohmann::json runPipeline(const RunOptions& options)
     using namespace tbb::flow;
     graph g;
     std::map<std::string, std::unique_ptr<continue_node<continue_msg>>> nodes;
-    for (const auto& spec : stageSpecs())
+    for (const auto& spec : specs)
         nodes[spec.name] = std::make_unique<continue_node<continue_msg>>(
             g, [&execute, &spec](const continue_msg&) { execute(spec); });
-    for (const auto& spec : stageSpecs()) {
+    for (const auto& spec : specs) {
         for (const auto& u : spec.upstream) make_edge(*nodes[u], *nodes[spec.name]);
         for (const auto& u : spec.after) make_edge(*nodes[u], *nodes[spec.name]);
     }
@@ -384,20 +412,21 @@ nlohmann::json runPipeline(const RunOptions& options)
     // The manifest: this run's entries, plus earlier entries of stages this run did not touch.
     const json previous = readManifest(run.dir);
     json stages = json::array();
-    for (const auto& spec : stageSpecs()) {
+    for (const auto& spec : specs) {
         if (entries.count(spec.name)) stages.push_back(entries[spec.name]);
         else if (!failure && !wanted.count(spec.name) && !(spec.name == "ingest" && !hasCt)) {
             json e = manifestEntry(previous, spec.name);
             if (!e.is_null()) stages.push_back(e);
         }
     }
-    const json manifest{{"schema", "flyover.manifest/1"},
+    json manifest{{"schema", "flyover.manifest/1"},
                         {"world_frame", WORLD_FRAME},
                         {"input", hasCt ? json(fs::absolute(options.ctPath).string()) : json(nullptr)},
                         {"input_digest", hasCt ? json(digests["input"]) : json(nullptr)},
                         {"mask", hasMask ? json(fs::absolute(options.maskPath).string()) : json(nullptr)},
                         {"mask_digest", hasMask ? json(digests["mask"]) : json(nullptr)},
                         {"stages", stages}};
+    if (kind == StudyKind::Part) manifest["pipeline"] = "inspect";
     writeJson(run.path("manifest.json"), manifest);
     if (failure) std::rethrow_exception(failure);
 
@@ -413,13 +442,17 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
     const json manifest = readManifest(dir);
     if (!fs::exists(dir / ".flyover") || manifest.is_null())
         throw InputError(options.studyDir + ": not a flyover study (no manifest.json; run 'flyover run' first)");
+    // A part study (flyover inspect) is compared with the parameters of its last run.
+    const StudyKind kind = manifest.value("pipeline", "") == "inspect" ? StudyKind::Part : StudyKind::Colon;
     PipelineParams params = options.params;
-    if (!options.paramsGiven)
-        for (const auto& spec : stageSpecs()) {
+    InspectParams inspect;
+    if (!options.paramsGiven || kind == StudyKind::Part)
+        for (const auto& spec : stageSpecs(kind)) {
             const json e = manifestEntry(manifest, spec.name);
             if (!e.is_null() && e.contains("parameters")) {
                 try {
-                    applyParamsJson(params, json{{paramStageOf(spec), e["parameters"]}}, "manifest.json");
+                    if (spec.part) applyInspectParamsJson(inspect, json{{paramStageOf(spec), e["parameters"]}}, "manifest.json");
+                    else applyParamsJson(params, json{{paramStageOf(spec), e["parameters"]}}, "manifest.json");
                 } catch (const ParameterError&) {
                     // parameters of an older stage version: the stage will show as stale
                 }
@@ -434,7 +467,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
     std::vector<StageStatus> out;
     if (hasCt && fs::exists(ctPath)) digests["input"] = inputDigest(ctPath);
     if (hasMask && fs::is_regular_file(maskPath)) digests["mask"] = inputDigest(maskPath);
-    for (const auto& spec : stageSpecs()) {
+    for (const auto& spec : stageSpecs(kind)) {
         StageStatus st{spec.name, "", ""};
         if (spec.name == "ingest" && !hasCt) {
             out.push_back({spec.name, "unused", "no CT scan: the study starts from its mask"});
@@ -455,7 +488,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
             out.push_back(st);
             continue;
         }
-        const json params2 = stageParams(spec, params);
+        const json params2 = stageParams(spec, params, inspect);
         const std::string key = stageKey(spec.name, stageVersionOf(spec), params2, inputs);
         const auto record = store.findRecord(spec.name, key);
         if (record) {
@@ -529,8 +562,9 @@ void cleanStudy(const std::string& studyDir)
         throw InputError(studyDir + ": not a flyover study (no manifest.json or .flyover/)");
     StudyLock lock(studyDir, false);
     std::error_code ec;
-    for (const auto& spec : stageSpecs())
-        for (const auto& a : spec.outputs) fs::remove_all(dir / a, ec);
+    for (const StudyKind kind : {StudyKind::Colon, StudyKind::Part})
+        for (const auto& spec : stageSpecs(kind))
+            for (const auto& a : spec.outputs) fs::remove_all(dir / a, ec);
     fs::remove(dir / "manifest.json", ec);
     for (const auto& e : fs::directory_iterator(dir / ".flyover", ec))
         if (e.path().filename() != "lock") fs::remove_all(e.path(), ec);

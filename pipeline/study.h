@@ -19,6 +19,7 @@
 ///                    computed or reused, report
 #pragma once
 
+#include "pipeline/inspect_params.h"
 #include "pipeline/params.h"
 #include "pipeline/run_log.h"
 
@@ -36,7 +37,14 @@ struct StageError : std::runtime_error {
     std::string stageName;
 };
 
+/// Which stage graph a study runs: the colon's (`flyover run`) or a solid part's
+/// (`flyover inspect`: ingest -> voids -> surfaces -> {overviews, turntable}; see
+/// pipeline/stage_inspect.cpp). The manifest of a part study says "pipeline": "inspect".
+enum class StudyKind { Colon, Part };
+
 struct RunOptions {
+    StudyKind kind = StudyKind::Colon;
+    InspectParams inspect;        ///< the parameters of a part study (kind Part)
     std::string ctPath;           ///< the input scan (file or DICOM directory); "" with a mask alone
     /// An external lumen mask or label map (params.segment.mask_label picks the label): the
     /// segment stage takes the lumen from it instead of from the CT's air. With a CT it is
@@ -84,8 +92,8 @@ void cleanStudy(const std::string& studyDir);
 void copyStudy(const std::string& from, const std::string& to);
 
 /// Stage names upstream of `stage`, inclusive, in pipeline order.
-std::vector<std::string> stagesNeededFor(const std::string& stage);
+std::vector<std::string> stagesNeededFor(const std::string& stage, StudyKind kind = StudyKind::Colon);
 /// Stage names downstream of `stage`, inclusive, in pipeline order.
-std::vector<std::string> stagesAffectedBy(const std::string& stage);
+std::vector<std::string> stagesAffectedBy(const std::string& stage, StudyKind kind = StudyKind::Colon);
 
 } // namespace flyover
