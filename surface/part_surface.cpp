@@ -3,7 +3,6 @@
 #include "volume/error.h"
 
 #include <openvdb/tools/Morphology.h>
-#include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/combinable.h>
 
@@ -71,23 +70,31 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
     solid->tree().topologyDifference(air->tree());
     reportProgress(progress, 0.05, "solid and air");
 
-    // The narrow band: two voxels either side of the solid's boundary.
+    // The narrow band: two voxels either side of the solid's boundary; the solid's core (deeper
+    // inside) is inactive with the inside value. The sign of every inactive value is set here
+    // explicitly: signedFloodFill cannot be trusted with a core made of large tiles (a tile's
+    // sign comes from its neighbours in scan order, which may lie outside the part).
     auto band = openvdb::BoolGrid::create(false);
     band->tree().topologyUnion(solid->tree());
     openvdb::tools::dilateActiveValues(band->tree(), 2, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::EXPAND_TILES);
-    {
-        auto core = openvdb::BoolGrid::create(false);
-        core->tree().topologyUnion(solid->tree());
-        openvdb::tools::erodeActiveValues(core->tree(), 2, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                          openvdb::tools::EXPAND_TILES);
-        band->tree().topologyDifference(core->tree());
-    }
+    auto core = openvdb::BoolGrid::create(false);
+    core->tree().topologyUnion(solid->tree());
+    openvdb::tools::erodeActiveValues(core->tree(), 2, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                      openvdb::tools::EXPAND_TILES);
+    band->tree().topologyDifference(core->tree());
     const float bandMm = float(2.5 * vox);
     auto field = openvdb::FloatGrid::create(bandMm);
     field->setTransform(ct.transform().copy());
     field->setGridClass(openvdb::GRID_LEVEL_SET);
     field->setName("part_field");
+    {
+        auto acc = field->getAccessor();
+        for (auto it = core->cbeginValueOn(); it; ++it) {
+            if (it.isVoxelValue()) acc.setValueOff(it.getCoord(), -bandMm);
+            else field->tree().fill(it.getBoundingBox(), -bandMm, false);
+        }
+    }
     field->tree().topologyUnion(band->tree());
     field->tree().voxelizeActiveTiles();
     reportProgress(progress, 0.1, "narrow band");
@@ -135,7 +142,6 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
             it.setValue(v);
         }
     });
-    openvdb::tools::signedFloodFill(field->tree());
     reportProgress(progress, 0.2, "field");
 
     MeshParams mp;

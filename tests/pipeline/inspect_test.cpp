@@ -1,0 +1,214 @@
+// `flyover inspect` end to end on a small uint16 test part (96^3, 0.5 mm): voids.csv and
+// voids.json, the cache (an unchanged re-run recomputes nothing, a render parameter only its
+// step), every listed void visible in an OST overview and hidden in the normal render, and bad
+// input refused in one line with exit 1 (2 for an unknown parameter).
+#include "cli_runner.h"
+#include "part_fixture.h"
+#include "pipeline/artifact_io.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace flyover {
+namespace {
+
+const char* const HEADER = "id,kind,volume_mm3,equivalent_diameter_mm,max_extent_mm,sphericity,centroid_x_mm,"
+                           "centroid_y_mm,centroid_z_mm,distance_to_surface_mm";
+/// Small and quick renders for the tests.
+const char* const QUICK = "--set render.overview_px=128 --set render.supersample=1 --set render.video_px=96 "
+                          "--set render.turntable_frames=4";
+
+bool haveFfmpeg() { return std::system("command -v ffmpeg >/dev/null 2>&1") == 0; }
+
+std::map<std::string, bool> computed(const json& manifest)
+{
+    std::map<std::string, bool> out;
+    for (const auto& s : manifest.at("stages")) out[s.at("stage").get<std::string>()] = s.at("computed").get<bool>();
+    return out;
+}
+
+std::vector<std::vector<std::string>> readCsv(const std::string& path, std::string& header)
+{
+    std::ifstream in(path);
+    std::getline(in, header);
+    std::vector<std::vector<std::string>> rows;
+    for (std::string line; std::getline(in, line);) {
+        std::vector<std::string> cells;
+        std::stringstream ss(line);
+        for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
+        rows.push_back(cells);
+    }
+    return rows;
+}
+
+struct InspectTest : ::testing::Test {
+    static void SetUpTestSuite()
+    {
+        root = new fs::path(fs::temp_directory_path() / ("flyover-inspect-" + std::to_string(::getpid())));
+        fs::remove_all(*root);
+        fs::create_directories(*root);
+        part = new test::TestPart(test::makeTestPart(96));
+        test::writeNrrdU16((*root / "part.nrrd").string(), part->geometry, part->grey);
+    }
+    static void TearDownTestSuite()
+    {
+        fs::remove_all(*root);
+        delete root;
+        delete part;
+    }
+    static std::string path(const std::string& name) { return (*root / name).string(); }
+    static std::string video() { return haveFfmpeg() ? "" : " --set render.video=false"; }
+    static fs::path* root;
+    static test::TestPart* part;
+};
+fs::path* InspectTest::root = nullptr;
+test::TestPart* InspectTest::part = nullptr;
+
+TEST_F(InspectTest, VoidsCsvJsonCacheAndVisibility)
+{
+    const std::string study = path("study");
+    const auto r = test::runFlyover("inspect " + path("part.nrrd") + " --study " + study + " " + QUICK + video() +
+                                    " --quiet");
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+
+    // voids.csv: the header, one row per listed void.
+    std::string header;
+    const auto rows = readCsv(study + "/voids.csv", header);
+    EXPECT_EQ(header, HEADER);
+    const json j = readJson(study + "/voids.json");
+    EXPECT_EQ(j.at("schema"), "flyover.voids/1");
+    EXPECT_EQ(j.at("world_frame"), "LPS");
+    EXPECT_EQ(j.at("threshold_source"), "otsu");
+    EXPECT_GT(j.at("threshold").get<double>(), part->air);
+    EXPECT_LT(j.at("threshold").get<double>(), part->material);
+    ASSERT_TRUE(j.contains("porosity_percent"));
+    ASSERT_TRUE(j.contains("small_void_count"));
+    ASSERT_EQ(rows.size(), j.at("voids").size());
+    ASSERT_EQ(rows.size(), part->voids.size()) << "listed voids: the test part has " << part->voids.size();
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+        ASSERT_EQ(rows[i].size(), 10u) << "row " << i;
+        const json& v = j.at("voids")[i];
+        EXPECT_EQ(rows[i][0], std::to_string(v.at("id").get<int>()));
+        EXPECT_EQ(rows[i][1], v.at("kind").get<std::string>());
+        EXPECT_TRUE(rows[i][1] == "pore" || rows[i][1] == "crack") << rows[i][1];
+        EXPECT_NEAR(std::stod(rows[i][2]), v.at("volume_mm3").get<double>(), 1e-3);
+        EXPECT_NEAR(std::stod(rows[i][6]), v.at("centroid_x_mm").get<double>(), 1e-3);
+    }
+    // Each truth void is a row whose centroid (LPS mm) lies within a voxel of it.
+    for (const auto& tv : part->voids) {
+        const Vec3d c = part->centreMm(tv);
+        double best = 1e9;
+        for (const auto& row : rows)
+            best = std::min(best, distance(c, Vec3d{std::stod(row[6]), std::stod(row[7]), std::stod(row[8])}));
+        EXPECT_LT(best, part->voxelMm()) << "truth void at " << c.x << "," << c.y << "," << c.z;
+    }
+
+    // Every listed void shows in an OST overview and in no normal render.
+    const json vis = readJson(study + "/overviews/visibility.json");
+    EXPECT_EQ(vis.at("voids_unseen_in_ost"), 0);
+    EXPECT_EQ(vis.at("voids_seen_in_normal"), 0);
+    ASSERT_EQ(vis.at("voids").size(), rows.size());
+    for (const auto& v : vis.at("voids")) {
+        EXPECT_GT(v.at("ost_pixels_max").get<int64_t>(), 0) << v.dump();
+        EXPECT_EQ(v.at("normal_pixels_total").get<int64_t>(), 0) << v.dump();
+    }
+    for (const char* view : {"anterior", "posterior", "left", "right", "superior", "inferior"}) {
+        const RgbImage im = readPng(study + "/overviews/" + view + ".png");
+        EXPECT_EQ(im.height, 128) << view;
+        EXPECT_GT(im.width, 2 * 128) << view << ": OST | normal | legend";
+    }
+    EXPECT_TRUE(fs::exists(study + "/overviews/legend.json"));
+    EXPECT_TRUE(fs::exists(study + "/overview.png"));
+    const json manifest = readJson(study + "/manifest.json");
+    EXPECT_EQ(manifest.at("pipeline"), "inspect");
+    if (haveFfmpeg()) EXPECT_GT(fs::file_size(study + "/turntable/turntable.mp4"), 1000u);
+
+    // An unchanged re-run recomputes nothing.
+    const auto again = test::runFlyover("inspect " + path("part.nrrd") + " --study " + study + " " + QUICK + video() +
+                                        " --quiet");
+    ASSERT_EQ(again.exitCode, 0) << again.err;
+    for (const auto& [stage, was] : computed(readJson(study + "/manifest.json")))
+        EXPECT_FALSE(was) << stage << " was recomputed on an unchanged re-run";
+
+    // A render parameter of the overviews recomputes only the overviews.
+    const auto px = test::runFlyover("inspect " + path("part.nrrd") + " --study " + study + " " + QUICK + video() +
+                                     " --set render.overview_px=96 --quiet");
+    ASSERT_EQ(px.exitCode, 0) << px.err;
+    EXPECT_EQ(computed(readJson(study + "/manifest.json")),
+              (std::map<std::string, bool>{{"ingest", false}, {"voids", false}, {"surfaces", false},
+                                           {"overviews", true}, {"turntable", false}}));
+    EXPECT_EQ(readPng(study + "/overviews/left.png").height, 96);
+
+    // flyover status on a part study.
+    const auto st = test::runFlyover("status --study " + study);
+    EXPECT_EQ(st.exitCode, 0) << st.err;
+    EXPECT_NE(st.out.find("voids"), std::string::npos) << st.out;
+    EXPECT_EQ(st.out.find("stale"), std::string::npos) << st.out;
+}
+
+TEST_F(InspectTest, GivenThresholdIsUsedAndRecorded)
+{
+    const std::string study = path("given");
+    const auto r = test::runFlyover("inspect " + path("part.nrrd") + " --study " + study +
+                                    " --threshold 25000 --until voids --quiet");
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json j = readJson(study + "/voids.json");
+    EXPECT_EQ(j.at("threshold").get<double>(), 25000.0);
+    EXPECT_EQ(j.at("threshold_source"), "given");
+    EXPECT_FALSE(fs::exists(study + "/part_surface.ply")) << "--until voids ran the surfaces";
+}
+
+void expectOneLineRefusal(const test::CliResult& r, int code, const std::string& mustName)
+{
+    EXPECT_EQ(r.exitCode, code) << r.err;
+    EXPECT_EQ(test::lineCount(r.err), 1) << r.err;
+    EXPECT_EQ(r.err.rfind("flyover: error: ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(mustName), std::string::npos) << "the message should name " << mustName << ": " << r.err;
+}
+
+TEST_F(InspectTest, BadInputIsOneLineAndExit1)
+{
+    // No material: a threshold above every grey value. All material: below every grey value.
+    expectOneLineRefusal(test::runFlyover("inspect " + path("part.nrrd") + " --study " + path("bad1") +
+                                          " --threshold 65535.5 --quiet"),
+                         1, "part.nrrd");
+    expectOneLineRefusal(test::runFlyover("inspect " + path("part.nrrd") + " --study " + path("bad2") +
+                                          " --threshold 1 --quiet"),
+                         1, "part.nrrd");
+    // A uniform block of material filling the whole scan (Otsu has nothing to split).
+    {
+        test::TestPart block = *part;
+        std::fill(block.grey.begin(), block.grey.end(), uint16_t(40000));
+        test::writeNrrdU16(path("block.nrrd"), block.geometry, block.grey);
+        expectOneLineRefusal(test::runFlyover("inspect " + path("block.nrrd") + " --study " + path("bad3") + " --quiet"),
+                             1, "block.nrrd");
+    }
+    test::writeNrrd2D(path("radiograph.nrrd"), 64, 48);
+    expectOneLineRefusal(test::runFlyover("inspect " + path("radiograph.nrrd") + " --study " + path("bad4") + " --quiet"),
+                         1, "radiograph.nrrd");
+    test::writeNrrdRgb(path("colour.nrrd"), 16);
+    expectOneLineRefusal(test::runFlyover("inspect " + path("colour.nrrd") + " --study " + path("bad5") + " --quiet"),
+                         1, "colour.nrrd");
+    expectOneLineRefusal(test::runFlyover("inspect " + path("missing.nrrd") + " --study " + path("bad6") + " --quiet"),
+                         1, "missing.nrrd");
+    // Unknown parameters, as in run: exit 2.
+    expectOneLineRefusal(test::runFlyover("inspect " + path("part.nrrd") + " --study " + path("bad7") +
+                                          " --set voids.no_such_thing=1 --quiet"),
+                         2, "voids.no_such_thing");
+    expectOneLineRefusal(test::runFlyover("inspect " + path("part.nrrd") + " --study " + path("bad8") +
+                                          " --set segment.cleanse=false --quiet"),
+                         2, "segment");
+    // Nothing half-written that a later run trusts: no voids.csv after a refusal.
+    EXPECT_FALSE(fs::exists(path("bad1") + "/voids.csv"));
+}
+
+} // namespace
+} // namespace flyover
