@@ -63,7 +63,8 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
     // Air that gets a surface: the outside air (bores and open cracks included) and the listed
     // voids. Everything else in the scan's box is solid for the mesh: material and small voids.
     auto air = openvdb::BoolGrid::create(false);
-    if (analysis.outsideAir) markVoxels(*analysis.outsideAir, *air, [](bool v) { return v; });
+    // A BoolGrid mask is its active topology (analysePart's values may all be false).
+    if (analysis.outsideAir) markVoxels(*analysis.outsideAir, *air, [](bool) { return true; });
     if (analysis.voidLabels) markVoxels(*analysis.voidLabels, *air, [](int32_t v) { return v > 0; });
     auto solid = openvdb::BoolGrid::create(false);
     solid->tree().fill(box, true, true);

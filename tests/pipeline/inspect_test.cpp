@@ -166,6 +166,47 @@ TEST_F(InspectTest, GivenThresholdIsUsedAndRecorded)
     EXPECT_FALSE(fs::exists(study + "/part_surface.ply")) << "--until voids ran the surfaces";
 }
 
+// The part phantom (flyover phantom --part, 128^3): every internal truth void is listed and shows
+// in an OST overview, none in the normal render; the crack open to the surface is not listed.
+TEST_F(InspectTest, PartPhantomEveryInternalVoidListedAndVisible)
+{
+    const auto ph = test::runFlyover("phantom " + path("phantom.nrrd") + " --part --size 128 --truth " +
+                                     path("phantom_truth.json") + " --quiet");
+    ASSERT_EQ(ph.exitCode, 0) << ph.err;
+    const std::string study = path("phantom_study");
+    const auto r = test::runFlyover("inspect " + path("phantom.nrrd") + " --study " + study +
+                                    " --set render.video=false --set render.overview_px=192 --set render.supersample=1 "
+                                    "--quiet");
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json truth = readJson(path("phantom_truth.json"));
+    const json voids = readJson(study + "/voids.json");
+    const double voxelMm = voids.at("voxel_mm").get<double>();
+    auto nearest = [&](const json& t) {
+        const auto& c = t.at("centroid_lps_mm");
+        const Vec3d tc{c[0].get<double>(), c[1].get<double>(), c[2].get<double>()};
+        double best = 1e9;
+        for (const auto& v : voids.at("voids"))
+            best = std::min(best, distance(tc, Vec3d{v.at("centroid_x_mm").get<double>(), v.at("centroid_y_mm").get<double>(),
+                                                     v.at("centroid_z_mm").get<double>()}));
+        return best;
+    };
+    int internal = 0;
+    for (const auto& t : truth.at("voids")) {
+        if (t.at("internal").get<bool>()) {
+            ++internal;
+            EXPECT_LT(nearest(t), voxelMm) << "truth void " << t.dump() << " not listed";
+        } else {
+            EXPECT_GT(nearest(t), 4 * voxelMm) << "the open crack is listed as an internal void: " << t.dump();
+        }
+    }
+    EXPECT_EQ(int(voids.at("voids").size()), internal);
+    const json vis = readJson(study + "/overviews/visibility.json");
+    for (const auto& v : vis.at("voids")) {
+        EXPECT_GT(v.at("ost_pixels_max").get<int64_t>(), 0) << "shows in no OST overview: " << v.dump();
+        EXPECT_EQ(v.at("normal_pixels_total").get<int64_t>(), 0) << "shows in the normal render: " << v.dump();
+    }
+}
+
 void expectOneLineRefusal(const test::CliResult& r, int code, const std::string& mustName)
 {
     EXPECT_EQ(r.exitCode, code) << r.err;

@@ -180,7 +180,8 @@ inline PartAnalysis truthAnalysis(const TestPart& part, const openvdb::FloatGrid
             for (int i = 0; i < s[0]; ++i) {
                 const int c = part.classify(Vec3d{double(i), double(j), double(k)});
                 const openvdb::Coord ijk(i, j, k);
-                if (c == 0) o.setValue(ijk, true);
+                // Masks are their active topology; analysePart leaves the values false.
+                if (c == 0) o.setValueOn(ijk, false);
                 else if (c == 1) m.setValue(ijk, true);
                 else {
                     l.setValue(ijk, c - 1);

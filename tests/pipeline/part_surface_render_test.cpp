@@ -97,6 +97,14 @@ TEST_F(PartSurfaceRenderTest, OneClosedSurfacePerVoidNormalsIntoTheMaterial)
     }
     ASSERT_GT(mantle, 100);
     EXPECT_EQ(inward, mantle);
+    // The outer surface is the cylinder, not the scan's box: its extent across is the diameter.
+    double lo = 1e9, hi = -1e9;
+    for (int64_t f = 0; f < surface->outer.count; ++f)
+        for (const auto v : mesh.fv_range(mesh.face_handle(int(f)))) {
+            lo = std::min(lo, double(mesh.point(v)[0]));
+            hi = std::max(hi, double(mesh.point(v)[0]));
+        }
+    EXPECT_NEAR(hi - lo, 2 * part->radius * part->voxelMm(), 1.5 * part->voxelMm());
 }
 
 TEST_F(PartSurfaceRenderTest, EveryVoidShowsInAnOstOverviewAndNoneInTheNormalRender)
