@@ -122,9 +122,40 @@ inline void godunov(float& value, const float (&nb)[6], float h, float sqrt2h)
     }
 }
 
-/// One sweep of one leaf in direction `dir` (bit a set: negative along axis a).
+/// One sweep of one leaf in direction `dir` (bit a set: negative along axis a). The leaf's
+/// values and its face neighbours' adjacent layers are copied into a padded 10^3 block first,
+/// so that the update reads every neighbour at a fixed offset (missing neighbours: +FLT_MAX).
 void sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& sweep, int dir, float h, float sqrt2h)
 {
+    if (sweep.isOff()) return;
+    constexpr int P = DIM + 2;
+    constexpr int PS[3] = {P * P, P, 1};  // padded strides of x, y, z
+    float buf[P * P * P];
+    auto padded = [&](int x, int y, int z) { return (x + 1) * PS[0] + (y + 1) * PS[1] + (z + 1); };
+    for (int x = 0; x < DIM; ++x)
+        for (int y = 0; y < DIM; ++y)
+            for (int z = 0; z < DIM; ++z) buf[padded(x, y, z)] = v[(x << 6) | (y << 3) | z];
+    // The six faces: (a, b) run over the face, `axis` is its normal.
+    for (int axis = 0; axis < 3; ++axis) {
+        const int ua = axis == 0 ? 1 : 0, ub = axis == 2 ? 1 : 2;
+        for (int side = 0; side < 2; ++side) {
+            const float* other = nb[std::size_t(slot(axis, side == 1))];
+            for (int a = 0; a < DIM; ++a)
+                for (int b = 0; b < DIM; ++b) {
+                    int c[3];
+                    c[axis] = side ? DIM : -1;
+                    c[ua] = a;
+                    c[ub] = b;
+                    float value = FLT_BIG;
+                    if (other) {
+                        int l[3] = {c[0], c[1], c[2]};
+                        l[axis] = side ? 0 : DIM - 1;
+                        value = other[(l[0] << 6) | (l[1] << 3) | l[2]];
+                    }
+                    buf[padded(c[0], c[1], c[2])] = value;
+                }
+        }
+    }
     const bool neg[3] = {(dir & 1) != 0, (dir & 2) != 0, (dir & 4) != 0};
     float n[6];
     for (int xi = 0; xi < DIM; ++xi) {
@@ -138,16 +169,20 @@ void sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& 
             for (int zi = 0; zi < DIM; ++zi) {
                 const int z = neg[2] ? DIM - 1 - zi : zi;
                 if (!((row >> z) & 1u)) continue;
-                const int pos = (x << 6) | (y << 3) | z;
-                const int local[3] = {x, y, z};
-                for (int axis = 0; axis < 3; ++axis) {
-                    n[2 * axis] = std::abs(across(v, nb[std::size_t(slot(axis, false))], pos, local[axis], axis, false, FLT_BIG));
-                    n[2 * axis + 1] = std::abs(across(v, nb[std::size_t(slot(axis, true))], pos, local[axis], axis, true, FLT_BIG));
-                }
-                godunov(v[pos], n, h, sqrt2h);
+                const int i = padded(x, y, z);
+                n[0] = std::abs(buf[i - PS[0]]);
+                n[1] = std::abs(buf[i + PS[0]]);
+                n[2] = std::abs(buf[i - PS[1]]);
+                n[3] = std::abs(buf[i + PS[1]]);
+                n[4] = std::abs(buf[i - PS[2]]);
+                n[5] = std::abs(buf[i + PS[2]]);
+                godunov(buf[i], n, h, sqrt2h);
             }
         }
     }
+    for (int x = 0; x < DIM; ++x)
+        for (int y = 0; y < DIM; ++y)
+            for (int z = 0; z < DIM; ++z) v[(x << 6) | (y << 3) | z] = buf[padded(x, y, z)];
 }
 
 } // namespace
