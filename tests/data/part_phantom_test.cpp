@@ -101,6 +101,12 @@ void expectAnalysisMatchesTruth(const Generated& g, const PartAnalysis& a)
         EXPECT_EQ(hit->kind, tv.kind == "crack" ? "crack" : "pore") << describe(tv) << " flatness-classified";
         EXPECT_NEAR(hit->maxExtentMm, tv.maxExtentMm, 2.0 * vox) << describe(tv);
         EXPECT_GT(hit->distanceToSurfaceMm, 4.0 * vox) << describe(tv) << ": voids keep >= 4 voxels of material";
+        if (tv.kind == "crack") {
+            EXPECT_LT(hit->sphericity, 0.6) << describe(tv);
+        } else {
+            EXPECT_GT(hit->sphericity, 0.7) << describe(tv);
+            EXPECT_LT(hit->sphericity, 1.1) << describe(tv);
+        }
     }
     EXPECT_EQ(static_cast<int>(a.voids.size()), internal) << "listed voids vs internal truth voids";
     EXPECT_NEAR(a.porosityPercent, t.porosityPercent, 0.01) << "porosity (percentage points)";
