@@ -100,7 +100,21 @@ int analyse(const std::string& path, const std::string& truthPath)
                 bench::peakRssMb());
     const double rssBefore = bench::currentRssMb();
     Timer ta;
-    const PartAnalysis a = analysePart(*ct, VoidParams{}, path);
+    // the time of each step, as analysePart reports them
+    struct StepClock : Progress {
+        Timer t;
+        std::string last = "start";
+        double lastWall = 0, lastCpu = 0;
+        void update(double, const std::string& what) override
+        {
+            if (what == last) return;
+            std::printf("    %-18s %6.1f s wall %6.1f s CPU\n", last.c_str(), t.wall() - lastWall, t.cpu() - lastCpu);
+            last = what;
+            lastWall = t.wall();
+            lastCpu = t.cpu();
+        }
+    } clock;
+    const PartAnalysis a = analysePart(*ct, VoidParams{}, path, &clock);
     const double gridsMb = mb(double(a.material->memUsage() + a.outsideAir->memUsage() + a.voidLabels->memUsage()));
     std::printf("analysePart: %.1f s wall, %.1f s CPU; threshold %.1f (%s); %zu voids listed, %lld small; porosity %.5f%%\n",
                 ta.wall(), ta.cpu(), a.threshold, a.thresholdSource.c_str(), a.voids.size(),
