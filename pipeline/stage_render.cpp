@@ -27,6 +27,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
