@@ -100,7 +100,21 @@ int analyse(const std::string& path, const std::string& truthPath)
                 bench::peakRssMb());
     const double rssBefore = bench::currentRssMb();
     Timer ta;
-    const PartAnalysis a = analysePart(*ct, VoidParams{}, path);
+    // the time of each step, as analysePart reports them
+    struct StepClock : Progress {
+        Timer t;
+        std::string last = "start";
+        double lastWall = 0, lastCpu = 0;
+        void update(double, const std::string& what) override
+        {
+            if (what == last) return;
+            std::printf("    %-18s %6.1f s wall %6.1f s CPU\n", last.c_str(), t.wall() - lastWall, t.cpu() - lastCpu);
+            last = what;
+            lastWall = t.wall();
+            lastCpu = t.cpu();
+        }
+    } clock;
+    const PartAnalysis a = analysePart(*ct, VoidParams{}, path, &clock);
     const double gridsMb = mb(double(a.material->memUsage() + a.outsideAir->memUsage() + a.voidLabels->memUsage()));
     std::printf("analysePart: %.1f s wall, %.1f s CPU; threshold %.1f (%s); %zu voids listed, %lld small; porosity %.5f%%\n",
                 ta.wall(), ta.cpu(), a.threshold, a.thresholdSource.c_str(), a.voids.size(),
@@ -111,18 +125,32 @@ int analyse(const std::string& path, const std::string& truthPath)
     if (!truthPath.empty()) {
         const nlohmann::json t = readJson(truthPath);
         const double vox = t.at("voxel_mm").get<double>();
-        int internal = 0, found = 0;
+        int internal = 0, found = 0, kindsRight = 0;
+        double worstVolume = 0;
         for (const auto& v : t.at("voids")) {
             if (!v.at("internal").get<bool>()) continue;
             ++internal;
             const Vec3d c{v.at("centroid_lps_mm")[0].get<double>(), v.at("centroid_lps_mm")[1].get<double>(),
                           v.at("centroid_lps_mm")[2].get<double>()};
             for (const VoidInfo& f : a.voids)
-                if (distance(f.centroidLps, c) <= vox) { ++found; break; }
+                if (distance(f.centroidLps, c) <= vox) {
+                    ++found;
+                    const double tv = v.at("volume_mm3").get<double>();
+                    if (v.at("equivalent_diameter_mm").get<double>() >= 4 * vox)
+                        worstVolume = std::max(worstVolume, std::abs(f.volumeMm3 - tv) / tv);
+                    kindsRight += f.kind == (v.at("kind") == "crack" ? "crack" : "pore");
+                    if (internal <= 40)
+                        std::printf("  void %-3d %-5s truth %.4f mm3 (eqd %.1f vox) | measured %.4f mm3 (%+.1f%%), thresholded "
+                                    "voxel count %+.1f%%, sphericity %.2f, extent %.2f vs %.2f mm\n",
+                                    f.id, f.kind.c_str(), tv, v.at("equivalent_diameter_mm").get<double>() / vox,
+                                    f.volumeMm3, 100 * (f.volumeMm3 / tv - 1), 100 * (f.voxels * vox * vox * vox / tv - 1),
+                                    f.sphericity, f.maxExtentMm, v.at("max_extent_mm").get<double>());
+                    break;
+                }
         }
-        std::printf("  truth: %d of %d internal voids found (centroid within 1 voxel); porosity truth %.5f%%, "
-                    "difference %.5f percentage points\n",
-                    found, internal, t.at("porosity_percent").get<double>(),
+        std::printf("  truth: %d of %d internal voids found (centroid within 1 voxel), %d kinds right, worst volume "
+                    "error %.2f%% (voids >= 4 voxels across); porosity truth %.5f%%, difference %.5f percentage points\n",
+                    found, internal, kindsRight, 100 * worstVolume, t.at("porosity_percent").get<double>(),
                     a.porosityPercent - t.at("porosity_percent").get<double>());
     }
     return 0;

@@ -268,6 +268,7 @@ int main(int argc, char** argv)
             return 0;
         }
         if (*phantomCmd) {
+            if (partPores != 0) throw ParameterError("--pores: only with --part");
             PhantomParams pp;
             pp.size = parsePhantomSize(sizeName);
             pp.seed = seed;

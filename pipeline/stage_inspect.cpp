@@ -477,7 +477,7 @@ json runTurntable(StudyRun& run, Progress* progress)
         writeJson(folder.path("poses.json"), json{{"schema", "flyover.turntable/1"},
                                                   {"world_frame", WORLD_FRAME},
                                                   {"file", "turntable.mp4"},
-                                                  {"codec", "H.264 (libx264, yuv420p, crf 20)"},
+                                                  {"codec", "H.264 (libx264 ultrafast, yuv420p, crf 20)"},
                                                   {"fps", rp.videoFps},
                                                   {"layout", "OST | normal (opaque) | size legend"},
                                                   {"axis", "superior (+z) through the part's bounding-box centre"},

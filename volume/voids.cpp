@@ -377,6 +377,7 @@ struct VoidWork {
     CoordBBox bbox;
     double volumeVoxels = 0;        // partial volume (voxels)
     double areaVoxels = 0;          // iso-surface area (voxel units^2)
+    double isoVolumeVoxels = 0;     // volume enclosed by that iso-surface (voxel units^3)
     double extentVoxels = 0;
     openvdb::Vec3d centroid;        // index space
     double flatness = 1;            // sqrt(lambda_min / lambda_mid)
@@ -495,11 +496,14 @@ void measureVoid(VoidWork& w, const FloatTree& ct, const BoolTree& air, double a
     std::vector<openvdb::Vec3s> points;
     std::vector<openvdb::Vec4I> quads;
     openvdb::tools::volumeToMesh(field, points, quads, 0.5);
-    double area = 0;
+    double area = 0, enclosed = 0;
     for (const openvdb::Vec4I& qd : quads) {
         const openvdb::Vec3d p0 = points[qd[0]], p1 = points[qd[1]], p2 = points[qd[2]], p3 = points[qd[3]];
         area += 0.5 * ((p2 - p0).cross(p3 - p1)).length();
+        // divergence theorem over the two triangles (p0 p1 p2) and (p0 p2 p3)
+        enclosed += (p0.dot(p1.cross(p2)) + p0.dot(p2.cross(p3))) / 6.0;
     }
+    w.isoVolumeVoxels = std::abs(enclosed);
     w.areaVoxels = area;
 }
 
@@ -702,8 +706,12 @@ PartAnalysis analysePart(const openvdb::FloatGrid& ct, const VoidParams& params,
         v.volumeMm3 = w.volumeVoxels * voxelVolume;
         v.equivalentDiameterMm = equivalentDiameter(v.volumeMm3);
         v.maxExtentMm = w.extentVoxels * voxelMm;
-        const double areaMm2 = w.areaVoxels * voxelMm * voxelMm;
-        v.sphericity = areaMm2 > 0 ? std::cbrt(PI) * std::pow(6.0 * v.volumeMm3, 2.0 / 3.0) / areaMm2 : 0.0;
+        // Sphericity of the iso-surface, its area against its own enclosed volume: on a blurred
+        // scan the 0.5 iso-surface of a small pore lies inside its true surface, so pairing its
+        // area with the partial volume would give values above 1.
+        v.sphericity = w.areaVoxels > 0
+                           ? std::cbrt(PI) * std::pow(6.0 * w.isoVolumeVoxels, 2.0 / 3.0) / w.areaVoxels
+                           : 0.0;
         v.kind = w.flatness < CRACK_FLATNESS ? "crack" : "pore";
         const openvdb::Vec3d world = ct.transform().indexToWorld(w.centroid);
         v.centroidLps = Vec3d{world[0], world[1], world[2]};

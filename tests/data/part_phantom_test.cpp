@@ -5,6 +5,7 @@
 #include "pipeline/part_phantom_io.h"
 #include "volume/error.h"
 #include "volume/image_io.h"
+#include "volume/progress.h"
 #include "volume/voids.h"
 
 #include <gtest/gtest.h>
@@ -101,6 +102,12 @@ void expectAnalysisMatchesTruth(const Generated& g, const PartAnalysis& a)
         EXPECT_EQ(hit->kind, tv.kind == "crack" ? "crack" : "pore") << describe(tv) << " flatness-classified";
         EXPECT_NEAR(hit->maxExtentMm, tv.maxExtentMm, 2.0 * vox) << describe(tv);
         EXPECT_GT(hit->distanceToSurfaceMm, 4.0 * vox) << describe(tv) << ": voids keep >= 4 voxels of material";
+        if (tv.kind == "crack") {
+            EXPECT_LT(hit->sphericity, 0.6) << describe(tv);
+        } else {
+            EXPECT_GT(hit->sphericity, 0.7) << describe(tv);
+            EXPECT_LT(hit->sphericity, 1.1) << describe(tv);
+        }
     }
     EXPECT_EQ(static_cast<int>(a.voids.size()), internal) << "listed voids vs internal truth voids";
     EXPECT_NEAR(a.porosityPercent, t.porosityPercent, 0.01) << "porosity (percentage points)";
@@ -258,4 +265,21 @@ TEST(PartAnalysis, SparseGridWithGreyBackgroundGivesTheSameAnswer)
     ASSERT_LT(sparse->activeVoxelCount(), dense->activeVoxelCount() * 3 / 4);
     const PartAnalysis a = analysePart(*sparse, VoidParams{}, "sparse.nii");
     expectAnalysisMatchesTruth(g, a);
+}
+
+TEST(PartPhantom, InterruptedWriteLeavesNoFile)
+{
+    struct CancelAfter : Progress {
+        int calls = 0;
+        void update(double, const std::string&) override { ++calls; }
+        bool cancelled() const override { return calls >= 2; }  // after the first slices
+    } cancel;
+    const fs::path dir = fs::temp_directory_path() / ("flyover_part_cancel_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const std::string path = (dir / "part.nii").string();
+    EXPECT_THROW(writePartPhantom(PartPhantomParams{}, path, (dir / "truth.json").string(), &cancel), Cancelled);
+    EXPECT_FALSE(fs::exists(path)) << "a half-written volume under the final name";
+    EXPECT_FALSE(fs::exists(dir / "truth.json"));
+    EXPECT_TRUE(fs::is_empty(dir)) << "temporary files left in " << dir;
+    fs::remove_all(dir);
 }
