@@ -16,6 +16,7 @@
 #include "volume/io/io_util.h"
 #include "volume/io/itk_console.h"
 #include "volume/io/metaimage.h"
+#include "volume/io/nifti1.h"
 #include "volume/io/nifti2.h"
 #include "volume/io/pixel_convert.h"
 #include "volume/io/probe.h"
@@ -174,6 +175,17 @@ std::unique_ptr<ImageSource> openFile(const std::string& path, const ImageReadOp
     bool streamed = false;
     std::string how;
     if (format == "NIfTI") {
+        // The voxels straight from the file (inflated while read when gzipped); ITK's reader
+        // only for layouts flyover leaves to it.
+        const std::string flyoverHow =
+            data.compressed ? "voxels inflated by zlib while streamed by slab" : "voxels streamed by slab";
+        const std::string warning = options.dicomSeriesUid.empty()
+                                        ? std::string()
+                                        : path + ": a DICOM series UID (" + options.dicomSeriesUid +
+                                              ") only selects within a DICOM folder; ignored for a single file";
+        auto own = openNifti1Voxels(path, g, data, metaString(*io, "bitpix"),
+                                    "NIfTI (header via ITK NiftiImageIO, " + flyoverHow + " by flyover)", warning);
+        if (own) return own;
         streamed = true;
         how = "streamed by slab";
         if (data.compressed) {

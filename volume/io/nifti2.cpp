@@ -13,15 +13,15 @@
 // - else (an sform with shear or scaling that does not match pixdim, and no qform): refused.
 // NIfTI's RAS is turned into LPS by negating x and y; metre and micron units are scaled to
 // mm. Voxels: int8..uint64, float32, float64, either byte order, scl_slope/scl_inter applied
-// (slope 0 means none), streamed by slab (gzip first inflated to a temporary file).
+// (slope 0 means none), streamed by slab (gzip inflated while read: raw_voxels.h).
 
 #include "volume/io/nifti2.h"
 
 #include "volume/error.h"
 #include "volume/io/geometry_check.h"
-#include "volume/io/gunzip.h"
 #include "volume/io/io_util.h"
 #include "volume/io/pixel_convert.h"
+#include "volume/io/raw_voxels.h"
 
 #include <nifti/nifti2.h>  // the NIfTI-2 header struct only (see above)
 #include <zlib.h>
@@ -34,8 +34,6 @@
 #include <sstream>
 #include <vector>
 
-#include <fcntl.h>
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 
@@ -271,24 +269,31 @@ public:
         const uint64_t need = static_cast<uint64_t>(mGeometry.voxelCount()) * mComponentBytes;
         std::string how = "streamed by slab";
         if (compressed) {
-            mTemp = std::make_unique<TempDir>();
-            const fs::path copy = mTemp->path() / "voxels.raw";
-            gunzipFile(data, copy, mOffset + need, path);
-            data = copy;
-            how = "gunzipped by zlib to a temporary file, then streamed by slab";
-        } else if (!fs::exists(data)) {
-            throw InputError(path + ": its voxel data file " + data.string() + " does not exist");
+            if (!fs::exists(data)) throw InputError(path + ": its voxel data file " + data.string() + " does not exist");
+            how = "inflated by zlib while streamed by slab";
+        } else {
+            if (!fs::exists(data)) throw InputError(path + ": its voxel data file " + data.string() + " does not exist");
+            const uint64_t have = fileBytes(data.string());
+            if (have < mOffset + need) {
+                std::ostringstream os;
+                os << path << ": header/data size mismatch: the header describes " << sizeText(mGeometry.size) << " "
+                   << 8 * bytes << "-bit voxels (" << need << " bytes after " << mOffset << ") but the file holds "
+                   << have << " bytes (truncated?)";
+                throw InputError(os.str());
+            }
         }
-        const uint64_t have = fileBytes(data);
-        if (have < mOffset + need) {
-            std::ostringstream os;
-            os << path << ": header/data size mismatch: the header describes " << sizeText(mGeometry.size) << " "
-               << 8 * bytes << "-bit voxels (" << need << " bytes after " << mOffset << ") but "
-               << (compressed ? "the decompressed data holds " : "the file holds ") << have << " bytes (truncated?)";
-            throw InputError(os.str());
-        }
-        mFd = ::open(data.c_str(), O_RDONLY | O_CLOEXEC);
-        if (mFd < 0) throw InputError(path + ": cannot open " + data.string() + ": " + std::strerror(errno));
+        RawLayout layout;
+        layout.dataPath = data.string();
+        layout.compressed = compressed;
+        layout.offset = mOffset;
+        layout.type = mType;
+        layout.componentBytes = mComponentBytes;
+        layout.swapped = mSwapped;
+        layout.scaled = mScaled;
+        layout.slope = mSlope;
+        layout.inter = mInter;
+        layout.size = mGeometry.size;
+        mVoxels = std::make_unique<RawVoxels>(path, layout);
         mRegular = true;
         for (int64_t k = 0; k < mGeometry.size[2]; ++k)
             mSliceOriginsMm.push_back(mGeometry.worldFromIndex({0, 0, double(k)}));
@@ -297,51 +302,16 @@ public:
 
     void addWarning(const std::string& text) { mWarnings.push_back(text); }
 
-    ~Nifti2Source() override
-    {
-        if (mFd >= 0) ::close(mFd);
-    }
-
-    void readSlices(int64_t k0, int64_t k1, float* out) override
-    {
-        const auto& s = mGeometry.size;
-        if (!(0 <= k0 && k0 < k1 && k1 <= s[2])) throw std::out_of_range("readSlices: slice range");
-        const std::size_t n = static_cast<std::size_t>(s[0] * s[1]) * static_cast<std::size_t>(k1 - k0);
-        mSlab.resize(n * mComponentBytes);
-        uint64_t pos = mOffset + static_cast<uint64_t>(s[0] * s[1] * k0) * mComponentBytes;
-        std::size_t done = 0;
-        while (done < mSlab.size()) {
-            const ssize_t got = ::pread(mFd, mSlab.data() + done, mSlab.size() - done, static_cast<off_t>(pos + done));
-            if (got < 0 && errno == EINTR) continue;
-            if (got <= 0)
-                throw InputError(mName + ": cannot read the voxel data: " +
-                                 (got < 0 ? std::string(std::strerror(errno)) : std::string("the file ends early")));
-            done += static_cast<std::size_t>(got);
-        }
-        if (mSwapped && mComponentBytes > 1)
-            for (std::size_t i = 0; i < n; ++i) {
-                char* v = mSlab.data() + i * mComponentBytes;
-                std::reverse(v, v + mComponentBytes);
-            }
-        const std::size_t bad = toFloat(mSlab.data(), mType, n, out);
-        if (bad < n) throwNonFinite(mName, s, k0, bad, out[bad]);
-        if (mScaled)
-            for (std::size_t i = 0; i < n; ++i) {
-                out[i] = static_cast<float>(out[i] * mSlope + mInter);
-                if (!std::isfinite(out[i])) throwNonFinite(mName, s, k0, i, out[i]);
-            }
-    }
+    void readSlices(int64_t k0, int64_t k1, float* out) override { mVoxels->readSlices(k0, k1, out); }
 
 private:
-    std::unique_ptr<TempDir> mTemp;
-    int mFd = -1;
     bool mSwapped = false;
     IOComponentEnum mType = IOComponentEnum::UNKNOWNCOMPONENTTYPE;
     std::size_t mComponentBytes = 0;
     uint64_t mOffset = 0;
     bool mScaled = false;
     double mSlope = 1, mInter = 0;
-    std::vector<char> mSlab;
+    std::unique_ptr<RawVoxels> mVoxels;
 };
 
 } // namespace

@@ -14,7 +14,7 @@ namespace flyover::imageio {
 /// True when the file (plain or gzipped) begins with sizeof_hdr = 540 in either byte order.
 bool isNifti2(const std::string& path);
 
-/// Opens a NIfTI-2 file, streamed by slab (gzip first inflated to a temporary file); `warning`,
+/// Opens a NIfTI-2 file, streamed by slab (gzip inflated while read); `warning`,
 /// when not empty, is added to the source's warnings.
 /// @throw InputError naming the file.
 std::unique_ptr<ImageSource> openNifti2(const std::string& path, const std::string& warning = "");
