@@ -5,13 +5,17 @@
 //   ingest_profile FILE [REPEATS]
 //
 // Steps: the input digest (the cache key's input), openImage (header probe in a child, header
-// checks, and for .nii.gz the inflation), ingestImage split into reading slices (the source's
-// readSlices: file IO, decompression when streamed, conversion to float) and the rest
-// (resampling, outside-air marking, leaf building), the .vdb write (writeGrids: Blosc, the
-// deterministic UUID), and the digest of the written file (which the next stage's key needs).
-// With REPEATS > 1 each figure is the median. Writes into a private temporary folder only.
+// checks, and before flyover read NIfTI voxels itself, the inflation of a .nii.gz), ingestImage
+// split into reading slices (the source's readSlices: file IO, decompression and conversion to
+// float unless a reading thread does them ahead) and the rest (resampling, outside-air
+// marking, leaf building; with a reading thread, its CPU too), the .vdb write (writeGrids as
+// the ingest stage calls it, with the deterministic UUID), and the digest of the written file
+// (which the next stage's key needs).
+// With REPEATS > 1 each figure is the median. Last, for comparison only, the same grid written
+// with Blosc. Writes into a private temporary folder only.
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/grid_write.h"
 #include "pipeline/artifact_store.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
@@ -107,9 +111,10 @@ int main(int argc, char** argv)
     const fs::path dir = fs::temp_directory_path() / ("flyover-ingest-profile-" + std::to_string(::getpid()));
     fs::create_directories(dir);
     const std::vector<std::string> order{"input digest", "openImage", "  read slices", "  build grid",
-                                         "ingestImage", ".vdb write", ".vdb digest", "total"};
+                                         "ingestImage", ".vdb write", ".vdb digest", "total", "(with Blosc)"};
     std::map<std::string, std::vector<double>> wall, cpu;
     std::string reader;
+    uintmax_t bloscBytes = 0;
     try {
         for (int r = 0; r < repeats; ++r) {
             std::map<std::string, Sample> s;
@@ -130,12 +135,18 @@ int main(int argc, char** argv)
             source.reset();
             const std::string vdb = (dir / "ct.vdb").string();
             t = Timer();
-            writeGrids(vdb, {grid});
+            writeGrids(vdb, {grid}, VdbValues::Raw);  // as the ingest stage writes ct.vdb
             s[".vdb write"] = t.elapsed();
             t = Timer();
             const std::string digest = artifactDigest(vdb);
             s[".vdb digest"] = t.elapsed();
-            s["total"] = total.elapsed();
+            s["total"] = total.elapsed();  // up to here: the steps of the ingest stage
+            {  // for comparison: the same grid with Blosc (as ct.vdb was written before)
+                t = Timer();
+                writeGrids((dir / "blosc.vdb").string(), {grid}, VdbValues::Blosc);
+                s["(with Blosc)"] = t.elapsed();
+                bloscBytes = fs::file_size(dir / "blosc.vdb");
+            }
             for (const auto& [k, v] : s) {
                 wall[k].push_back(v.wall);
                 cpu[k].push_back(v.cpu);
@@ -152,5 +163,6 @@ int main(int argc, char** argv)
     std::cout << path << "\nreader: " << reader << "\n";
     std::printf("%-16s %10s %10s   (median of %d)\n", "step", "wall s", "cpu s", repeats);
     for (const auto& k : order) std::printf("%-16s %10.3f %10.3f\n", k.c_str(), median(wall[k]), median(cpu[k]));
+    std::printf("(with Blosc): the .vdb written with Blosc, for comparison: %ju bytes\n", bloscBytes);
     return 0;
 }
