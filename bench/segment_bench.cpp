@@ -4,7 +4,12 @@
 // lumen mask written as .nii.gz (read from the file, as `flyover run --mask` does), with the
 // time of each step.
 //
-//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask | --centerline]
+//   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--seed N]
+//                 [--touching N] [--redundant] [--rectal-tube] [--spacing SX,SY,SZ] [--ct FILE]
+//                 [--mask | --centerline]
+//
+// The phantom options are those of `flyover phantom`; --ct FILE ingests that CT (any format
+// openImage() reads, e.g. one written by `flyover phantom`) instead of generating a phantom.
 //
 // --centerline: instead, segment + centerline as before contacts were cut ("centerline") against
 // segment + contact cutting + centerline ("contacts", volume/contacts.h), time and peak memory.
@@ -227,6 +232,8 @@ int main(int argc, char** argv)
     std::string size = "full", grid, mode;
     int runs = 5;
     bool fluid = false, collapse = false, mask = false, centerline = false;
+    PhantomParams pp;
+    std::string ctPath, spacingText;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         if (a == "--size" && i + 1 < argc) size = argv[++i];
@@ -237,31 +244,58 @@ int main(int argc, char** argv)
         else if (a == "--collapse") collapse = true;
         else if (a == "--mask") mask = true;
         else if (a == "--centerline") centerline = true;
+        else if (a == "--seed" && i + 1 < argc) pp.seed = std::strtoull(argv[++i], nullptr, 10);
+        else if (a == "--touching" && i + 1 < argc) pp.touching = std::atoi(argv[++i]);
+        else if (a == "--redundant") pp.redundant = true;
+        else if (a == "--rectal-tube") pp.rectalTube = true;
+        else if (a == "--spacing" && i + 1 < argc) spacingText = argv[++i];
+        else if (a == "--ct" && i + 1 < argc) ctPath = argv[++i];
         else {
-            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--mask | --centerline]\n";
+            std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--seed N] "
+                         "[--touching N] [--redundant] [--rectal-tube] [--spacing SX,SY,SZ] [--ct FILE] "
+                         "[--mask | --centerline]\n";
             return 2;
         }
+    }
+    if (!spacingText.empty()) {
+        char tail = 0;
+        if (std::sscanf(spacingText.c_str(), "%lf,%lf,%lf%c", &pp.spacingMm.x, &pp.spacingMm.y, &pp.spacingMm.z,
+                        &tail) != 3 ||
+            !(pp.spacingMm.x > 0 && pp.spacingMm.y > 0 && pp.spacingMm.z > 0)) {
+            std::cerr << "segment_bench: --spacing wants three positive numbers SX,SY,SZ (mm), got '" << spacingText
+                      << "'\n";
+            return 2;
+        }
+    }
+    if (!ctPath.empty() && mask) {
+        std::cerr << "segment_bench: --ct and --mask do not go together (--mask uses the phantom's true lumen)\n";
+        return 2;
     }
     try {
         if (!grid.empty()) return child(grid, mode, runs);
 
         openvdb::initialize();
-        PhantomParams pp;
         pp.size = parsePhantomSize(size);
         pp.fluid = fluid;
         pp.collapse = collapse;
         const auto t0 = std::chrono::steady_clock::now();
         const fs::path tmp = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + ".vdb");
         double truthMl = 0;
+        std::ostringstream variant;
+        variant << size << (fluid ? " --fluid" : "") << (collapse ? " --collapse" : "") << " --seed " << pp.seed;
+        if (pp.touching) variant << " --touching " << pp.touching;
+        if (pp.redundant) variant << " --redundant";
+        if (pp.rectalTube) variant << " --rectal-tube";
+        if (!spacingText.empty()) variant << " --spacing " << spacingText;
         if (mask) {
             const fs::path maskPath = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + "_mask.nii.gz");
             {
                 Phantom ph = makePhantom(pp);
                 writeImage(ph.truthLumen, maskPath.string());
                 const auto& g = ph.truthLumen.geometry;
-                std::printf("phantom %s%s%s true lumen mask: %lld x %lld x %lld at %.3g x %.3g x %.3g mm, truth lumen "
+                std::printf("phantom %s true lumen mask: %lld x %lld x %lld at %.3g x %.3g x %.3g mm, truth lumen "
                             "%.1f mL (built in %.1f s)\n",
-                            size.c_str(), fluid ? " --fluid" : "", collapse ? " --collapse" : "", (long long)g.size[0],
+                            variant.str().c_str(), (long long)g.size[0],
                             (long long)g.size[1], (long long)g.size[2], g.spacingMm.x, g.spacingMm.y, g.spacingMm.z,
                             ph.truth.lumenVolumeMl,
                             std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
@@ -274,20 +308,27 @@ int main(int argc, char** argv)
             return 0;
         }
         {
-            Phantom ph = makePhantom(pp);
-            truthMl = ph.truth.lumenVolumeMl;
-            Image3<float> ct;
-            ct.geometry = ph.ct.geometry;
-            ct.voxels.assign(ph.ct.voxels.begin(), ph.ct.voxels.end());
-            ph = Phantom{};
             IngestReport rep;
-            openvdb::FloatGrid::Ptr hu = ingestImage(ct, IngestParams{}, &rep);
+            openvdb::FloatGrid::Ptr hu;
+            if (!ctPath.empty()) {
+                auto source = openImage(ctPath);
+                hu = ingestImage(*source, IngestParams{}, &rep);
+                variant.str("CT file " + ctPath);
+            } else {
+                Phantom ph = makePhantom(pp);
+                truthMl = ph.truth.lumenVolumeMl;
+                Image3<float> ct;
+                ct.geometry = ph.ct.geometry;
+                ct.voxels.assign(ph.ct.voxels.begin(), ph.ct.voxels.end());
+                ph = Phantom{};
+                hu = ingestImage(ct, IngestParams{}, &rep);
+            }
             hu->setName("ct_hu");
             openvdb::io::File file(tmp.string());
             file.write({hu});
-            std::printf("phantom %s%s%s: %lld x %lld x %lld, HU grid %.4g mm voxels, %lld active voxels, "
+            std::printf("phantom %s: %lld x %lld x %lld, HU grid %.4g mm voxels, %lld active voxels, "
                         "%.0f MB; truth lumen %.1f mL (built in %.1f s)\n",
-                        size.c_str(), fluid ? " --fluid" : "", collapse ? " --collapse" : "",
+                        variant.str().c_str(),
                         (long long)rep.inputSize[0], (long long)rep.inputSize[1], (long long)rep.inputSize[2],
                         rep.voxelMm, (long long)rep.activeVoxels, double(rep.memoryBytes) / 1e6, truthMl,
                         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());

@@ -5,6 +5,7 @@
 #include "pipeline/artifact_store.h"
 #include "pipeline/config_file.h"
 #include "pipeline/export.h"
+#include "pipeline/part_phantom_io.h"
 #include "pipeline/phantom_io.h"
 #include "pipeline/params.h"
 #include "pipeline/stage_command.h"
@@ -80,6 +81,13 @@ int main(int argc, char** argv)
     phantomCmd->add_flag("--redundant", phantomRedundant, "a redundant colon (extra sigmoid and transverse loops, "
                                                           "about 1.8-1.9 m)");
     phantomCmd->add_flag("--rectal-tube", phantomTube, "an air-filled rectal catheter from the outside air into the rectum");
+    bool phantomPart = false;
+    int partPores = 0;
+    phantomCmd->add_flag("--part", phantomPart, "an industrial CT of a cast part (bore, flange, pores, an internal and an "
+                                                "open crack; uint16, written slab by slab; .nii, .nii.gz, .nrrd); "
+                                                "--size N voxels (112..2048, default 128)");
+    phantomCmd->add_option("--pores", partPores, "with --part: number of pores (default 12 x (N/128)^2)")
+        ->check(CLI::Range(0, 100000));
     phantomCmd->add_option("--spacing", phantomSpacing, "SX,SY,SZ voxel size in mm (same field of view), e.g. "
                                                         "0.8,0.8,1.25; default: the size's");
 
@@ -217,7 +225,22 @@ int main(int argc, char** argv)
                       << describeParams();
             return 0;
         }
+        if (*phantomCmd && phantomPart) {
+            if (!maskOut.empty()) throw ParameterError("--truth-mask: not available with --part");
+            PartPhantomParams pp;
+            pp.size = sizeName == "small" ? 128 : parsePartSize(sizeName);
+            pp.seed = seed;
+            pp.pores = partPores;
+            const auto t0 = std::chrono::steady_clock::now();
+            const PartTruth truth = writePartPhantom(pp, phantomOut, truthOut);
+            const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            log("part phantom " + std::to_string(pp.size) + "^3 seed " + std::to_string(seed) + " written to " +
+                phantomOut + " (" + std::to_string(truth.voids.size()) + " voids, porosity " +
+                std::to_string(truth.porosityPercent).substr(0, 6) + "%, " + std::to_string(s).substr(0, 5) + " s)");
+            return 0;
+        }
         if (*phantomCmd) {
+            if (partPores != 0) throw ParameterError("--pores: only with --part");
             PhantomParams pp;
             pp.size = parsePhantomSize(sizeName);
             pp.seed = seed;

@@ -38,12 +38,21 @@ struct RenderInputs {
     ~RenderInputs();
 };
 
+/// The fly-over pairs the frames step rendered in this run, by centerline index: the file in
+/// the study's frames/ (committed before any later render step starts). The video takes the
+/// pairs whose cameras coincide from there instead of rendering them again.
+struct RenderedPairs {
+    std::vector<std::size_t> centerlineIndices;  ///< ascending
+    std::vector<std::string> files;              ///< same order: absolute paths of the PNGs
+};
+
 /// Objects handed from stage to stage in memory within one run.
 struct StudyState {
     openvdb::FloatGrid::Ptr hu;
     openvdb::FloatGrid::Ptr sdf;
     std::optional<Centerline> centerline;
     std::optional<TriMesh> mesh;
+    std::optional<RenderedPairs> framePairs;  ///< set by the frames step when it ran in this run
 };
 
 class StudyRun {

@@ -6,6 +6,7 @@
 #include "render/render_view.h"
 #include "volume/error.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
@@ -17,10 +18,19 @@
 
 namespace flyover {
 
-/// Triangles around each vertex (compressed rows), for the edge neighbours of a triangle.
+/// Triangles around each vertex (compressed rows), for the edge neighbours of a triangle; and,
+/// for the footprint walk, each triangle's edge neighbours (compressed rows) and its
+/// unnormalised normal, computed once per mesh instead of once per ray.
 struct ViewMarker::Topology {
     std::vector<uint32_t> start;  ///< triangles of vertex v: list[start[v] .. start[v + 1])
     std::vector<uint32_t> list;
+    /// Triangles sharing an edge with triangle f (every g != f that holds both ends of one of
+    /// f's edges, as the walk over `list` finds them; non-manifold edges give more than one):
+    /// neighbours[neighbourStart[f] .. neighbourStart[f + 1]).
+    std::vector<uint32_t> neighbourStart;
+    std::vector<uint32_t> neighbours;
+    /// cross(v1 - v0, v2 - v0) of triangle f in double, from the float vertices.
+    std::vector<Vec3d> normals;
 
     explicit Topology(const RayScene::Impl& im)
     {
@@ -31,6 +41,47 @@ struct ViewMarker::Topology {
         list.resize(im.indices.size());
         std::vector<uint32_t> fill(start.begin(), start.end() - 1);
         for (std::size_t k = 0; k < im.indices.size(); ++k) list[fill[im.indices[k]]++] = uint32_t(k / 3);
+
+        const std::size_t nf = im.triangles;
+        // Edge neighbours of f, sorted and unique, into `found`.
+        auto neighboursOf = [&](std::size_t f, std::vector<uint32_t>& found) {
+            const uint32_t* t = &im.indices[3 * f];
+            found.clear();
+            for (int e = 0; e < 3; ++e) {
+                const uint32_t a = t[e], b = t[(e + 1) % 3];
+                for (uint32_t k = start[a]; k < start[a + 1]; ++k) {
+                    const uint32_t g = list[k];
+                    if (g == uint32_t(f)) continue;
+                    const uint32_t* u = &im.indices[3 * std::size_t(g)];
+                    if (u[0] == b || u[1] == b || u[2] == b) found.push_back(g);
+                }
+            }
+            std::sort(found.begin(), found.end());
+            found.erase(std::unique(found.begin(), found.end()), found.end());
+        };
+        // Two parallel passes: count (and the normals), then fill the rows.
+        neighbourStart.assign(nf + 1, 0);
+        normals.resize(nf);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf), [&](const tbb::blocked_range<std::size_t>& r) {
+            std::vector<uint32_t> found;
+            for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                neighboursOf(f, found);
+                neighbourStart[f + 1] = uint32_t(found.size());
+                const uint32_t* t = &im.indices[3 * f];
+                const auto &v0 = im.vertices[t[0]], &v1 = im.vertices[t[1]], &v2 = im.vertices[t[2]];
+                const Vec3d c0{v0.x, v0.y, v0.z}, c1{v1.x, v1.y, v1.z}, c2{v2.x, v2.y, v2.z};
+                normals[f] = cross(c1 - c0, c2 - c0);
+            }
+        });
+        for (std::size_t f = 0; f < nf; ++f) neighbourStart[f + 1] += neighbourStart[f];
+        neighbours.resize(neighbourStart[nf]);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf), [&](const tbb::blocked_range<std::size_t>& r) {
+            std::vector<uint32_t> found;
+            for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                neighboursOf(f, found);
+                std::copy(found.begin(), found.end(), neighbours.begin() + neighbourStart[f]);
+            }
+        });
     }
 };
 
@@ -212,6 +263,7 @@ struct ViewMarker::Scratch {
     std::vector<uint32_t> stamp;  ///< BFS visit marks, one stamp value per ray
     uint32_t currentStamp = 0;
     std::vector<uint32_t> queue;
+    std::vector<double> columnFactor, rowFactor;  ///< pixelDirection's per-column / per-row terms
 };
 
 ViewMarker::ViewMarker(const RayScene& scene, int viewPx, bool footprint)
@@ -250,6 +302,16 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
     // Lateral distance between neighbouring rays at depth 1 (dot(dir, forward) == 1).
     const double spacingAtUnitDepth =
         2.0 * std::tan(0.5 * camera.fovDeg * 3.14159265358979323846 / 180.0) / double(mViewPx);
+    // pixelDirection(camera, w, h, x + 0.5, y + 0.5) term by term, with its tangent and the
+    // per-column and per-row factors computed once per view (the same double arithmetic).
+    const double tanHalf = std::tan(0.5 * (camera.fovDeg * 3.14159265358979323846 / 180.0));
+    const double aspect = double(hits.width) / double(hits.height);
+    w.columnFactor.resize(std::size_t(hits.width));
+    w.rowFactor.resize(std::size_t(hits.height));
+    for (int x = 0; x < hits.width; ++x)
+        w.columnFactor[std::size_t(x)] = (2.0 * (x + 0.5) / hits.width - 1.0) * tanHalf * aspect;
+    for (int y = 0; y < hits.height; ++y)
+        w.rowFactor[std::size_t(y)] = (1.0 - 2.0 * (y + 0.5) / hits.height) * tanHalf;
     for (int y = 0; y < hits.height; ++y)
         for (int x = 0; x < hits.width; ++x) {
             const std::size_t pix = std::size_t(y) * std::size_t(hits.width) + std::size_t(x);
@@ -260,9 +322,10 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
             // The ray's footprint: the surface within half the ray spacing of the hit,
             // stretched by 1/cos of the incidence (capped at 4x), walked over edge
             // neighbours that face the camera.
-            const Vec3d dir = pixelDirection(camera, hits.width, hits.height, x + 0.5, y + 0.5);
+            const Vec3d dir = camera.forward + camera.right * w.columnFactor[std::size_t(x)] +
+                              camera.up * w.rowFactor[std::size_t(y)];
             const Vec3d hit = camera.position + dir * double(hits.t[pix]);
-            const Vec3d ng = normalize(cross(vertexOf(id, 1) - vertexOf(id, 0), vertexOf(id, 2) - vertexOf(id, 0)));
+            const Vec3d ng = normalize(vt.normals[id]);
             const double cosine = std::fabs(dot(normalize(dir), ng));
             const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
             const double r2 = radius * radius;
@@ -273,24 +336,20 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
             w.stamp[id] = w.currentStamp;
             w.queue.assign(1, id);
             for (std::size_t q = 0; q < w.queue.size(); ++q) {
-                const uint32_t* t = &im.indices[3 * std::size_t(w.queue[q])];
-                for (int e = 0; e < 3; ++e) {
-                    const uint32_t a = t[e], b = t[(e + 1) % 3];
-                    for (uint32_t k = vt.start[a]; k < vt.start[a + 1]; ++k) {
-                        const uint32_t g = vt.list[k];
-                        if (w.stamp[g] == w.currentStamp) continue;
-                        const uint32_t* u = &im.indices[3 * std::size_t(g)];
-                        if (u[0] != b && u[1] != b && u[2] != b) continue;
-                        w.stamp[g] = w.currentStamp;
-                        const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
-                        const Vec3d n = cross(c1 - c0, c2 - c0);
-                        const bool facing = ost ? dot(c0 - camera.position, n) < 0.0 : true;
-                        const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
-                        const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
-                        if (!facing || !near) continue;
-                        out.push_back(g);
-                        w.queue.push_back(g);
-                    }
+                const uint32_t f = w.queue[q];
+                for (uint32_t k = vt.neighbourStart[f]; k < vt.neighbourStart[f + 1]; ++k) {
+                    const uint32_t g = vt.neighbours[k];
+                    if (w.stamp[g] == w.currentStamp) continue;
+                    w.stamp[g] = w.currentStamp;
+                    const Vec3d c0 = vertexOf(g, 0);
+                    const bool facing = ost ? dot(c0 - camera.position, vt.normals[g]) < 0.0 : true;
+                    if (!facing) continue;
+                    const Vec3d c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
+                    const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
+                    const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
+                    if (!near) continue;
+                    out.push_back(g);
+                    w.queue.push_back(g);
                 }
             }
         }

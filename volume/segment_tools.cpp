@@ -1,9 +1,9 @@
 // The heavy OpenVDB tool families used by segmentation live in this translation unit only
-// (style.md §4). All of them are pre-instantiated for the tree types used here.
+// (style.md §4). All of them are pre-instantiated for the tree types used here. The fast
+// sweeping redistance is in redistance.cpp.
 #include "volume/segment_tools.h"
 
 #include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/FastSweeping.h>
 #include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
@@ -60,16 +60,6 @@ openvdb::BoolTree::Ptr reachableWithin(const openvdb::BoolTree& seed,
         count = now;
     }
     return reach;
-}
-
-openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f)
-{
-    openvdb::tree::LeafManager<openvdb::FloatTree> leaves(f.tree());
-    leaves.foreach([](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
-        for (auto it = leaf.beginValueOn(); it; ++it)
-            if (*it == 0.0f) it.setValue(std::numeric_limits<float>::min());
-    });
-    return openvdb::tools::sdfToSdf(f, 0.0f, 1);
 }
 
 void trimExteriorBand(openvdb::FloatTree& sdf, float bandMm)

@@ -41,8 +41,11 @@ openvdb::BoolTree::Ptr reachableWithin(const openvdb::BoolTree& seed,
 
 /// Signed distance (world units, the grid's transform) to the zero crossing of `f`, on the
 /// active voxels of `f`, negative where f < 0: first-order fast sweeping, one round of the
-/// eight sweep orderings (openvdb::tools::sdfToSdf). The interface is placed along each
-/// axis by linear interpolation of f between neighbouring voxels.
+/// eight sweep orderings. The interface is placed along each axis by linear interpolation of
+/// f between neighbouring voxels. The result is bit for bit that of
+/// openvdb::tools::sdfToSdf(f, 0, 1), computed leaf by leaf as a dependency graph
+/// (redistance.cpp): several times faster, a fraction of the memory, the same on any number
+/// of threads. @throw openvdb::RuntimeError when `f` has active tiles.
 /// @note Values of exactly 0 in `f` are first set to the smallest positive float (outside):
 ///       the sweeping's sign is ambiguous there (integer HU equal to the iso-value, a
 ///       resampled mask at exactly one half), and such a voxel can come out deep inside.

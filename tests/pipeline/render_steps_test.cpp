@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <set>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -40,6 +41,25 @@ TEST_F(StudyTest, VideoFpsRecomputesTheVideoOnly)
     const auto first = runPipeline(o);
     ASSERT_TRUE(fs::exists(o.studyDir + "/video/flyover.mp4"));
     EXPECT_EQ(readJson(o.studyDir + "/video/poses.json").at("fps"), 25);
+    // The video takes the pairs the frames step rendered in the same run (the same cameras)
+    // from frames/: as many as the two steps' centerline indices have in common.
+    auto videoReport = [&] {
+        const nlohmann::json manifest = readJson(o.studyDir + "/manifest.json");
+        for (const auto& st : manifest.at("stages"))
+            if (st.at("stage") == "video") return st.at("report");
+        return nlohmann::json();
+    };
+    {
+        std::set<std::size_t> frameIndices;
+        const nlohmann::json framePoses = readJson(o.studyDir + "/frames/poses.json");
+        const nlohmann::json videoPoses = readJson(o.studyDir + "/video/poses.json");
+        for (const auto& f : framePoses.at("frames")) frameIndices.insert(f.at("centerline_index").get<std::size_t>());
+        std::size_t common = 0;
+        for (const auto& f : videoPoses.at("frames"))
+            common += frameIndices.count(f.at("centerline_index").get<std::size_t>());
+        EXPECT_GT(common, 0u);
+        EXPECT_EQ(videoReport().value("frames_from_frame_pairs", std::size_t(0)), common);
+    }
 
     o.params.render.videoFps = 12;
     const auto second = runPipeline(o);
@@ -49,6 +69,8 @@ TEST_F(StudyTest, VideoFpsRecomputesTheVideoOnly)
                                               {"overviews", false}, {"video", true}, {"coverage", false}}))
         << "render.video_fps changed: only the video may be recomputed";
     EXPECT_EQ(readJson(o.studyDir + "/video/poses.json").at("fps"), 12);
+    EXPECT_EQ(videoReport().value("frames_from_frame_pairs", std::size_t(1)), 0u)
+        << "the frames step did not run: every video frame is rendered";
     EXPECT_NE(outputDigests(first)["video"], outputDigests(second)["video"]);
     for (const char* step : {"frames", "flythrough", "overviews", "coverage"})
         EXPECT_EQ(outputDigests(first)[step], outputDigests(second)[step]) << step;

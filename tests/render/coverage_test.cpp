@@ -4,6 +4,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/coverage.h"
 
+#include "reference_marker.h"
 #include "test_meshes.h"
 #include "volume/error.h"
 
@@ -146,6 +147,53 @@ TEST(Coverage, FootprintConvergesFasterThanHitTrianglesAlone)
     RecordProperty("coarseFootprint", std::to_string(coarseFootprint));
     EXPECT_LT(std::fabs(coarseFootprint - fine), std::fabs(coarseHit - fine));
     EXPECT_LT(coarseHit, fine);
+}
+
+TEST(Coverage, FootprintWalkMatchesThePlainRuleOnAFineMesh)
+{
+    // A fine mesh (long footprint walks, grazing views at the fold) and a non-manifold piece:
+    // ViewMarker's rows of edge neighbours must give what scanning the triangles around each
+    // vertex gives (reference_marker.h), with and without OST.
+    const FoldedTube tube;
+    const TriMesh mesh = tube.mesh(0.2, 192);
+    std::vector<float> xyz;
+    std::vector<uint32_t> tris;
+    for (const auto v : mesh.vertices())
+        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
+    for (const auto f : mesh.faces())
+        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    {
+        // Two extra triangles on the first triangle's first edge make it non-manifold.
+        const uint32_t a = tris[0], b = tris[1];
+        for (const float side : {1.0f, -1.0f}) {
+            const uint32_t c = uint32_t(xyz.size() / 3);
+            for (int k = 0; k < 3; ++k) xyz.push_back(0.5f * (xyz[3 * a + k] + xyz[3 * b + k]) + side * 0.3f);
+            tris.insert(tris.end(), {side > 0 ? b : a, side > 0 ? a : b, c});
+        }
+    }
+    const RayScene scene(std::move(xyz), std::move(tris));
+    const Centerline line = tube.centerline();
+    FlyoverParams fp;
+    ViewMarker marker(scene, 64, true);
+    const auto around = test::trianglesAroundVertices(scene);
+    std::size_t views = 0;
+    for (std::size_t i = 0; i < line.points.size(); i += 10) {
+        std::vector<Camera> cams;
+        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
+        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
+        for (std::size_t c = 0; c < cams.size(); ++c)
+            for (const bool ost : {true, false}) {
+                std::vector<uint32_t> got;
+                marker.mark(cams[c], ost, got);
+                std::sort(got.begin(), got.end());
+                got.erase(std::unique(got.begin(), got.end()), got.end());
+                const auto want = test::referenceMark(scene, around, cams[c], 64, ost, true);
+                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
+                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
+                ++views;
+            }
+    }
+    EXPECT_GE(views, 30u);
 }
 
 TEST(Coverage, RejectsBadParameters)

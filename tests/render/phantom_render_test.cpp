@@ -9,6 +9,7 @@
 #include "render/flyover_path.h"
 #include "render/render_view.h"
 #include "render/review.h"
+#include "reference_marker.h"
 #include "surface/extract_surface.h"
 #include "volume/centerline.h"
 #include "volume/ingest.h"
@@ -119,6 +120,43 @@ TEST_F(SmallPhantom, FlyoverCoversAtLeast99PercentOfTheSurface)
     EXPECT_GE(c.flyover.fraction, 0.99);
     EXPECT_GT(c.flyover.fraction, c.flythroughTwoWay.fraction);
     EXPECT_GT(c.flythroughTwoWay.fraction, std::max(c.flythroughForward.fraction, c.flythroughBackward.fraction));
+}
+
+TEST_F(SmallPhantom, CoverageMarksTheSameTrianglesAsThePlainRule)
+{
+    // ViewMarker walks the footprint over edge-neighbour rows and normals built once per mesh;
+    // the rule written out plainly (reference_marker.h, the walk it replaced) must give the
+    // same triangles for every view, so coverage fractions do not change.
+    const RenderParams rp;
+    const Centerline& cl = data->centerline;
+    const FlyoverParams fp = defaultFlyoverParams();
+    const std::vector<double> frame = flyoverFrameRadii(*data->scene, cl, fp);
+    ViewMarker marker(*data->scene, rp.coveragePx, true);
+    ViewMarker hitsOnly(*data->scene, rp.coveragePx, false);
+    const auto around = test::trianglesAroundVertices(*data->scene);
+    std::size_t views = 0, marked = 0;
+    for (std::size_t i = 0; i < cl.points.size(); i += std::max<std::size_t>(1, cl.points.size() / 16)) {
+        std::vector<Camera> cams;
+        for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) cams.push_back(c);
+        cams.push_back(flythroughCamera(cl.points[i], true, rp.flythroughFovDeg));
+        cams.push_back(flythroughCamera(cl.points[i], false, rp.flythroughFovDeg));
+        for (std::size_t c = 0; c < cams.size(); ++c) {
+            for (const bool footprint : {true, false}) {
+                std::vector<uint32_t> got;
+                (footprint ? marker : hitsOnly).mark(cams[c], rp.ost, got);
+                std::sort(got.begin(), got.end());
+                got.erase(std::unique(got.begin(), got.end()), got.end());
+                const auto want = test::referenceMark(*data->scene, around, cams[c], rp.coveragePx, rp.ost, footprint);
+                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", footprint " << footprint
+                                     << ": " << got.size() << " triangles marked, the plain rule marks "
+                                     << want.size();
+                ++views;
+                marked += got.size();
+            }
+        }
+    }
+    EXPECT_GE(views, 64u);
+    EXPECT_GT(marked, views * 100) << "the views should show many triangles";
 }
 
 TEST_F(SmallPhantom, EveryPolypIsSeenInAFlyoverFrame)
