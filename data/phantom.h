@@ -18,9 +18,10 @@
 ///   the full path and the truth lists the collapsed arc ranges.
 /// - colon = false: no colon at all (body, lungs, small-bowel gas, spine): a scan on which
 ///   segmentation must refuse with a clear message.
-/// - redundant: a longer colon (about 1.8-1.9 m: an extra sigmoid loop into the right
-///   pelvis, a second one high in the left abdomen, a transverse colon that rises to the top
-///   of the abdomen and sags deep into the right lower abdomen), clear of itself and the body.
+/// - redundant: a longer colon (about 2.02 m, 2.03-2.09 m with contacts: an extra sigmoid
+///   loop into the right pelvis, a second one high in the left abdomen, a transverse colon
+///   that hangs a loop down in front of the small bowel and back up behind it, then sags deep
+///   into the right lower abdomen), clear of itself and the body.
 /// - touching = N (0..5; at most 2 on the default colon, 5 on the redundant one): N places where two loops far apart along the colon (>= 150 mm of
 ///   arc) are bent against each other until their walls meet, and the walls between them
 ///   vanish over a patch 1-3 voxels wide: lumen A and lumen B are face-connected there, in
@@ -54,7 +55,7 @@ struct PhantomParams {
     bool collapse = false;   ///< one or two collapsed stretches of the sigmoid
     bool colon = true;       ///< false: no colon (lungs, gas pockets, body only)
     int touching = 0;        ///< contacts between far-apart loops, 0..PHANTOM_MAX_CONTACTS
-    bool redundant = false;  ///< extra sigmoid and transverse loops (about 1.8-1.9 m of colon)
+    bool redundant = false;  ///< extra sigmoid and transverse loops (about 2.0-2.1 m of colon)
     bool rectalTube = false; ///< an air-filled rectal catheter open to the outside air
     /// Voxel size (mm) along i, j, k; all zero: the size's own spacing. The field of view
     /// stays 400 x 400 x 375 mm centred on the origin (sizes rounded to whole voxels).

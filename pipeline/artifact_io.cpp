@@ -1,6 +1,7 @@
 #include "pipeline/artifact_io.h"
 
 #include "pipeline/deferred_writes.h"
+#include "pipeline/grid_write.h"
 
 #include "volume/error.h"
 #include "volume/image.h"
@@ -21,6 +22,7 @@
 #include <new>
 #include <system_error>
 #include <unistd.h>
+#include <vector>
 
 namespace fs = std::filesystem;
 
@@ -189,35 +191,47 @@ namespace {
 /// identify content, as the cache and the reproducibility checks need.
 void makeVdbUuidDeterministic(const std::string& path)
 {
-    constexpr std::size_t UUID_OFFSET = 21, UUID_LENGTH = 36;
-    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
-    std::vector<char> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-    const bool isVdb = bytes.size() > UUID_OFFSET + UUID_LENGTH && bytes[0] == 0x20 && bytes[1] == 0x42 &&
-                       bytes[2] == 0x44 && bytes[3] == 0x56 && bytes[UUID_OFFSET + 8] == '-';
+    constexpr std::size_t UUID_OFFSET = 21, UUID_LENGTH = 36, HEAD = UUID_OFFSET + UUID_LENGTH;
+    std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "r+b"), std::fclose);
+    if (!f) throw InputError(path + ": cannot open for reading: " + std::strerror(errno));
+    // The rest of the file hashed in chunks (a ct.vdb is ~200 MB: never held whole).
+    std::vector<char> buf(std::size_t(4) << 20);
+    std::size_t n = std::fread(buf.data(), 1, buf.size(), f.get());
+    const bool isVdb = n > HEAD && buf[0] == 0x20 && buf[1] == 0x42 && buf[2] == 0x44 && buf[3] == 0x56 &&
+                       buf[UUID_OFFSET + 8] == '-';
     if (!isVdb) throw InputError(path + ": unexpected OpenVDB file header");
-    const XXH128_hash_t h = XXH3_128bits(bytes.data() + UUID_OFFSET + UUID_LENGTH,
-                                         bytes.size() - UUID_OFFSET - UUID_LENGTH);
+    std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(), XXH3_freeState);
+    XXH3_128bits_reset(state.get());
+    XXH3_128bits_update(state.get(), buf.data() + HEAD, n - HEAD);
+    while ((n = std::fread(buf.data(), 1, buf.size(), f.get())) > 0) XXH3_128bits_update(state.get(), buf.data(), n);
+    if (std::ferror(f.get())) throw InputError(path + ": cannot read: " + std::strerror(errno));
+    const XXH128_hash_t h = XXH3_128bits_digest(state.get());
     char hex[33];
     std::snprintf(hex, sizeof hex, "%016llx%016llx", static_cast<unsigned long long>(h.high64),
                   static_cast<unsigned long long>(h.low64));
     const std::string s(hex);
     const std::string uuid = s.substr(0, 8) + "-" + s.substr(8, 4) + "-" + s.substr(12, 4) + "-" +
                              s.substr(16, 4) + "-" + s.substr(20, 12);
-    f.clear();
-    f.seekp(static_cast<std::streamoff>(UUID_OFFSET));
-    f.write(uuid.data(), static_cast<std::streamsize>(uuid.size()));
-    if (!f.flush()) throw InputError(path + ": cannot write");
+    if (std::fseek(f.get(), static_cast<long>(UUID_OFFSET), SEEK_SET) != 0 ||
+        std::fwrite(uuid.data(), 1, uuid.size(), f.get()) != uuid.size() || std::fflush(f.get()) != 0)
+        throw InputError(path + ": cannot write");
 }
 
 } // namespace
 
 void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids)
 {
+    writeGrids(path, grids, VdbValues::Blosc);
+}
+
+void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids, VdbValues values)
+{
     writeAtomically(path, [&](const std::string& tmp) {
         openvdb::io::File file(tmp);
         uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
-        compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
-                                                                   : openvdb::io::COMPRESS_ZIP;
+        if (values == VdbValues::Blosc)
+            compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
+                                                                       : openvdb::io::COMPRESS_ZIP;
         file.setCompression(compression);
         file.write(grids);
         file.close();

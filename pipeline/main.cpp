@@ -79,7 +79,7 @@ int main(int argc, char** argv)
                                                           "the truth lists them")
         ->check(CLI::Range(0, PHANTOM_MAX_CONTACTS));
     phantomCmd->add_flag("--redundant", phantomRedundant, "a redundant colon (extra sigmoid and transverse loops, "
-                                                          "about 1.8-1.9 m)");
+                                                          "about 2.0-2.1 m)");
     phantomCmd->add_flag("--rectal-tube", phantomTube, "an air-filled rectal catheter from the outside air into the rectum");
     bool phantomPart = false;
     int partPores = 0;

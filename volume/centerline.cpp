@@ -821,7 +821,6 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
             }
         }
     }
-    const std::int32_t rectumPiece = rectumSeed == NO_SLOT ? -1 : pieces.label[rectumSeed];
 
     // 3. Per piece: ends, minimal path through the core, refinement. A step of length l
     // between voxels u and v costs l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid
@@ -882,7 +881,13 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     });
     const double minEdge = voxelMm * double(minWeight), maxEdge = std::sqrt(3.0) * voxelMm * double(maxWeight);
 
-    const double fineMm = std::min(0.25 * voxelMm, 0.5 * params.stepMm);
+    // Sampling of the paths before the final resampling: a quarter voxel, at most 0.5 mm, and
+    // independent of stepMm: the refinement (trimming, sections, smoothing) works on these
+    // samples, and on a coarse grid (3 mm voxels) a spacing that followed the output step moved
+    // the path by up to 15 mm between --step-mm 1 and 2 (issue 14: the path from the other
+    // end, asked with another step, was another curve). Linear interpolation between samples
+    // this close is exact to well under a micrometre on colon bends.
+    const double fineMm = std::min(0.25 * voxelMm, 0.5);
     std::vector<std::int32_t> steps(index.slotCount(), -1);
     std::vector<Slot> pieceSlots;
     std::vector<double> dist;
@@ -969,13 +974,17 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     };
     for (std::size_t u = 0; u < used.size(); ++u) {
         reportProgress(progress, 0.2 + 0.6 * double(u) / double(used.size()), "minimal path");
-        paths.push_back(tracePiece(used[u], used[u] == rectumPiece ? rectumSeed : NO_SLOT));
+        paths.push_back(tracePiece(used[u], NO_SLOT));
     }
     reportProgress(progress, 0.8, "order and bridge pieces");
 
     // 4. The rectum end: the lowest piece end in world z (LPS: +z is superior), or the end
-    // nearest to rectumMm (the front of the path from rectumSeed); its piece comes first,
-    // entered there.
+    // nearest to rectumMm; its piece comes first, entered there. Every piece is first traced
+    // between its own farthest pair, whatever the hint, so that the path from one end and the
+    // path from the other are the same curve (a piece with cycles or branches has several
+    // tips, and the tip farthest from the hint's end need not be the one the other direction
+    // starts from). Only a hint that lies at none of these ends re-traces its piece from there.
+    DepthProbe depthAt(*grid);
     std::vector<PieceEnds> ends(paths.size());
     for (std::size_t i = 0; i < paths.size(); ++i) {
         const auto& p = paths[i].pointsMm;
@@ -998,30 +1007,40 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                 }
             }
     }
-    // The lowest end far above the lowest lumen voxel: the farthest pair of its piece missed
-    // the rectum (a shortcut left through an uncut contact, a branch): trace the lowest voxel's
-    // piece again from the end of the tube nearest to that voxel, and start there.
+    // Re-trace the piece of `seed` from the end of the tube nearest to it, and start there.
+    auto retraceFrom = [&](Slot seed) {
+        const std::int32_t label = pieces.label[seed];
+        for (std::size_t i = 0; i < paths.size(); ++i)
+            if (paths[i].label == label) {
+                paths[i] = tracePiece(label, seed);
+                const auto& p = paths[i].pointsMm;
+                ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+                first = static_cast<int>(i);
+                firstReversed = false;
+            }
+    };
     const Vec3d lowestMm = toVec(xf.indexToWorld(index.coord(lowestSlot)));
     bool reseeded = false;
-    if (!params.rectumMm) {
-        const Vec3d start = firstReversed ? ends[first].backMm : ends[first].frontMm;
-        if (start.z - lowestMm.z > LOWEST_END_SLACK_MM) {
-            const std::int32_t label = pieces.label[lowestSlot];
-            for (std::size_t i = 0; i < paths.size(); ++i)
-                if (paths[i].label == label) {
-                    paths[i] = tracePiece(label, lowestSlot);
-                    const auto& p = paths[i].pointsMm;
-                    ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
-                    first = static_cast<int>(i);
-                    firstReversed = false;
-                    reseeded = true;
-                }
+    const Vec3d start = firstReversed ? ends[first].backMm : ends[first].frontMm;
+    if (params.rectumMm) {
+        // The hint at an end: the lumen voxel nearest to it (on the cap wall for a hint outside
+        // the lumen, such as the anus) within two depths of the end (the path stops where the
+        // depth in the cap falls to 60% of the lumen radius, that far from the cap wall).
+        const Vec3d seedMm = toVec(xf.indexToWorld(index.coord(rectumSeed)));
+        const double reach = std::max(2.0 * std::max(0.0, depthAt(start)), 3.0 * voxelMm);
+        if (distance(start, seedMm) > reach) {
+            retraceFrom(rectumSeed);
+            reseeded = true;
         }
+    } else if (start.z - lowestMm.z > LOWEST_END_SLACK_MM) {
+        // The lowest end far above the lowest lumen voxel: the farthest pair of its piece
+        // missed the rectum (a shortcut left through an uncut contact, a branch).
+        retraceFrom(lowestSlot);
+        reseeded = true;
     }
     const PieceChain chain = orderPieces(ends, first, firstReversed, params.bridgeTurnMmPerRad);
 
     // 5. One polyline: pieces in chain order, bridges between them.
-    DepthProbe depthAt(*grid);
     struct Bridge {
         double startArc, endArc, startDepth, endDepth;
     };
@@ -1109,7 +1128,8 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     if (report) {
         report->pieces.clear();
         report->bridges = bridgeInfo;
-        report->rectumRule = params.rectumMm ? "nearest to rectum_mm"
+        report->rectumRule = params.rectumMm ? (reseeded ? "end of the tube nearest to rectum_mm"
+                                                         : "piece end nearest to rectum_mm")
                              : reseeded      ? "end nearest to the lowest lumen voxel"
                                              : "lowest end";
         report->lowestLumenMm = lowestMm;

@@ -10,9 +10,12 @@
 /// 3. the path is moved to the centroids of the lumen's cross-sections perpendicular to it
 ///    (sections cut by a haustral fold or a large polyp are recognised by their area and
 ///    skipped), smoothed along its arc length, and continued straight into the blind ends.
-/// The rectum is the lowest piece end in world z, or the end of the tube nearest to the lumen
-/// voxel nearest rectumMm (the voxel farthest from that voxel's farthest voxel; the path of its
-/// piece runs from there to the farthest voxel along the lumen, the cecum). Pieces are joined
+/// The rectum is the lowest piece end in world z, or the piece end nearest to rectumMm. Each
+/// piece's path runs between its own farthest pair whatever the hint, so the path traced from
+/// either end is the same curve. When the hint lies at no piece end (its nearest lumen voxel
+/// farther than two depths from it), or without a hint the lowest end lies more than 40 mm above the lowest lumen voxel,
+/// that point's piece is traced again from the end of the tube nearest to it (the voxel farthest
+/// from its farthest voxel) to the farthest voxel from there along the lumen (the cecum). Pieces are joined
 /// into one chain starting at the rectum, in the order and directions that minimise the total
 /// bridge length plus a turning penalty; each gap is bridged by a smooth curve whose points
 /// are flagged `bridged`.
@@ -52,7 +55,7 @@ struct CenterlineParams {
     double bridgeTurnMmPerRad = 20.0;
     /// Path points closer than this to the wall outside bridges are reported (mm, >= 0).
     double nearWallMm = 1.0;
-    static constexpr int VERSION = 3;
+    static constexpr int VERSION = 4;
 };
 
 /// One lumen piece as the centerline saw it.
@@ -83,7 +86,9 @@ struct CenterlineNearWall {
 struct CenterlineReport {
     std::vector<CenterlinePieceInfo> pieces;   ///< largest first
     std::vector<CenterlineBridgeInfo> bridges; ///< in travel order
-    std::string rectumRule;                    ///< "lowest end" or "nearest to rectum_mm"
+    /// "lowest end", "end nearest to the lowest lumen voxel", "piece end nearest to rectum_mm"
+    /// or "end of the tube nearest to rectum_mm" (the hint lay at no piece end: re-traced)
+    std::string rectumRule;
     Vec3d lowestLumenMm;                       ///< the lowest lumen voxel in world z (LPS mm)
     std::vector<CenterlineNearWall> nearWall;  ///< in path order
 };

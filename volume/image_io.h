@@ -2,17 +2,19 @@
 /// @brief Reading scans (NIfTI-1 and NIfTI-2 .nii/.nii.gz/.hdr+.img, NRRD .nrrd/.nhdr, MetaImage
 ///        .mha/.mhd, DICOM series folders and single DICOM files) and writing dense images,
 ///        all through ITK's IO except NIfTI-2, whose header flyover reads (ITK 5.2 has
-///        no NIfTI-2 reader; see image_io.cpp) (DICOM through ITK's GDCMImageIO, i.e. GDCM with OpenJPEG
+///        no NIfTI-2 reader; see volume/io/nifti2.cpp), and NIfTI voxels (volume/io/nifti1.h) (DICOM through ITK's GDCMImageIO, i.e. GDCM with OpenJPEG
 ///        and CharLS: uncompressed, JPEG lossless/lossy, JPEG 2000, JPEG-LS, RLE).
 ///
 /// World geometry is LPS millimetres, as ITK reports it (NIfTI's RAS qform/sform is
 /// converted by ITK). Nothing here resamples: see volume/ingest.h.
 ///
 /// How voxels are read (memory while a source is open):
-/// - streamed by slab: uncompressed NIfTI (.nii, .hdr+.img) and MetaImage (.mha/.mhd) are
-///   read by region (ITK's IORegion), a few slices at a time; gzipped NIfTI (.nii.gz,
-///   .img.gz) is first decompressed with zlib to a temporary file (in $TMPDIR; disk = the
-///   uncompressed size), then read by region. A DICOM series is read file by file.
+/// - streamed by slab: NIfTI-1 and NIfTI-2 voxels are read by flyover a few slices at a time,
+///   by pread, or for gzipped files (.nii.gz, .img.gz) inflated by zlib while read, on a
+///   thread a few slices ahead (volume/io/raw_voxels.h); NIfTI-1 headers are read by ITK.
+///   MetaImage (.mha/.mhd) is read by region (ITK's IORegion). Analyze 7.5 headers and scaled
+///   double NIfTI-1 voxels are left to ITK (gzipped: first inflated to a temporary file in
+///   $TMPDIR). A DICOM series is read file by file.
 /// - buffered: NRRD (ITK's NrrdImageIO cannot read a region), compressed MetaImage and
 ///   multi-frame DICOM files are read once, whole, in their native pixel type (int16: 2
 ///   bytes per voxel), never as float; heldBytes() says how much.

@@ -229,6 +229,87 @@ TEST(Centerline, RectumOverridePicksNearestEnd)
     }
 }
 
+/// Largest distance from a point of `a` to the polyline of `b` (mm).
+double farthestFrom(const Centerline& a, const Centerline& b)
+{
+    double worst = 0;
+    for (const CenterlinePoint& p : a.points) {
+        double best = 1e300;
+        for (std::size_t i = 1; i < b.points.size(); ++i) {
+            const Vec3d u = b.points[i - 1].positionMm, v = b.points[i].positionMm;
+            const double len2 = dot(v - u, v - u);
+            const double t = len2 > 0 ? std::clamp(dot(p.positionMm - u, v - u) / len2, 0.0, 1.0) : 0.0;
+            best = std::min(best, distance(p.positionMm, u + (v - u) * t));
+        }
+        worst = std::max(worst, best);
+    }
+    return worst;
+}
+
+TEST(Centerline, PathFromEitherEndIsTheSameCurve)
+{
+    // Issue 14 (defect 1): on a lumen in several pieces with a branch, the path traced from the
+    // other end (rectumMm at the first path's cecum end) went another way and was longer: the
+    // hinted piece was traced from the hint to its farthest voxel, not between the ends the
+    // unhinted path used. Two pieces: a straight rectum piece, and one with a side branch
+    // whose tip is the farthest voxel from the cecum end but not the end nearest the rectum.
+    const Frame frame = test::makeFrame(1.0, true);
+    const double radius = 5.0;
+    auto sdf = test::makeTubeSdf(frame, Axis::straight({20, 30, 10}, {20, 30, 70}), radius);
+    const auto trunk = test::makeTubeSdf(frame, Axis::straight({20, 45, 95}, {90, 45, 95}), radius);
+    const auto branch = test::makeTubeSdf(frame, Axis::straight({35, 45, 95}, {35, 110, 95}), radius);
+    openvdb::tools::csgUnion(*sdf, *trunk->deepCopy());
+    openvdb::tools::csgUnion(*sdf, *branch->deepCopy());
+    CenterlineReport report;
+    const Centerline first = extractCenterline(*sdf, CenterlineParams{}, nullptr, &report);
+    ASSERT_GE(first.points.size(), 10u);
+    EXPECT_EQ(report.rectumRule, "lowest end");
+    for (bool fromCecum : {true, false}) {
+        SCOPED_TRACE(fromCecum ? "hint at the cecum end" : "hint at the rectum end");
+        CenterlineParams params;
+        params.rectumMm = fromCecum ? first.points.back().positionMm : first.points.front().positionMm;
+        params.stepMm = 2.0;
+        CenterlineReport again;
+        const Centerline second = extractCenterline(*sdf, params, nullptr, &again);
+        ASSERT_GE(second.points.size(), 5u);
+        EXPECT_EQ(again.rectumRule, "piece end nearest to rectum_mm");
+        // The first path drops the remainder (< 1 mm step) at its cecum end, the second < 2 mm.
+        EXPECT_LT(distance(second.points.front().positionMm, *params.rectumMm), 1.5);
+        const Vec3d otherEnd = fromCecum ? first.points.front().positionMm : first.points.back().positionMm;
+        EXPECT_LT(distance(second.points.back().positionMm, otherEnd), 2.5);
+        EXPECT_NEAR(second.lengthMm(), first.lengthMm(), 0.01 * first.lengthMm());
+        EXPECT_LT(farthestFrom(second, first), 1.5) << "the second path leaves the first";
+        EXPECT_LT(farthestFrom(first, second), 2.5) << "the first path leaves the second";
+    }
+    // A hint in the middle of a piece (at no end) still re-traces that piece from there.
+    CenterlineParams mid;
+    mid.rectumMm = frame.worldFromLocal({60, 45, 95});
+    CenterlineReport midReport;
+    const Centerline fromMiddle = extractCenterline(*sdf, mid, nullptr, &midReport);
+    EXPECT_EQ(midReport.rectumRule, "end of the tube nearest to rectum_mm");
+    ASSERT_GE(fromMiddle.points.size(), 10u);
+}
+
+TEST(Centerline, CurveDoesNotDependOnTheOutputStep)
+{
+    // Issue 14 (defect 1): on a coarse grid (3 mm voxels, as the TotalSegmentator label) the
+    // paths were refined on samples spaced by the output step, and --step-mm 2 gave a curve up
+    // to 15 mm away from --step-mm 1. The step now only resamples one curve: every second point
+    // at 1 mm is the point at 2 mm.
+    const TubeCase tc{"coarseUBend", test::makeFrame(3.0, true), Axis::uBend({30, 30, 30}, 60, 50, 25), 9.0};
+    SCOPED_TRACE(tc.describe());
+    const auto sdf = test::makeTubeSdf(tc.frame, tc.axis, tc.radiusMm);
+    CenterlineParams one, two;
+    two.stepMm = 2.0;
+    const Centerline a = extractCenterline(*sdf, one), b = extractCenterline(*sdf, two);
+    ASSERT_GE(a.points.size(), 20u);
+    ASSERT_EQ(b.points.size(), (a.points.size() + 1) / 2);
+    double worst = 0;
+    for (std::size_t k = 0; k < b.points.size(); ++k)
+        worst = std::max(worst, distance(b.points[k].positionMm, a.points[2 * k].positionMm));
+    EXPECT_LT(worst, 1e-6) << "mm between the 2 mm path and every second point of the 1 mm path";
+}
+
 TEST(Centerline, IgnoresLumenCrumbsSmallerThanMinPiece)
 {
     // Pieces of at least minPieceMl are bridged into the path (the collapse tests); a crumb of

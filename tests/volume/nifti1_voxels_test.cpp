@@ -1,0 +1,234 @@
+// NIfTI-1 voxels read by flyover (volume/io/nifti1.h, raw_voxels.h: pread, or inflated while
+// read) must be exactly what ITK's NiftiImageIO gives for the same file: every voxel type,
+// both byte orders, with and without scl_slope/scl_inter, plain and gzipped. Also: a gzip
+// stream that ends early, and a source closed while its reading thread is ahead of it.
+
+#include "volume/error.h"
+#include "volume/image_io.h"
+
+#include <itkImage.h>
+#include <itkImageFileReader.h>
+#include <itkNiftiImageIO.h>
+#include <nifti/nifti1.h>
+
+#include <gtest/gtest.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+namespace fs = std::filesystem;
+using namespace flyover;
+
+namespace {
+
+struct Dir {
+    fs::path path;
+    explicit Dir(const std::string& tag)
+        : path(fs::temp_directory_path() / ("flyover-nifti1-" + tag + "-" + std::to_string(::getpid())))
+    {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~Dir() { fs::remove_all(path); }
+};
+
+template <typename T>
+void reverseBytes(T& v)
+{
+    auto* b = reinterpret_cast<unsigned char*>(&v);
+    std::reverse(b, b + sizeof(T));
+}
+
+/// A value of voxel (i, j, k) in the range of type T, signs and large magnitudes included.
+template <typename T>
+T pattern(int i, int j, int k)
+{
+    const long long n = i * 7 + j * 131 + k * 1031;
+    if constexpr (std::is_floating_point_v<T>) return T((n % 2000) * 0.37 - 250.25);
+    else if constexpr (sizeof(T) == 1) return T(n % 251 + (std::is_signed_v<T> ? -125 : 0));
+    else if constexpr (sizeof(T) == 2) return T(n * 37 % 60000 + (std::is_signed_v<T> ? -30000 : 0));
+    else if constexpr (sizeof(T) == 4) return T(n * 2654435 % 4000000000LL + (std::is_signed_v<T> ? -2000000000LL : 0));
+    else return T(n * 976369LL * 1024 + (std::is_signed_v<T> ? -(1LL << 40) : 0));
+}
+
+struct Layout {
+    int nx = 9, ny = 7, nz = 5;
+    bool bigEndian = false;
+    float slope = 0, inter = 0;
+};
+
+/// A .nii file (header, 4 bytes of extension flag, voxels), in either byte order.
+template <typename T>
+std::vector<char> niftiBytes(short datatype, const Layout& l)
+{
+    nifti_1_header h{};
+    h.sizeof_hdr = 348;
+    std::memcpy(h.magic, "n+1\0", 4);
+    h.datatype = datatype;
+    h.bitpix = short(8 * sizeof(T));
+    const short dims[8] = {3, short(l.nx), short(l.ny), short(l.nz), 1, 1, 1, 1};
+    std::memcpy(h.dim, dims, sizeof dims);
+    const float pixdim[4] = {1, 0.7f, 0.8f, 1.5f};
+    std::memcpy(h.pixdim, pixdim, sizeof pixdim);
+    h.vox_offset = 352;
+    h.scl_slope = l.slope;
+    h.scl_inter = l.inter;
+    h.xyzt_units = 2;
+    if (l.bigEndian) {
+        reverseBytes(h.sizeof_hdr);
+        for (auto& d : h.dim) reverseBytes(d);
+        reverseBytes(h.datatype);
+        reverseBytes(h.bitpix);
+        for (auto& p : h.pixdim) reverseBytes(p);
+        reverseBytes(h.vox_offset);
+        reverseBytes(h.scl_slope);
+        reverseBytes(h.scl_inter);
+    }
+    std::vector<char> bytes(352 + sizeof(T) * std::size_t(l.nx * l.ny * l.nz), 0);
+    std::memcpy(bytes.data(), &h, sizeof h);
+    std::size_t at = 352;
+    for (int k = 0; k < l.nz; ++k)
+        for (int j = 0; j < l.ny; ++j)
+            for (int i = 0; i < l.nx; ++i) {
+                T v = pattern<T>(i, j, k);
+                if (l.bigEndian) reverseBytes(v);
+                std::memcpy(bytes.data() + at, &v, sizeof(T));
+                at += sizeof(T);
+            }
+    return bytes;
+}
+
+void writePlain(const fs::path& p, const std::vector<char>& bytes)
+{
+    std::ofstream(p, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+void writeGzip(const fs::path& p, const std::vector<char>& bytes)
+{
+    gzFile f = ::gzopen(p.c_str(), "wb6");
+    ASSERT_NE(f, nullptr);
+    ASSERT_EQ(::gzwrite(f, bytes.data(), unsigned(bytes.size())), int(bytes.size()));
+    ::gzclose(f);
+}
+
+/// ITK's own reading of the file, as float (the reference).
+std::vector<float> itkVoxels(const fs::path& p)
+{
+    using Image = itk::Image<float, 3>;
+    auto reader = itk::ImageFileReader<Image>::New();
+    reader->SetImageIO(itk::NiftiImageIO::New());
+    reader->SetFileName(p.string());
+    reader->Update();
+    const Image* img = reader->GetOutput();
+    const auto n = img->GetLargestPossibleRegion().GetNumberOfPixels();
+    return std::vector<float>(img->GetBufferPointer(), img->GetBufferPointer() + n);
+}
+
+/// Checks every voxel of flyover's reading against ITK's, bit for bit (NaN never occurs).
+void expectSameAsItk(const fs::path& p, bool byFlyover)
+{
+    const std::vector<float> itk = itkVoxels(p);
+    auto source = openImage(p.string());
+    EXPECT_EQ(source->description().find("by flyover") != std::string::npos, byFlyover)
+        << p.filename() << ": " << source->description();
+    const Image3<float> ours = readImage(p.string());
+    ASSERT_EQ(ours.voxels.size(), itk.size()) << p.filename();
+    std::size_t differ = 0, first = itk.size();
+    for (std::size_t n = 0; n < itk.size(); ++n)
+        if (std::memcmp(&ours.voxels[n], &itk[n], sizeof(float)) != 0 && differ++ == 0) first = n;
+    EXPECT_EQ(differ, 0u) << p.filename() << ": " << differ << " voxels differ from ITK's, the first #" << first
+                          << ": flyover " << ours.voxels[first] << ", ITK " << itk[first];
+}
+
+template <typename T>
+void checkType(short datatype, const char* name)
+{
+    const Dir dir(name);
+    for (bool big : {false, true})
+        for (int scaled = 0; scaled < 2; ++scaled)
+            for (bool gz : {false, true}) {
+                Layout l;
+                l.bigEndian = big;
+                if (scaled) {  // inexact in binary: float and double arithmetic round differently
+                    l.slope = 0.37f;
+                    l.inter = -1024.3f;
+                }
+                const std::string file = std::string(name) + (big ? "_be" : "_le") + (scaled ? "_scaled" : "") +
+                                         (gz ? ".nii.gz" : ".nii");
+                const fs::path p = dir.path / file;
+                const auto bytes = niftiBytes<T>(datatype, l);
+                if (gz) writeGzip(p, bytes);
+                else writePlain(p, bytes);
+                // Scaled doubles are left to ITK (it scales them in double).
+                SCOPED_TRACE(file);
+                expectSameAsItk(p, !(scaled && std::is_same_v<T, double>));
+            }
+}
+
+} // namespace
+
+TEST(Nifti1Voxels, EveryTypeByteOrderScalingAndGzipReadsExactlyAsItk)
+{
+    checkType<uint8_t>(DT_UINT8, "uint8");
+    checkType<int8_t>(DT_INT8, "int8");
+    checkType<int16_t>(DT_INT16, "int16");
+    checkType<uint16_t>(DT_UINT16, "uint16");
+    checkType<int32_t>(DT_INT32, "int32");
+    checkType<uint32_t>(DT_UINT32, "uint32");
+    checkType<int64_t>(DT_INT64, "int64");
+    checkType<float>(DT_FLOAT32, "float32");
+    checkType<double>(DT_FLOAT64, "float64");
+}
+
+TEST(Nifti1Voxels, AGzipStreamEndingEarlyIsRefusedNamingTheFile)
+{
+    const Dir dir("short");
+    Layout l;
+    auto bytes = niftiBytes<int16_t>(DT_INT16, l);
+    bytes.resize(bytes.size() - 2 * std::size_t(l.nx * l.ny) - 10);  // a clean gzip stream of a cut file
+    const fs::path p = dir.path / "short.nii.gz";
+    writeGzip(p, bytes);
+    std::string message;
+    try {
+        auto source = openImage(p.string());
+        std::vector<float> all(std::size_t(l.nx * l.ny * l.nz));
+        source->readSlices(0, l.nz, all.data());
+    } catch (const InputError& e) {
+        message = e.what();
+    }
+    EXPECT_NE(message.find("short.nii.gz: header/data size mismatch"), std::string::npos) << message;
+    EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+}
+
+TEST(Nifti1Voxels, ClosingASourceWhileItsReaderIsAheadNeitherHangsNorLeaks)
+{
+    // 256 x 256 x 160 int16: the reading thread runs up to a few blocks ahead and then waits;
+    // closing the source must stop it. Reading forward, backwards and forward again gives the
+    // same values.
+    const Dir dir("ahead");
+    Layout l;
+    l.nx = 256;
+    l.ny = 256;
+    l.nz = 160;
+    const fs::path p = dir.path / "ahead.nii.gz";
+    writeGzip(p, niftiBytes<int16_t>(DT_INT16, l));
+    const std::size_t perSlice = std::size_t(l.nx * l.ny);
+    std::vector<float> a(perSlice * 2), b(perSlice * 2);
+    for (int round = 0; round < 3; ++round) {
+        auto source = openImage(p.string());
+        EXPECT_EQ(source->heldBytes(), 0);
+        source->readSlices(150, 152, a.data());
+        source->readSlices(3, 5, b.data());
+        EXPECT_EQ(b[0], float(pattern<int16_t>(0, 0, 3)));
+        EXPECT_EQ(a[perSlice + 5], float(pattern<int16_t>(5, 0, 151)));
+        source->readSlices(0, 1, b.data());  // and close with the reader running ahead
+        EXPECT_EQ(b[l.nx + 1], float(pattern<int16_t>(1, 1, 0)));
+    }
+}
