@@ -196,7 +196,7 @@ nlohmann::json stageParamsToJson(const PipelineParams& params, const std::string
 int stageVersion(const std::string& stage)
 {
     if (stage == "ingest") return IngestParams::VERSION;
-    if (stage == "segment") return SegmentParams::VERSION;
+    if (stage == "segment") return SegmentParams::VERSION * 100 + ContactParams::VERSION;  // contacts: end of segment
     if (stage == "centerline") return CenterlineParams::VERSION;
     if (stage == "mesh") return MeshParams::VERSION;
     if (stage == "render") return RenderParams::VERSION;

@@ -48,7 +48,8 @@ json cutLumenContacts(StudyRun& run, LumenSegmentation& seg)
                             {"side_b_mm", vec3Json(c.sideMm[1])},
                             {"side_radius_mm", json::array({c.sideRadiusMm[0], c.sideRadiusMm[1]})},
                             {"straight_mm", c.straightMm},
-                            {"detour_mm", c.detourMm},
+                            {"detour_mm", c.detourMm},  // at least; null: no way round
+                            {"links", c.links},
                             {"voxels_removed", c.voxelsRemoved},
                             {"cut", c.cut},
                             {"reason", c.reason}});
@@ -62,9 +63,12 @@ json cutLumenContacts(StudyRun& run, LumenSegmentation& seg)
                                  mm(c.detourMm) + " mm the way round): " + c.reason);
     return json{{"world_frame", "LPS"},
                 {"enabled", params.enabled},
-                {"criterion", "the narrowest link of a cycle through the lumen, cut when its neck radius is "
-                              "below contact_neck_ratio x the lumen radius on both sides and the way round "
-                              "is long (a loop); a narrow place closing no cycle (a collapse) is never cut"},
+                {"criterion", "a neck whose radius is below contact_neck_ratio x the lumen radius on both "
+                              "sides, cut when it closes a cycle whose way round through the lumen deeper "
+                              "than the neck is long (a loop, not a polyp or fold within one tube), or when "
+                              "it closes none but meets a tube from the side on both hands (two loops kept "
+                              "apart along the colon by a collapse); a narrow place across one tube (a "
+                              "collapse, stricture or fold) is never cut"},
                 {"regions", report.regions},
                 {"links", report.links},
                 {"cycle_links", report.cycleLinks},

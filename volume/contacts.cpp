@@ -5,10 +5,12 @@
 //  3. regions: priority flood from the chunks in order of decreasing D (bucket queue);
 //  4. region graph: per touching pair of regions the saddle (largest min(D, D') over the
 //     26-neighbour pairs across their interface);
-//  5. maximum spanning forest by relative width; the edges left out close cycles; a narrow one
-//     with a long detour is a contact;
-//  6. cut: the interface voxels of both regions, checked not to split the lumen; written back
-//     to the grids with the distances near the cut corrected.
+//  5. maximum spanning forest by relative width; a narrow link left out (it closes a cycle) is a
+//     contact when the way round through the lumen deeper than its neck is long (5a); a narrow
+//     tree link is one when it meets a tube from the side on both hands (5b);
+//  6. cut: the interface voxels of both regions, checked not to split the lumen more than the
+//     kind of cut allows; written back to the grids with the distances near the cut corrected;
+//     cuts close together reported as one contact.
 // Searches are serial and deterministic; scans over voxels run in parallel.
 #include "volume/contacts.h"
 
@@ -40,6 +42,8 @@ using namespace lumen_index;
 /// The 13 of the 26 steps that point "backwards" (see STEPS' order): visiting only these from
 /// every voxel visits each neighbouring pair once.
 constexpr int HALF_STEPS = 13;
+
+constexpr double PI = 3.14159265358979323846;
 
 struct UnionFind {
     std::vector<int> parent;
@@ -89,6 +93,8 @@ void validate(const openvdb::FloatGrid& sdf, const ContactParams& p)
         bad("minDetourRatio must be finite and >= 1");
     if (!(p.minDetourMm >= 0) || !std::isfinite(p.minDetourMm)) bad("minDetourMm must be finite and >= 0");
     if (!(p.chunkMm > 0) || !std::isfinite(p.chunkMm)) bad("chunkMm must be finite and > 0");
+    if (!(p.minArmMm >= 0) || !std::isfinite(p.minArmMm)) bad("minArmMm must be finite and >= 0");
+    if (!(p.minArmRadii >= 0) || !std::isfinite(p.minArmRadii)) bad("minArmRadii must be finite and >= 0");
     const auto& xf = sdf.transform();
     if (!xf.isLinear()) throw InputError("cutContacts: the sdf grid's transform is not linear");
     const openvdb::Vec3d vs = xf.voxelSize();
@@ -318,48 +324,132 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
     }
     std::vector<Vec3d> nodeMm(regionCount);
     for (std::int32_t r = 0; r < regionCount; ++r) nodeMm[r] = worldOf(peakSlot[r]);
-    auto narrow = [&](const Link& l) { return !l.tree && l.ratio < params.maxNeckRatio; };
-    // The graph for detours: every link but the narrow cycle-closing ones.
-    std::vector<std::vector<std::pair<std::int32_t, double>>> adjacency(regionCount);
-    for (const Link& l : links)
-        if (!narrow(l)) {
-            const double len = distance(nodeMm[l.a], nodeMm[l.b]);
-            adjacency[l.a].push_back({l.b, len});
-            adjacency[l.b].push_back({l.a, len});
+    auto narrow = [&](const Link& l) { return l.ratio < params.maxNeckRatio; };
+
+    // Wide cycles (counted only): the way round through the region graph, without the narrow
+    // links, is long.
+    {
+        std::vector<std::vector<std::pair<std::int32_t, double>>> adjacency(regionCount);
+        for (const Link& l : links)
+            if (l.tree || !narrow(l)) {
+                const double len = distance(nodeMm[l.a], nodeMm[l.b]);
+                adjacency[l.a].push_back({l.b, len});
+                adjacency[l.b].push_back({l.a, len});
+            }
+        auto graphDetourMm = [&](const Link& skip) {
+            std::vector<double> dist(regionCount, std::numeric_limits<double>::infinity());
+            using Entry = std::pair<double, std::int32_t>;
+            std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> heap;
+            dist[skip.a] = 0;
+            heap.push({0.0, skip.a});
+            while (!heap.empty()) {
+                const auto [d, u] = heap.top();
+                heap.pop();
+                if (d > dist[u]) continue;
+                if (u == skip.b) return d;
+                for (const auto& [v, len] : adjacency[u]) {
+                    if ((u == skip.a && v == skip.b) || (u == skip.b && v == skip.a)) continue;
+                    if (d + len < dist[v]) {
+                        dist[v] = d + len;
+                        heap.push({d + len, v});
+                    }
+                }
+            }
+            return std::numeric_limits<double>::infinity();
+        };
+        for (const Link& l : links) {
+            if (l.tree) continue;
+            ++report.cycleLinks;
+            if (narrow(l)) continue;
+            const double straight = distance(nodeMm[l.a], nodeMm[l.b]);
+            const double detour = graphDetourMm(l);
+            if (detour >= params.minDetourRatio * straight && detour >= straight + params.minDetourMm)
+                ++report.wideCycles;
         }
-    auto detourMm = [&](const Link& skip) {
-        std::vector<double> dist(regionCount, std::numeric_limits<double>::infinity());
-        using Entry = std::pair<double, std::int32_t>;
+    }
+    reportProgress(progress, 0.6, "contacts: narrow links");
+
+    // The narrow links and their interface voxels (what a cut removes: the voxels of either
+    // region with a 26-neighbour in the other), in slot order.
+    std::vector<std::size_t> narrowLinks;
+    std::unordered_map<std::uint64_t, int> narrowOf;
+    for (std::size_t i = 0; i < links.size(); ++i)
+        if (narrow(links[i])) {
+            narrowOf[pairKey(links[i].a, links[i].b)] = static_cast<int>(narrowLinks.size());
+            narrowLinks.push_back(i);
+        }
+    std::vector<std::vector<Slot>> interfaceOf(narrowLinks.size());
+    if (!narrowLinks.empty()) {
+        using Hits = std::vector<std::pair<int, Slot>>;
+        tbb::enumerable_thread_specific<Hits> local;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            Hits& hits = local.local();
+            for (std::size_t s = r.begin(); s != r.end(); ++s) {
+                if (!index.isLumen(static_cast<Slot>(s))) continue;
+                const std::int32_t rs = region[s];
+                int last = -1;
+                index.forEachNeighbour(static_cast<Slot>(s), [&](Slot t, int) {
+                    const std::int32_t rt = region[t];
+                    if (rt == rs) return;
+                    auto it = narrowOf.find(pairKey(rs, rt));
+                    if (it == narrowOf.end() || it->second == last) return;
+                    last = it->second;
+                    hits.push_back({it->second, static_cast<Slot>(s)});
+                });
+            }
+        });
+        for (const Hits& hits : local)
+            for (const auto& [k, s] : hits) interfaceOf[k].push_back(s);
+        for (std::vector<Slot>& v : interfaceOf) {
+            std::sort(v.begin(), v.end());
+            v.erase(std::unique(v.begin(), v.end()), v.end());
+        }
+    }
+
+    // The way round: the shortest path through the lumen from `from` to `to` over voxels
+    // deeper than `above` and not removed (26-steps); +inf when longer than boundMm.
+    std::vector<std::uint8_t> removed(n, 0);
+    std::vector<float> reach(n, std::numeric_limits<float>::infinity());
+    auto wayRoundMm = [&](Slot from, Slot to, float above, double boundMm) {
+        std::vector<Slot> touched;
+        using Entry = std::pair<float, Slot>;
         std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> heap;
-        dist[skip.a] = 0;
-        heap.push({0.0, skip.a});
+        reach[from] = 0.0f;
+        touched.push_back(from);
+        heap.push({0.0f, from});
+        double found = std::numeric_limits<double>::infinity();
+        std::size_t pops = 0;
         while (!heap.empty()) {
             const auto [d, u] = heap.top();
             heap.pop();
-            if (d > dist[u]) continue;
-            if (u == skip.b) return d;
-            for (const auto& [v, len] : adjacency[u]) {
-                if ((u == skip.a && v == skip.b) || (u == skip.b && v == skip.a)) continue;
-                if (d + len < dist[v]) {
-                    dist[v] = d + len;
-                    heap.push({d + len, v});
-                }
+            if ((++pops & 0xfffff) == 0) checkCancelled(progress);
+            if (d > reach[u]) continue;
+            if (u == to) {
+                found = d;
+                break;
             }
+            index.forEachNeighbour(u, [&](Slot t, int k) {
+                if (removed[t] || !(index.depthMm[t] > above)) return;
+                const float nd = d + static_cast<float>(STEPS[k].lengthVoxels * voxelMm);
+                if (nd < reach[t] && nd <= boundMm) {
+                    if (reach[t] == std::numeric_limits<float>::infinity()) touched.push_back(t);
+                    reach[t] = nd;
+                    heap.push({nd, t});
+                }
+            });
         }
-        return std::numeric_limits<double>::infinity();
+        for (Slot s : touched) reach[s] = std::numeric_limits<float>::infinity();
+        return found;
     };
-    std::vector<const Link*> toCut;
-    for (const Link& l : links) {
-        if (l.tree) continue;
-        ++report.cycleLinks;
-        const double straight = distance(nodeMm[l.a], nodeMm[l.b]);
-        const double detour = detourMm(l);
-        const bool loop = detour >= params.minDetourRatio * straight && detour >= straight + params.minDetourMm;
-        if (!loop) continue;  // a small cycle of regions meeting three at a time, or a pocket
-        if (!narrow(l)) {
-            ++report.wideCycles;
-            continue;
-        }
+
+    struct Cut {
+        int narrow = 0;     ///< index into narrowLinks
+        bool tree = false;  ///< a tree link (no cycle): the cut adds a piece
+        ContactInfo info;
+    };
+    std::vector<Cut> cuts;
+    auto contactInfo = [&](const Link& l) {
         ContactInfo c;
         c.positionMm = (worldOf(l.sa) + worldOf(l.sb)) * 0.5;
         c.widthMm = 2.0 * double(l.saddle);
@@ -367,85 +457,200 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         c.sideMm[1] = nodeMm[l.b];
         c.sideRadiusMm[0] = peak[l.a];
         c.sideRadiusMm[1] = peak[l.b];
-        c.straightMm = straight;
-        c.detourMm = detour;
+        c.straightMm = distance(nodeMm[l.a], nodeMm[l.b]);
         c.cut = true;
-        c.reason = "narrowest link of a cycle through the lumen: a contact between loops";
-        toCut.push_back(&l);
-        report.contacts.push_back(c);
-    }
-    reportProgress(progress, 0.7, "contacts: cut");
+        return c;
+    };
 
-    // 6. Cut: the interface voxels of each contact's two regions.
-    if (!toCut.empty()) {
-        std::unordered_map<std::uint64_t, int> cutIndex;  // pair -> index into toCut
-        for (std::size_t i = 0; i < toCut.size(); ++i)
-            cutIndex[pairKey(toCut[i]->a, toCut[i]->b)] = static_cast<int>(i);
-        std::vector<std::int16_t> cutOf(n, -1);  // per slot: which cut removes it
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                if (!index.isLumen(static_cast<Slot>(s))) continue;
-                const std::int32_t rs = region[s];
-                index.forEachNeighbour(static_cast<Slot>(s), [&](Slot t, int) {
-                    const std::int32_t rt = region[t];
-                    if (rt == rs || cutOf[s] >= 0) return;
-                    auto it = cutIndex.find(pairKey(rs, rt));
-                    if (it != cutIndex.end()) cutOf[s] = static_cast<std::int16_t>(it->second);
-                });
-            }
+    // 5a. Narrow links that close a cycle, widest first (a cut one is no way round for the
+    // next): a contact when the way round through the lumen deeper than the neck is long.
+    {
+        std::vector<int> order;
+        for (std::size_t k = 0; k < narrowLinks.size(); ++k)
+            if (!links[narrowLinks[k]].tree) order.push_back(static_cast<int>(k));
+        std::stable_sort(order.begin(), order.end(), [&](int x, int y) {
+            return links[narrowLinks[x]].saddle > links[narrowLinks[y]].saddle;
         });
-        std::vector<std::uint8_t> removed(n, 0), active(toCut.size(), 1);
-        for (std::size_t s = 0; s < n; ++s) removed[s] = cutOf[s] >= 0;
-        if (countPieces(index, removed, progress) > report.pieces) {
-            // Some cut splits the lumen (its interface voxels also carried another link): add
-            // the cuts one at a time and keep those that do not.
+        for (int k : order) {
+            const Link& l = links[narrowLinks[k]];
+            ContactInfo c = contactInfo(l);
+            const double aroundMm = PI * std::max(c.sideRadiusMm[0], c.sideRadiusMm[1]);
+            const double need = std::max(params.minDetourRatio * c.straightMm,
+                                         c.straightMm + std::max(params.minDetourMm, aroundMm));
+            const double way = wayRoundMm(peakSlot[l.a], peakSlot[l.b], l.saddle, need);
+            if (way < need) continue;  // regions meeting around a fold, a bend or a pocket
+            c.detourMm = need;  // at least
+            c.reason = "narrowest link of a cycle through the lumen: a contact between loops";
+            for (Slot s : interfaceOf[k]) removed[s] = 1;
+            cuts.push_back({k, false, c});
+        }
+    }
+    reportProgress(progress, 0.7, "contacts: tree links");
+
+    // 5b. Narrow links of the spanning tree (no cycle: a collapse elsewhere keeps the two loops
+    // apart along the colon): a contact when, on both sides, the link meets a tube from the side.
+    // Per side (the tree without the link): its longest path (two farthest-point passes along
+    // the tree, peaks to peaks), the point of that path nearest to the link's region, and the
+    // lengths of the path on either side of it (the arms). A collapse, a stricture or a fold
+    // lies across the tube: on each side it is at the end of the longest path (one arm ~0).
+    {
+        std::vector<std::vector<std::pair<std::int32_t, double>>> tree(regionCount);
+        for (const Link& l : links)
+            if (l.tree) {
+                const double len = distance(nodeMm[l.a], nodeMm[l.b]);
+                tree[l.a].push_back({l.b, len});
+                tree[l.b].push_back({l.a, len});
+            }
+        std::vector<double> fromRoot(regionCount, -1.0), fromEnd(regionCount, -1.0);
+        std::vector<std::int32_t> parent(regionCount, -1);
+        std::vector<std::int32_t> stack, seen;
+        // Tree distances from `start` (d: all -1 before) not crossing the link (cutA, cutB);
+        // `seen` gets the side's regions; returns the farthest one.
+        auto sweep = [&](std::int32_t start, std::int32_t cutA, std::int32_t cutB, std::vector<double>& d) {
+            seen.assign(1, start);
+            stack.assign(1, start);
+            d[start] = 0;
+            parent[start] = -1;
+            std::int32_t far = start;
+            while (!stack.empty()) {
+                const std::int32_t u = stack.back();
+                stack.pop_back();
+                if (d[u] > d[far]) far = u;
+                for (const auto& [v, len] : tree[u]) {
+                    if ((u == cutA && v == cutB) || (u == cutB && v == cutA) || d[v] >= 0) continue;
+                    d[v] = d[u] + len;
+                    parent[v] = u;
+                    seen.push_back(v);
+                    stack.push_back(v);
+                }
+            }
+            return far;
+        };
+        // The shorter arm of the side of `root` (see above).
+        auto shorterArm = [&](std::int32_t root, std::int32_t other) {
+            const std::int32_t e1 = sweep(root, root, other, fromRoot);
+            const std::int32_t e2 = sweep(e1, root, other, fromEnd);
+            // Along the longest path e2 -> e1 (the second sweep's parents lead to e1).
+            double best = std::numeric_limits<double>::infinity(), arm = 0;
+            for (std::int32_t u = e2; u >= 0; u = parent[u])
+                if (fromRoot[u] < best) {
+                    best = fromRoot[u];
+                    arm = std::min(fromEnd[u], fromEnd[e2] - fromEnd[u]);
+                }
+            for (std::int32_t r : seen) fromRoot[r] = fromEnd[r] = -1.0;
+            return arm;
+        };
+        for (std::size_t k = 0; k < narrowLinks.size(); ++k) {
+            const Link& l = links[narrowLinks[k]];
+            if (!l.tree) continue;
+            const double armA = shorterArm(l.a, l.b), armB = shorterArm(l.b, l.a);
+            const double needA = std::max(params.minArmMm, params.minArmRadii * peak[l.a]);
+            const double needB = std::max(params.minArmMm, params.minArmRadii * peak[l.b]);
+            if (armA < needA || armB < needB) continue;
+            ContactInfo c = contactInfo(l);
+            c.detourMm = std::numeric_limits<double>::infinity();
+            c.reason = "narrow link between the sides of two tubes (no way round: a collapse lies between "
+                       "them along the colon): a contact between loops";
+            for (Slot s : interfaceOf[k]) removed[s] = 1;
+            cuts.push_back({static_cast<int>(k), true, c});
+        }
+    }
+    reportProgress(progress, 0.8, "contacts: cut");
+
+    // 6. Cut: check that no cut splits the lumen more than its kind allows (a tree link's cut
+    // adds one piece, a cycle link's none), else add them one at a time and keep those that do
+    // not; write them to the grids with the distances near them corrected.
+    if (!cuts.empty()) {
+        std::size_t treeCuts = 0;
+        for (const Cut& c : cuts) treeCuts += c.tree;
+        if (countPieces(index, removed, progress) > report.pieces + treeCuts) {
             std::fill(removed.begin(), removed.end(), 0);
-            for (std::size_t i = 0; i < toCut.size(); ++i) {
-                for (std::size_t s = 0; s < n; ++s)
-                    if (cutOf[s] == static_cast<int>(i)) removed[s] = 1;
-                if (countPieces(index, removed, progress) > report.pieces) {
-                    active[i] = 0;
-                    for (std::size_t s = 0; s < n; ++s)
-                        if (cutOf[s] == static_cast<int>(i)) removed[s] = 0;
+            std::size_t allowed = report.pieces;
+            for (Cut& c : cuts) {
+                std::vector<Slot> added;
+                for (Slot s : interfaceOf[c.narrow])
+                    if (!removed[s]) {
+                        removed[s] = 1;
+                        added.push_back(s);
+                    }
+                if (countPieces(index, removed, progress) > allowed + (c.tree ? 1 : 0)) {
+                    for (Slot s : added) removed[s] = 0;
+                    c.info.cut = false;
+                    c.info.reason = "a contact whose cut would split the lumen further: kept";
+                } else {
+                    allowed += c.tree ? 1 : 0;
                 }
             }
         }
-        std::vector<std::vector<Coord>> voxels(toCut.size());
-        for (std::size_t s = 0; s < n; ++s)
-            if (removed[s]) voxels[cutOf[s]].push_back(index.coord(static_cast<Slot>(s)));
+        // Each removed voxel goes to the first cut that removes it.
+        std::vector<std::uint8_t> taken(n, 0);
+        std::vector<std::vector<Coord>> voxels(cuts.size());
+        for (std::size_t i = 0; i < cuts.size(); ++i) {
+            if (!cuts[i].info.cut) continue;
+            for (Slot s : interfaceOf[cuts[i].narrow])
+                if (removed[s] && !taken[s]) {
+                    taken[s] = 1;
+                    voxels[i].push_back(index.coord(s));
+                }
+        }
 
         openvdb::tree::ValueAccessor<openvdb::FloatTree> acc(sdf.tree());
         const float half = static_cast<float>(0.5 * voxelMm);
-        std::size_t c = 0;
-        for (std::size_t i = 0; i < toCut.size(); ++i) {
-            while (!report.contacts[c].cut) ++c;  // cut ones are in toCut's order
-            ContactInfo& info = report.contacts[c++];
-            if (!active[i]) {
-                info.cut = false;
-                info.reason = "a cycle's narrowest link whose cut would split the lumen: kept";
-                continue;
-            }
+        for (std::size_t i = 0; i < cuts.size(); ++i) {
+            ContactInfo& info = cuts[i].info;
+            if (!info.cut) continue;
             info.voxelsRemoved = voxels[i].size();
             for (const Coord& v : voxels[i]) {
                 acc.setValueOn(v, half);
                 if (mask) mask->tree().setValueOff(v, false);
             }
             // Distances near the cut: within the deeper side's radius of a removed voxel.
-            const int reach = std::min(
+            const int reachVoxels = std::min(
                 32, static_cast<int>(std::ceil(std::max(info.sideRadiusMm[0], info.sideRadiusMm[1]) / voxelMm)) + 1);
             for (const Coord& v : voxels[i])
-                for (int dx = -reach; dx <= reach; ++dx)
-                    for (int dy = -reach; dy <= reach; ++dy)
-                        for (int dz = -reach; dz <= reach; ++dz) {
+                for (int dx = -reachVoxels; dx <= reachVoxels; ++dx)
+                    for (int dy = -reachVoxels; dy <= reachVoxels; ++dy)
+                        for (int dz = -reachVoxels; dz <= reachVoxels; ++dz) {
                             const double r2 = double(dx * dx + dy * dy + dz * dz);
-                            if (r2 == 0 || r2 > double(reach * reach)) continue;
+                            if (r2 == 0 || r2 > double(reachVoxels * reachVoxels)) continue;
                             const Coord q = v.offsetBy(dx, dy, dz);
                             float value;
                             if (!acc.probeValue(q, value) || !(value < 0.0f)) continue;
                             const float bound = static_cast<float>(-(std::sqrt(r2) - 0.5) * voxelMm);
                             if (bound > value) acc.setValueOnly(q, bound);
                         }
+        }
+
+        // One contact per place: the links cut within the smaller lumen radius (at least three
+        // voxels) of each other are one contact (a channel touching several regions on a side);
+        // it is reported by its narrowest link.
+        UnionFind same(cuts.size());
+        for (std::size_t i = 0; i < cuts.size(); ++i)
+            for (std::size_t j = i + 1; j < cuts.size(); ++j) {
+                const ContactInfo &x = cuts[i].info, &y = cuts[j].info;
+                if (x.cut != y.cut) continue;
+                const double near = std::max(3.0 * voxelMm, std::min({x.sideRadiusMm[0], x.sideRadiusMm[1],
+                                                                      y.sideRadiusMm[0], y.sideRadiusMm[1]}));
+                if (distance(x.positionMm, y.positionMm) <= near) same.unite(int(i), int(j));
+            }
+        for (std::size_t i = 0; i < cuts.size(); ++i) {
+            if (same.find(int(i)) != int(i)) continue;
+            ContactInfo merged = cuts[i].info;
+            merged.links = 0;
+            merged.voxelsRemoved = 0;
+            for (std::size_t j = i; j < cuts.size(); ++j) {
+                if (same.find(int(j)) != int(i)) continue;
+                const ContactInfo& c = cuts[j].info;
+                merged.links += 1;
+                merged.voxelsRemoved += c.voxelsRemoved;
+                if (c.widthMm < merged.widthMm) {
+                    const std::size_t links = merged.links, removedVoxels = merged.voxelsRemoved;
+                    merged = c;
+                    merged.links = links;
+                    merged.voxelsRemoved = removedVoxels;
+                }
+            }
+            report.contacts.push_back(merged);
         }
         // Reported: cut contacts first, then those kept; each group narrowest first.
         std::stable_sort(report.contacts.begin(), report.contacts.end(),

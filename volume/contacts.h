@@ -1,45 +1,45 @@
 /// @file contacts.h
 /// @brief Contacts between touching loops of colon: where two loops pressed together are
 ///        joined in the lumen mask through a thin neck, found and cut so that the lumen's
-///        topology follows the colon (one unbranched tube per piece) before the centerline and
-///        the surface are made.
+///        topology follows the colon (one unbranched tube per piece) before the centerline.
 ///
-/// Criterion (and why). A colon is one tube: its lumen has no cycles. A contact between two
-/// loops adds one; a collapsed or narrowed stretch that continues the tube does not. So a
-/// narrow place is cut only when it closes a cycle, and only the narrowest link of that cycle:
-/// 1. Cores: voxels at least half as deep as the deepest voxel nearby (D = -sdf, D >= 0.5 x the
-///    largest D within about one leaf) and at least one voxel deep. A neck whose inscribed
-///    radius is under half the lumen's on both sides breaks the core there.
-/// 2. Chunks: the cores are cut into pieces of about chunkMm along their length (shells of
-///    breadth-first distance within each core piece, split into connected parts), so that a
-///    loop touching itself is two chunks at the contact, not one.
-/// 3. Regions: every lumen voxel joins the chunk it is reached from by flooding in order of
-///    decreasing D (a watershed of D), so two regions meet at the saddle of D between them,
-///    the narrowest place of the passage. Region graph: nodes = regions (radius = their
-///    largest D), edges = touching regions (width = D at the saddle).
-/// 4. Topology: a maximum spanning tree of the graph by relative width (saddle D / the
-///    smaller radius of the two sides) keeps the widest way through the lumen; each edge left
-///    out closes a cycle and is its narrowest link.
-/// 5. Contact: such an edge is cut when it is narrow (relative width < maxNeckRatio) and the
-///    way round without it and without any other narrow link is longer than the straight way
-///    (the detour through the region graph >= minDetourRatio x and >= minDetourMm more than
-///    the straight distance between the two sides): a loop, not regions meeting three at a
-///    time around a bend (small cycles whose way round is about as long as the straight one,
-///    which are left alone). On a real colon a tight flexure whose limbs touch skips only
-///    ~40 mm of colon, so the detour asked for is modest; a narrow link closing a small cycle
-///    is harmless to cut anyway (the path keeps to the wide way round). A narrow link that
-///    closes no cycle (a collapse, a stricture, a haustral fold) is never cut: the lumen stays
-///    connected there, and pieces that are already apart stay bridged as before. A cycle whose
-///    narrowest link is wide (loops fused over a large area) is counted, not cut.
-/// Cutting removes the voxels on both sides of the two regions' interface (a wall about two
-/// voxels thick: no 26-neighbour of one region is left in the other) from the mask and sets
-/// the sdf there to +half a voxel; the lumen voxels nearby get sdf = max(sdf, -(distance to
-/// the removed voxels - half a voxel)), so D stays a distance to the (new) wall. A cut that
-/// would split the lumen into more pieces is undone.
+/// Criterion (and why). A colon is one tube: no cycles, no branches. A contact joins two loops
+/// through a neck where two walls meet; a collapsed or narrowed stretch continues one tube.
+/// 1. Cores: voxels at least half as deep as the deepest nearby (D = -sdf) and >= 1 voxel deep;
+///    cut into chunks of ~chunkMm along their length; every lumen voxel joins the chunk it is
+///    reached from by flooding in order of decreasing D (a watershed of D): regions meet at
+///    the saddle of D, the narrowest place between them. Region graph: nodes = regions
+///    (radius = their deepest D), links = touching regions (width = D at the saddle).
+/// 2. A maximum spanning tree of the graph by relative width (saddle D / the smaller radius of
+///    the two sides) keeps the widest way through the lumen. A link is narrow when its relative
+///    width is below maxNeckRatio. A narrow link is a contact when either
+///    a. it closes a cycle and the way round is long: the shortest path through the lumen
+///       deeper than the neck (so it cannot cross this neck, nor a narrower one) between the
+///       two sides' deepest points is at least minDetourRatio x the straight distance and the
+///       straight distance + max(minDetourMm, pi x the larger side radius). Why: within one
+///       tube (around a polyp or a fold that meets the opposite wall, regions around a bend or
+///       a wide cecum) the way round is at most about half a circumference longer than the
+///       straight way; between two loops it is the colon between them. Measured through the
+///       voxels, not the region graph (whose zig-zag between region peaks made small cycles
+///       look long: the false cuts of the first version). Widest first; a cut is no way round.
+///    b. or it closes no cycle (a collapse between the two loops keeps them apart along the
+///       colon: the first version missed every such contact from the CT phantoms) and it meets
+///       a tube from the side on both hands: on each side (the spanning tree without the link),
+///       the longest path and the point of it nearest the link leave at least
+///       max(minArmMm, minArmRadii x radius) of tree on either hand. A collapse, stricture or
+///       fold lies across the tube: on one side it is the end of the longest path (arm ~0).
+/// Links cut within the smaller side radius (>= 3 voxels) of each other are one contact.
+/// Cutting removes the voxels of both regions along their interface (a wall ~2 voxels thick)
+/// from the mask, sets the sdf there to +half a voxel and caps the depth of the lumen nearby
+/// by the distance to the removed voxels. A cut that splits the lumen more than its kind
+/// allows (a: no new piece; b: one) is undone. Cycles with a long way round whose narrowest
+/// link is wide (loops fused over a large area) are counted, not cut.
 ///
 /// What it does not do: it does not look at HU (no wall is detected between the loops; the
-/// cut is where the lumen is narrowest); when a real stricture on a loop is narrower (relative
-/// to its radius) than the contact that closes the loop, the stricture is what gets cut.
+/// cut is where the lumen is narrowest); a loop's blind end (or a collapse's end) touching
+/// another loop is not cut (b needs a tube on both hands); when a stricture on a loop is
+/// narrower, relative to its radius, than the contact closing the loop, the stricture is cut;
+/// the region graph's detour estimate only counts wide cycles.
 #pragma once
 
 #include "volume/progress.h"
@@ -58,7 +58,12 @@ struct ContactParams {
     double minDetourRatio = 1.5;  ///< the way round / the straight distance, at least
     double minDetourMm = 20.0;    ///< the way round minus the straight distance, at least (mm)
     double chunkMm = 10.0;        ///< length of the core chunks (mm, > 0)
-    static constexpr int VERSION = 1;
+    /// A link with no way round is a contact only when it meets a tube from the side on both
+    /// sides, with at least this much tube (mm along the region tree) on either hand ...
+    double minArmMm = 15.0;
+    /// ... and at least this many times that side's lumen radius.
+    double minArmRadii = 1.0;
+    static constexpr int VERSION = 2;
 };
 
 /// A contact: the narrow, cycle-closing link of the lumen that was cut (or kept, see reason).
@@ -70,6 +75,7 @@ struct ContactInfo {
     double straightMm = 0;        ///< distance between the two side points (mm)
     double detourMm = 0;          ///< the way round through the lumen without this link (mm)
     std::size_t voxelsRemoved = 0;
+    std::size_t links = 1;        ///< region links cut at this place (a channel may touch several)
     bool cut = false;             ///< false: reported only (see reason)
     std::string reason;
 };

@@ -256,6 +256,38 @@ TEST(Contacts, NarrowPlacesWithoutCycleAreNeverCut)
     EXPECT_LT(cr.nearWall.front().minRadiusMm, 1.0);
 }
 
+TEST(Contacts, TubesJoinedFromTheSideWithoutACycleAreCut)
+{
+    // Two separate tubes (a collapse elsewhere keeps them apart along the colon) side by side,
+    // walls 3 mm apart, joined by one neck: no cycle, but the neck meets each tube from the
+    // side (60 mm of tube on either hand): a contact, cut, and the lumen is two pieces again.
+    const Frame frame = test::makeFrame(0.75, true);
+    auto grid = test::makeTubeSdf(frame, Axis::straight({20, 20, 10}, {20, 20, 130}), 6.0);
+    unionInto(*grid, *test::makeTubeSdf(frame, Axis::straight({35, 20, 10}, {35, 20, 130}), 6.0));
+    unionInto(*grid, *test::makeTubeSdf(frame, Axis::straight({20, 20, 70}, {35, 20, 70}), 1.2));
+    const ContactReport r = cutContacts(*grid, nullptr, ContactParams{});
+    EXPECT_EQ(r.pieces, 1u);
+    ASSERT_EQ(r.contacts.size(), 1u);
+    EXPECT_TRUE(r.contacts[0].cut) << r.contacts[0].reason;
+    const Vec3d at = frame.localFromWorld(r.contacts[0].positionMm);
+    EXPECT_NEAR(at.x, 27.5, 4.0);
+    EXPECT_NEAR(at.z, 70.0, 3.0);
+    EXPECT_LT(r.contacts[0].widthMm, 3.0);
+    const ContactReport after = cutContacts(*grid, nullptr, ContactParams{});
+    EXPECT_EQ(after.pieces, 2u) << "the two tubes are apart after the cut";
+    EXPECT_TRUE(after.contacts.empty());
+
+    // The end of one tube joined to the side of the other (a T): the neck continues a tube on
+    // one hand, as a collapse or a stricture does: not cut.
+    auto tee = test::makeTubeSdf(frame, Axis::straight({20, 20, 10}, {20, 20, 130}), 6.0);
+    unionInto(*tee, *test::makeTubeSdf(frame, Axis::straight({35, 20, 70}, {95, 20, 70}), 6.0));
+    unionInto(*tee, *test::makeTubeSdf(frame, Axis::straight({20, 20, 70}, {35, 20, 70}), 1.2));
+    const openvdb::Index64 before = tee->activeVoxelCount();
+    const ContactReport t = cutContacts(*tee, nullptr, ContactParams{});
+    EXPECT_TRUE(t.contacts.empty()) << t.contacts.size() << " contacts";
+    EXPECT_EQ(tee->activeVoxelCount(), before);
+}
+
 TEST(Contacts, DisabledOrBadParameters)
 {
     const Touching tc = uWithNeck(false, 0.75);
@@ -266,7 +298,8 @@ TEST(Contacts, DisabledOrBadParameters)
     for (auto set : std::vector<void (*)(ContactParams&)>{
              [](ContactParams& p) { p.maxNeckRatio = 0; }, [](ContactParams& p) { p.maxNeckRatio = 1.5; },
              [](ContactParams& p) { p.minDetourRatio = std::nan(""); },
-             [](ContactParams& p) { p.chunkMm = -1; }, [](ContactParams& p) { p.minDetourMm = -1; }}) {
+             [](ContactParams& p) { p.chunkMm = -1; }, [](ContactParams& p) { p.minDetourMm = -1; },
+             [](ContactParams& p) { p.minArmMm = -1; }, [](ContactParams& p) { p.minArmRadii = std::nan(""); }}) {
         ContactParams bad;
         set(bad);
         EXPECT_THROW(cutContacts(*sdf, nullptr, bad), ParameterError);
