@@ -1,5 +1,7 @@
 #include "pipeline/inspect_params.h"
 
+#include "pipeline/param_json.h"
+
 #include "volume/error.h"
 
 #include <cmath>
@@ -61,39 +63,16 @@ void fromJsonValue(const json& j, double& out, const std::string& name)
         out = std::numeric_limits<double>::quiet_NaN();
         return;
     }
-    if (!j.is_number()) throw ParameterError(name + ": expected a number, got " + j.dump());
-    out = j.get<double>();
-    if (!std::isfinite(out)) throw ParameterError(name + ": must be finite");
+    param_json::readNumber(j, out, name);
 }
-void fromJsonValue(const json& j, int& out, const std::string& name)
-{
-    if (!j.is_number_integer()) throw ParameterError(name + ": expected an integer, got " + j.dump());
-    out = j.get<int>();
-}
-void fromJsonValue(const json& j, bool& out, const std::string& name)
-{
-    if (!j.is_boolean()) throw ParameterError(name + ": expected true or false, got " + j.dump());
-    out = j.get<bool>();
-}
+void fromJsonValue(const json& j, int& out, const std::string& name) { param_json::readInteger(j, out, name); }
+void fromJsonValue(const json& j, bool& out, const std::string& name) { param_json::readBool(j, out, name); }
 
 template <typename P> void sectionFromJson(P& p, const json& j, const std::string& section)
 {
-    if (!j.is_object()) throw ParameterError(section + ": expected an object of parameters");
-    for (auto it = j.begin(); it != j.end(); ++it) {
-        bool found = false;
-        visit(p, [&](const char* key, auto& value, const char*) {
-            if (it.key() == key) {
-                fromJsonValue(it.value(), value, section + "." + key);
-                found = true;
-            }
-        });
-        if (!found) {
-            std::string known;
-            visit(p, [&](const char* key, auto&, const char*) { known += (known.empty() ? "" : ", ") + std::string(key); });
-            throw ParameterError("unknown parameter '" + section + "." + it.key() + "' (inspect " + section +
-                                 " has: " + known + ")");
-        }
-    }
+    param_json::readObject(
+        p, j, section, "inspect " + section, [](auto& q, auto&& f) { visit(q, f); },
+        [](const json& v, auto& out, const std::string& name) { fromJsonValue(v, out, name); });
 }
 
 } // namespace

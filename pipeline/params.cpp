@@ -1,5 +1,7 @@
 #include "pipeline/params.h"
 
+#include "pipeline/param_json.h"
+
 #include "volume/error.h"
 
 #include <cmath>
@@ -110,22 +112,9 @@ json toJsonValue(const std::optional<Vec3d>& v)
     return v ? json::array({v->x, v->y, v->z}) : json(nullptr);
 }
 
-void fromJsonValue(const json& j, double& out, const std::string& name)
-{
-    if (!j.is_number()) throw ParameterError(name + ": expected a number, got " + j.dump());
-    out = j.get<double>();
-    if (!std::isfinite(out)) throw ParameterError(name + ": must be finite");
-}
-void fromJsonValue(const json& j, int& out, const std::string& name)
-{
-    if (!j.is_number_integer()) throw ParameterError(name + ": expected an integer, got " + j.dump());
-    out = j.get<int>();
-}
-void fromJsonValue(const json& j, bool& out, const std::string& name)
-{
-    if (!j.is_boolean()) throw ParameterError(name + ": expected true or false, got " + j.dump());
-    out = j.get<bool>();
-}
+void fromJsonValue(const json& j, double& out, const std::string& name) { param_json::readNumber(j, out, name); }
+void fromJsonValue(const json& j, int& out, const std::string& name) { param_json::readInteger(j, out, name); }
+void fromJsonValue(const json& j, bool& out, const std::string& name) { param_json::readBool(j, out, name); }
 void fromJsonValue(const json& j, std::string& out, const std::string& name)
 {
     if (!j.is_string()) throw ParameterError(name + ": expected a string, got " + j.dump());
@@ -159,22 +148,9 @@ template <typename P> json paramsToJson(P& p)
 
 template <typename P> void paramsFromJson(P& p, const json& j, const std::string& stage)
 {
-    if (!j.is_object()) throw ParameterError(stage + ": expected an object of parameters");
-    for (auto it = j.begin(); it != j.end(); ++it) {
-        bool found = false;
-        visit(p, [&](const char* key, auto& value, const char*) {
-            if (it.key() == key) {
-                fromJsonValue(it.value(), value, stage + "." + key);
-                found = true;
-            }
-        });
-        if (!found) {
-            std::string known;
-            visit(p, [&](const char* key, auto&, const char*) { known += (known.empty() ? "" : ", ") + std::string(key); });
-            throw ParameterError("unknown parameter '" + stage + "." + it.key() + "' (" + stage +
-                                 " has: " + known + ")");
-        }
-    }
+    param_json::readObject(
+        p, j, stage, stage, [](auto& q, auto&& f) { visit(q, f); },
+        [](const json& v, auto& out, const std::string& name) { fromJsonValue(v, out, name); });
 }
 
 } // namespace
