@@ -971,7 +971,10 @@ double bodyInnerSignedDistanceMm(double x, double y)
     return (f - 1.0) * f / std::hypot(ux / a, uy / b);
 }
 
-ColonClearance colonSelfClearance(const PhantomAnatomy& a)
+namespace {
+/// The closest pair of non-adjacent centerline points (wall-to-wall gap), over the pairs `counts`
+/// accepts (counts(i, j, gap)).
+template <typename Counts> ColonClearance closestWalls(const PhantomAnatomy& a, Counts&& counts)
 {
     ColonClearance best;
     const std::size_t n = a.centerlineMm.size();
@@ -980,35 +983,30 @@ ColonClearance colonSelfClearance(const PhantomAnatomy& a)
         for (std::size_t j = i + skip; j < n; ++j) {
             const double gap = distance(a.centerlineMm[i], a.centerlineMm[j]) - a.radiusMm[i] -
                                a.radiusMm[j] - 2.0 * COLON_WALL_MM;
-            if (gap < best.gapMm)
+            if (gap < best.gapMm && counts(i, j, gap))
                 best = {gap, i, j};
         }
     return best;
 }
+} // namespace
+
+ColonClearance colonSelfClearance(const PhantomAnatomy& a)
+{
+    return closestWalls(a, [](std::size_t, std::size_t, double) { return true; });
+}
 
 ColonClearance colonClearanceOutsideContacts(const PhantomAnatomy& a)
 {
-    ColonClearance best;
-    const std::size_t n = a.centerlineMm.size();
-    const auto skip = std::size_t(std::ceil(NON_ADJACENT_ARC_MM / a.stepMm)) + 1;
-    for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t j = i + skip; j < n; ++j) {
-            const double gap = distance(a.centerlineMm[i], a.centerlineMm[j]) - a.radiusMm[i] -
-                               a.radiusMm[j] - 2.0 * COLON_WALL_MM;
-            if (gap >= best.gapMm)
-                continue;
-            bool inWindow = false;
-            for (std::size_t c = 0; c < a.contacts.size() && !inWindow; ++c) {
-                const double w = a.contactWindowMm[c] + 10.0;
-                inWindow = std::abs(double(i) * a.stepMm - a.contacts[c].arcAMm) <= w &&
-                           std::abs(double(j) * a.stepMm - a.contacts[c].arcBMm) <= w;
-            }
-            // Inside a window the walls may meet, but the lumens stay two walls apart.
-            if (inWindow && gap > -0.75)
-                continue;
-            best = {gap, i, j};
+    return closestWalls(a, [&](std::size_t i, std::size_t j, double gap) {
+        bool inWindow = false;
+        for (std::size_t c = 0; c < a.contacts.size() && !inWindow; ++c) {
+            const double w = a.contactWindowMm[c] + 10.0;
+            inWindow = std::abs(double(i) * a.stepMm - a.contacts[c].arcAMm) <= w &&
+                       std::abs(double(j) * a.stepMm - a.contacts[c].arcBMm) <= w;
         }
-    return best;
+        // Inside a window the walls may meet, but the lumens stay two walls apart.
+        return !(inWindow && gap > -0.75);
+    });
 }
 
 double contactSignedDistanceMm(const PhantomContact& c, const Vec3d& p)
