@@ -8,6 +8,8 @@
 #include "pipeline/study.h"
 #include "surface/mesh_types.h"
 #include "volume/centerline_types.h"
+#include "volume/image_io.h"
+#include "volume/ingest.h"
 #include "volume/progress.h"
 #include "volume/vec3.h"
 
@@ -86,6 +88,11 @@ private:
 };
 
 inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
+
+/// Reads run.opt.ctPath into an isotropic grid named `gridName`, writes it to ct.vdb and returns
+/// the ingest report (geometry, reader, warnings): the ingest of both `run` and `inspect`.
+nlohmann::json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOptions& options,
+                             const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid);
 
 // Stage bodies: each writes its artifacts (atomically) and returns its report.
 nlohmann::json runIngest(StudyRun& run, Progress* progress);

@@ -35,24 +35,19 @@ int64_t peakRssBytes()
 
 } // namespace
 
-json runIngest(StudyRun& run, Progress* progress)
+json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOptions& options,
+                   const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid)
 {
-    const IngestParams& params = run.opt.params.ingest;
-    ImageReadOptions options;
-    options.dicomSeriesUid = params.dicomSeries;
-    options.allowGaps = params.allowGaps;
-
     IngestReport rep;
-    openvdb::FloatGrid::Ptr grid;
     {
         auto source = openImage(run.opt.ctPath, options);
         for (const auto& w : source->warnings())
             if (run.opt.log) run.opt.log->message("ingest: warning: " + w);
         grid = ingestImage(*source, params, &rep, progress);
     }  // the source (and any temporary copy it made) is released before writing
-    // HU noise barely compresses (Blosc: -15% of the file for ~1 s of CPU on the critical path).
+    grid->setName(gridName);
+    // CT noise barely compresses (Blosc: -15% of the file for ~1 s of CPU on the critical path).
     writeGrids(run.path("ct.vdb"), {grid}, VdbValues::Raw);
-    run.state.hu = grid;
     return json{{"world_frame", WORLD_FRAME},
                 {"voxel_mm", rep.voxelMm},
                 {"interpolation", rep.interpolation},
@@ -70,6 +65,18 @@ json runIngest(StudyRun& run, Progress* progress)
                 {"working_bytes", rep.workingBytes},
                 {"process_peak_rss_bytes", peakRssBytes()},
                 {"warnings", rep.warnings}};
+}
+
+json runIngest(StudyRun& run, Progress* progress)
+{
+    const IngestParams& params = run.opt.params.ingest;
+    ImageReadOptions options;
+    options.dicomSeriesUid = params.dicomSeries;
+    options.allowGaps = params.allowGaps;
+    openvdb::FloatGrid::Ptr grid;
+    json report = ingestToCtVdb(run, params, options, "ct_hu", progress, grid);
+    run.state.hu = grid;
+    return report;
 }
 
 } // namespace flyover

@@ -238,31 +238,13 @@ json runPartIngest(StudyRun& run, Progress* progress)
     // No HU: nothing is "air outside the body". Every voxel stays active.
     params.outsideAirHu = double(std::numeric_limits<float>::lowest());
     params.backgroundHu = 0.0;
-    IngestReport rep;
     openvdb::FloatGrid::Ptr grid;
-    {
-        auto source = openImage(run.opt.ctPath);
-        for (const auto& w : source->warnings())
-            if (run.opt.log) run.opt.log->message("ingest: warning: " + w);
-        grid = ingestImage(*source, params, &rep, progress);
-    }
-    grid->setName(CT_GRID);
-    const auto range = openvdb::tools::minMax(grid->tree());
-    writeGrids(run.path("ct.vdb"), {grid});
+    json report = ingestToCtVdb(run, params, ImageReadOptions{}, CT_GRID, progress, grid);
     run.state.hu = grid;
-    return json{{"world_frame", WORLD_FRAME},
-                {"voxel_mm", rep.voxelMm},
-                {"interpolation", rep.interpolation},
-                {"active_voxels", rep.activeVoxels},
-                {"memory_bytes", rep.memoryBytes},
-                {"grid_size", rep.gridSize},
-                {"grid_origin_mm", vec3Json(rep.gridOriginMm)},
-                {"input_size", rep.inputSize},
-                {"input_spacing_mm", vec3Json(rep.inputSpacingMm)},
-                {"grey_min", range.min()},
-                {"grey_max", range.max()},
-                {"reader", rep.source},
-                {"warnings", rep.warnings}};
+    const auto range = openvdb::tools::minMax(grid->tree());
+    report["grey_min"] = range.min();
+    report["grey_max"] = range.max();
+    return report;
 }
 
 json runVoids(StudyRun& run, Progress* progress)
