@@ -9,7 +9,10 @@
 ///    the wall), so it keeps to the middle of the lumen;
 /// 3. the path is moved to the centroids of the lumen's cross-sections perpendicular to it
 ///    (sections cut by a haustral fold or a large polyp are recognised by their area and
-///    skipped), smoothed along its arc length, and continued straight into the blind ends.
+///    skipped), smoothed along its arc length, and continued straight into the blind ends;
+///    where the centred path is less than half as deep as the ridge of D beside it (sections
+///    that overlap in a bend tighter than the lumen radius pull it onto the inner wall), the
+///    ridge is kept.
 /// The rectum is the lowest piece end in world z, or the piece end nearest to rectumMm. Each
 /// piece's path runs between its own farthest pair whatever the hint, so the path traced from
 /// either end is the same curve. When the hint lies at no piece end (its nearest lumen voxel
@@ -55,7 +58,7 @@ struct CenterlineParams {
     double bridgeTurnMmPerRad = 20.0;
     /// Path points closer than this to the wall outside bridges are reported (mm, >= 0).
     double nearWallMm = 1.0;
-    static constexpr int VERSION = 4;
+    static constexpr int VERSION = 5;
 };
 
 /// One lumen piece as the centerline saw it.
