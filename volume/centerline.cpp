@@ -699,15 +699,20 @@ void extendEnd(std::vector<Vec3d>& path, DepthProbe& depthAt, double fineMm)
 /// the round before moved, moves the path further, until it hugs the inner wall or the tip of
 /// the fold between the limbs (gca-colon-00020: 16 mm off the reference path at D 1.6 mm, where
 /// the ridge kept 17 mm of lumen round the bend). So a point of the centred path less than
-/// SHALLOW_FRACTION as deep as the ridge point nearest to it marks a stretch that is no tube's
-/// section centre; the stretch, widened on either hand until the centred path is back within
+/// SHALLOW_FRACTION as deep as the ridge point nearest to it, and moved off it by more than
+/// OFFSET_FRACTION of that depth (a fold moves the centroid less), marks a stretch that is no
+/// tube's section centre; where the ridge itself has no lumen to speak of (under
+/// MIN_RIDGE_VOXELS deep: a neck or a thread of lumen, where it is no better a guide) nothing is
+/// replaced. The stretch, widened on either hand until the centred path is back within
 /// SEAM_FRACTION of the ridge's depth of it, is replaced by the ridge between the matching
 /// points (the smoothing that follows removes the small steps at the seams). Returns `centred`
 /// itself where no point is that shallow.
 std::vector<Vec3d> keepRidgeWhereShallow(const std::vector<Vec3d>& centred, const std::vector<Vec3d>& ridge,
-                                         const openvdb::FloatGrid& grid, double fineMm)
+                                         const openvdb::FloatGrid& grid, double voxelMm, double fineMm)
 {
     constexpr double SHALLOW_FRACTION = 0.5;
+    constexpr double OFFSET_FRACTION = 0.5;
+    constexpr double MIN_RIDGE_VOXELS = 2.0;
     constexpr double SEAM_FRACTION = 0.15;
     constexpr double MATCH_WINDOW_MM = 150.0;  // how far apart matching points may lie along the paths
     const long n = static_cast<long>(centred.size()), nr = static_cast<long>(ridge.size());
@@ -739,7 +744,11 @@ std::vector<Vec3d> keepRidgeWhereShallow(const std::vector<Vec3d>& centred, cons
             match[i] = best;
         }
     });
-    auto shallow = [&](long i) { return dc[i] < SHALLOW_FRACTION * dr[match[i]]; };
+    auto shallow = [&](long i) {
+        const double ridgeDepth = dr[match[i]];
+        return ridgeDepth >= MIN_RIDGE_VOXELS * voxelMm && dc[i] < SHALLOW_FRACTION * ridgeDepth &&
+               distance(centred[i], ridge[match[i]]) > OFFSET_FRACTION * ridgeDepth;
+    };
     auto onRidge = [&](long i) { return distance(centred[i], ridge[match[i]]) <= SEAM_FRACTION * dr[match[i]]; };
     std::vector<Vec3d> out;
     long copied = 0;  // centred[copied..] not yet handled
@@ -795,7 +804,7 @@ std::vector<Vec3d> refinePath(const std::vector<Vec3d>& raw, const openvdb::Floa
             }
             fine = resampleEven(moved, fineMm);
         }
-    if (params.centerSections) fine = keepRidgeWhereShallow(fine, ridge, grid, fineMm);
+    if (params.centerSections) fine = keepRidgeWhereShallow(fine, ridge, grid, voxelMm, fineMm);
     fine = smoothTwiced(fine, params.smoothingMm);
     extendEnd(fine, depthAt, fineMm);
     std::reverse(fine.begin(), fine.end());
