@@ -421,7 +421,9 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
         openvdb::tree::LeafManager<FloatTree> leaves(*f);
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
             FloatConstAccessor indAcc(*indicator);
-            for (auto it = leaf.beginValueOn(); it; ++it) it.setValue(0.5f - indAcc.getValue(it.getCoord()));
+            const FloatLeaf* indLeaf = indicator->probeConstLeaf(leaf.origin());
+            for (auto it = leaf.beginValueOn(); it; ++it)
+                it.setValue(0.5f - (indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord())));
         });
     }
     FloatGrid::Ptr fGrid = FloatGrid::create(f);
