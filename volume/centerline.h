@@ -10,9 +10,9 @@
 /// 3. the path is moved to the centroids of the lumen's cross-sections perpendicular to it
 ///    (sections cut by a haustral fold or a large polyp are recognised by their area and
 ///    skipped), smoothed along its arc length, and continued straight into the blind ends;
-///    where the centred path is less than half as deep as the ridge of D beside it (sections
-///    that overlap in a bend tighter than the lumen radius pull it onto the inner wall), the
-///    ridge is kept.
+///    where the centred path is less than half as deep as the ridge of D beside it and has moved
+///    off it by more than half that depth (sections that overlap in a bend tighter than the lumen
+///    radius pull it onto the inner wall), the ridge is kept.
 /// The rectum is the lowest piece end in world z, or the piece end nearest to rectumMm. Each
 /// piece's path runs between its own farthest pair whatever the hint, so the path traced from
 /// either end is the same curve. When the hint lies at no piece end (its nearest lumen voxel
