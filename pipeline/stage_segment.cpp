@@ -1,6 +1,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/speculative_mesh.h"
 #include "volume/image_io.h"
 #include "volume/lumen_mask.h"
 #include "volume/segment.h"
@@ -100,7 +101,13 @@ void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
 {
+    // The mesh of the lumen beside the contact cut, kept when the cut changes nothing.
+    std::shared_ptr<SpeculativeMesh> speculative;
+    if (run.state.meshWanted && seg.sdf && SpeculativeMesh::applicable(*seg.sdf))
+        speculative = std::make_shared<SpeculativeMesh>(*seg.sdf, run.opt.params.mesh);
     json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
+    if (speculative && contacts.value("cut", -1) == 0) run.state.speculativeMesh = std::move(speculative);
+    speculative.reset();  // a cut: cancelled, the mesh stage meshes the cut lumen
     writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
     run.state.sdf = seg.sdf;
     reportPieces(run, seg);

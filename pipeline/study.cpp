@@ -282,6 +282,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     ArtifactStore store(options.studyDir);
     store.removeStaleTemporaries();
     StudyRun run(options);
+    run.state.meshWanted = wanted.count("mesh") > 0;
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries
