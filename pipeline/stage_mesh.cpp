@@ -48,6 +48,8 @@ json runMesh(StudyRun& run, Progress* progress)
         components.push_back(componentJson(c.componentList[i]));
     const MeshStats& e = r.extraction;
     return json{
+        // Meshed beside the segment stage's contact cut (which removed nothing), or here.
+        {"made_beside_contact_cut", bool(speculative)},
         // The final surface (surface.ply).
         {"vertices", c.vertices},
         {"edges", c.edges},
