@@ -6,6 +6,8 @@
 #include "volume/lumen_mask.h"
 #include "volume/segment.h"
 
+#include <tbb/global_control.h>
+
 #include <filesystem>
 #include <iomanip>
 #include <sstream>
@@ -101,9 +103,11 @@ void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
 {
-    // The mesh of the lumen beside the contact cut, kept when the cut changes nothing.
+    // The mesh of the lumen beside the contact cut, kept when the cut changes nothing (not
+    // with --threads 1: that thread would be a second one).
     std::shared_ptr<SpeculativeMesh> speculative;
-    if (run.state.meshWanted && seg.sdf && SpeculativeMesh::applicable(*seg.sdf))
+    const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
+    if (threads && run.state.meshWanted && seg.sdf && SpeculativeMesh::applicable(*seg.sdf))
         speculative = std::make_shared<SpeculativeMesh>(*seg.sdf, run.opt.params.mesh);
     json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
     if (speculative && contacts.value("cut", -1) == 0) run.state.speculativeMesh = std::move(speculative);
