@@ -3,7 +3,10 @@
 # Usage: bench/first_pair.sh [small|medium|full] [runs] [extra flyover run arguments...]
 # Prints, as the median / min / max over the cold runs: CT -> first fly-over pair (the
 # "first_pair" event's seconds_since_start), the whole run, and the peak RSS (GNU time); then
-# the median of unchanged re-runs. Works only in its own folder (FLYOVER_BENCH_DIR, default
+# the median of unchanged re-runs; the process CPU seconds (user + system) at the first pair and
+# at the end (steadier than wall times on a shared machine); then the plain ITK reference
+# (bench/itk_reference: ITK read + threshold + marching cubes of the same file) and the ratio
+# first pair / reference (issue 15 asks <= 0.75). Works only in its own folder (FLYOVER_BENCH_DIR, default
 # /tmp/flyover-bench-first-pair): never in a user's study. Build first: scripts/build.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -29,7 +32,7 @@ stats() {  # label unit values...
           (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2), unit, t[1], t[NR], NR }'
 }
 
-first=() whole=() rss=()
+first=() whole=() rss=() cpufirst=() cpuwhole=()
 for _ in $(seq "$RUNS"); do
   rm -rf "$STUDY"
   sync
@@ -41,18 +44,31 @@ for _ in $(seq "$RUNS"); do
   fp=$(sed -n 's/.*"event":"first_pair".*"seconds_since_start":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | head -1)
   [ -n "$fp" ] || { echo "no first_pair event in the log"; exit 1; }
   first+=("$fp")
+  cpufirst+=("$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\),"event":"first_pair".*/\1/p' "$WORK/log.jsonl" | head -1)")
+  cpuwhole+=("$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | tail -1)")
   [ -f "$WORK/rss" ] && rss+=("$(awk '/^[0-9]+$/ { printf "%.1f", $1 / 1024 }' "$WORK/rss" | tail -1)")
 done
 echo "flyover run, $SIZE phantom, cold (fresh study each run), extra arguments: ${*:-none}"
 stats "CT -> first fly-over pair" s "${first[@]}"
 stats "whole run" s "${whole[@]}"
 [ ${#rss[@]} -gt 0 ] && stats "peak RSS" MB "${rss[@]}"
+stats "process CPU at the first pair" s "${cpufirst[@]}"
+stats "process CPU, whole run" s "${cpuwhole[@]}"
 rerun=()
 for _ in $(seq "$RUNS"); do
   t0=$(now); "$FLYOVER" -q run "$CT" --study "$STUDY" "$@"; t1=$(now)
   rerun+=("$(secs "$t0" "$t1")")
 done
 stats "unchanged re-run" s "${rerun[@]}"
+REFERENCE=${ITK_REFERENCE_BIN:-build/bench/itk_reference}
+if [ -x "$REFERENCE" ]; then
+  "$REFERENCE" "$CT" --runs "$RUNS" | tee "$WORK/reference.txt"
+  ref=$(sed -n 's/^reference_seconds //p' "$WORK/reference.txt")
+  fpm=$(printf '%s\n' "${first[@]}" | sort -g | awk '{ t[NR] = $1 } END { print (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2) }')
+  awk -v a="$fpm" -v b="$ref" 'BEGIN { printf "first pair / ITK reference: %.3f / %.3f = %.2f (target <= 0.75)\n", a, b, a / b }'
+else
+  echo "no $REFERENCE: build it (cmake --build build --target itk_reference) for the ITK reference"
+fi
 echo "per stage of the last cold run (wall s, computed):"
 sed -n 's/.*"event":"stage_finished".*"stage":"\([a-z]*\)".*"wall_seconds":\([0-9.eE+-]*\).*/  \1 \2/p' "$WORK/log.jsonl" ||
   true

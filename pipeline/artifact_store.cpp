@@ -1,6 +1,7 @@
 #include "pipeline/artifact_store.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/digest_stamps.h"
 #include "volume/error.h"
 
 #include <algorithm>
@@ -122,7 +123,7 @@ uint64_t bytesOf(const fs::path& p)
 
 } // namespace
 
-ArtifactStore::ArtifactStore(const std::string& studyDir) : mDir(studyDir)
+ArtifactStore::ArtifactStore(const std::string& studyDir, DigestStamps* stamps) : mDir(studyDir), mStamps(stamps)
 {
     fs::create_directories(fs::path(mDir) / ".flyover" / "objects");
     fs::create_directories(fs::path(mDir) / ".flyover" / "records");
@@ -140,7 +141,7 @@ std::string ArtifactStore::objectPath(const std::string& name, const std::string
 
 void ArtifactStore::removeStaleTemporaries() const
 {
-    for (const fs::path& d : {fs::path(mDir), fs::path(mDir) / ".flyover" / "objects",
+    for (const fs::path& d : {fs::path(mDir), fs::path(mDir) / ".flyover", fs::path(mDir) / ".flyover" / "objects",
                               fs::path(mDir) / ".flyover" / "records"}) {
         std::error_code ec;
         for (const auto& e : fs::directory_iterator(d, ec))
@@ -169,7 +170,7 @@ std::string ArtifactStore::verifyRecord(const json& record) const
         if (!fs::exists(obj, ec)) return it.key() + " is missing from the cache";
         std::string digest;
         try {
-            digest = artifactDigest(obj);
+            digest = mStamps ? mStamps->digest(obj) : artifactDigest(obj);
         } catch (const InputError&) {
             return it.key() + " is unreadable";
         }

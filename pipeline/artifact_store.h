@@ -46,9 +46,13 @@ std::string stageKey(const std::string& stage, int version, const nlohmann::json
 /// Digest of a file artifact, or of a folder artifact (names and digests of its files).
 std::string artifactDigest(const std::string& path);
 
+class DigestStamps;
+
 class ArtifactStore {
 public:
-    explicit ArtifactStore(const std::string& studyDir);
+    /// @param stamps  when given, verifyRecord() takes the digests of unchanged objects from
+    ///                it instead of hashing them (digest_stamps.h)
+    explicit ArtifactStore(const std::string& studyDir, DigestStamps* stamps = nullptr);
 
     /// Removes temporary files left by a killed run (call while holding the study lock).
     void removeStaleTemporaries() const;
@@ -91,6 +95,7 @@ public:
 
 private:
     std::string mDir;
+    DigestStamps* mStamps = nullptr;
 };
 
 } // namespace flyover

@@ -28,6 +28,7 @@
 namespace flyover {
 
 class RayScene;
+class SpeculativeMesh;
 struct PartAnalysis;
 struct PartSurface;
 
@@ -59,6 +60,11 @@ struct StudyState {
     std::shared_ptr<PartAnalysis> part;          ///< flyover inspect: the voids stage's analysis
     std::shared_ptr<PartSurface> partSurface;    ///< flyover inspect: the surfaces stage's mesh
     std::optional<RenderedPairs> framePairs;  ///< set by the frames step when it ran in this run
+    /// Whether this run computes the mesh stage (set by runPipeline): the segment stage then
+    /// meshes its lumen beside the contact cut (speculative_mesh.h).
+    bool meshWanted = false;
+    /// The segment stage's mesh of the lumen it handed on, when the contact cut changed nothing.
+    std::shared_ptr<SpeculativeMesh> speculativeMesh;
 };
 
 class StudyRun {

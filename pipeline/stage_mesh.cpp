@@ -1,6 +1,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/speculative_mesh.h"
 #include "surface/lumen_surface.h"
 
 #include <algorithm>
@@ -34,7 +35,10 @@ json runMesh(StudyRun& run, Progress* progress)
     auto sdf = run.sdf();
     const MeshParams& params = run.opt.params.mesh;
     LumenSurfaceReport r;
-    TriMesh mesh = makeLumenSurface(*sdf, params, &r, progress);
+    // The segment stage's mesh of this very lumen, made beside its contact cut, when it made one.
+    std::shared_ptr<SpeculativeMesh> speculative = std::move(run.state.speculativeMesh);
+    if (speculative) reportProgress(progress, 0.0, "waiting for the mesh made beside the contact cut");
+    TriMesh mesh = speculative ? speculative->take(r) : makeLumenSurface(*sdf, params, &r, progress);
     writeMesh(run.path("surface.ply"), mesh);
     run.state.mesh = std::move(mesh);
 
@@ -44,6 +48,8 @@ json runMesh(StudyRun& run, Progress* progress)
         components.push_back(componentJson(c.componentList[i]));
     const MeshStats& e = r.extraction;
     return json{
+        // Meshed beside the segment stage's contact cut (which removed nothing), or here.
+        {"made_beside_contact_cut", bool(speculative)},
         // The final surface (surface.ply).
         {"vertices", c.vertices},
         {"edges", c.edges},

@@ -1,9 +1,12 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/speculative_mesh.h"
 #include "volume/image_io.h"
 #include "volume/lumen_mask.h"
 #include "volume/segment.h"
+
+#include <tbb/global_control.h>
 
 #include <filesystem>
 #include <iomanip>
@@ -100,7 +103,15 @@ void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
 {
+    // The mesh of the lumen beside the contact cut, kept when the cut changes nothing (not
+    // with --threads 1: that thread would be a second one).
+    std::shared_ptr<SpeculativeMesh> speculative;
+    const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
+    if (threads && run.state.meshWanted && seg.sdf && SpeculativeMesh::applicable(*seg.sdf))
+        speculative = std::make_shared<SpeculativeMesh>(*seg.sdf, run.opt.params.mesh);
     json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
+    if (speculative && contacts.value("cut", -1) == 0) run.state.speculativeMesh = std::move(speculative);
+    speculative.reset();  // a cut: cancelled, the mesh stage meshes the cut lumen
     writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
     run.state.sdf = seg.sdf;
     reportPieces(run, seg);

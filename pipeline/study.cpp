@@ -3,6 +3,7 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"
 #include "pipeline/deferred_writes.h"
+#include "pipeline/digest_stamps.h"
 #include "pipeline/stage_context.h"
 #include "volume/error.h"
 
@@ -279,15 +280,17 @@ nlohmann::json runPipeline(const RunOptions& options)
     if (ec) throw InputError(options.studyDir + ": cannot create the study folder: " + ec.message());
 
     StudyLock lock(options.studyDir, options.waitForLock);
-    ArtifactStore store(options.studyDir);
+    DigestStamps stamps((fs::path(options.studyDir) / ".flyover" / "stamps.json").string());
+    ArtifactStore store(options.studyDir, &stamps);
     store.removeStaleTemporaries();
     StudyRun run(options);
+    run.state.meshWanted = wanted.count("mesh") > 0;
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries
     std::map<std::string, std::string> digests;
-    if (hasCt) digests["input"] = inputDigest(options.ctPath);
-    if (hasMask) digests["mask"] = inputDigest(options.maskPath);
+    if (hasCt) digests["input"] = stamps.digest(options.ctPath);
+    if (hasMask) digests["mask"] = stamps.digest(options.maskPath);
     std::map<std::string, json> entries;
     std::set<std::string> usedRecords;
     // Write-behind: the finishing of each such stage (fsync, rename, record), joined before the
@@ -357,10 +360,16 @@ nlohmann::json runPipeline(const RunOptions& options)
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        auto finish = [&store, deferred, record2, name = spec.name] {
+        auto finish = [&store, &stamps, deferred, record2, name = spec.name] {
             crashPoint(("writebehind:" + name + ":before-finish").c_str());
             deferred->finish();
             store.commit(record2);
+            // The file objects' digests were computed from their content above: stamp them.
+            for (auto it = record2.at("outputs").begin(); it != record2.at("outputs").end(); ++it) {
+                const std::string obj = store.objectPath(it.key(), it.value().get<std::string>());
+                std::error_code ec;
+                if (fs::is_regular_file(obj, ec)) stamps.hashed(obj, it.value().get<std::string>());
+            }
             crashPoint(("stage:" + name + ":committed").c_str());
         };
         if (!spec.writeBehind) finish();
@@ -428,6 +437,7 @@ nlohmann::json runPipeline(const RunOptions& options)
                         {"stages", stages}};
     if (kind == StudyKind::Part) manifest["pipeline"] = "inspect";
     writeJson(run.path("manifest.json"), manifest);
+    stamps.save();
     if (failure) std::rethrow_exception(failure);
 
     const uint64_t freed = store.evict(static_cast<uint64_t>(options.cacheMaxGb * 1e9), usedRecords);

@@ -32,28 +32,49 @@ const Coord FACE_STEPS[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0
 
 inline Coord scaled(const Coord& step, int n) { return Coord(step.x() * n, step.y() * n, step.z() * n); }
 
-/// Active voxels of `hu` above `thresholdHu` (active tiles voxelised).
-BoolTree::Ptr candidatesAbove(const FloatTree& hu, float thresholdHu)
+/// The active voxels of `hu` above `thresholdHu` within `near` (leaf by leaf, in parallel).
+BoolTree::Ptr candidatesWithin(const FloatTree& hu, const BoolTree& near, float thresholdHu)
 {
-    auto out = std::make_shared<BoolTree>(hu, false, true, openvdb::TopologyCopy());
+    auto out = std::make_shared<BoolTree>(near);
+    out->voxelizeActiveTiles();
     openvdb::tree::LeafManager<BoolTree> leaves(*out);
     leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
-        const FloatLeaf* src = hu.probeConstLeaf(leaf.origin());
-        if (!src) {
-            leaf.setValuesOff();
-            return;
+        FloatConstAccessor huAcc(hu);
+        for (auto it = leaf.beginValueOn(); it; ++it) {
+            float v;
+            if (!huAcc.probeValue(it.getCoord(), v) || !(v > thresholdHu)) leaf.setValueOff(it.pos(), false);
         }
-        for (auto it = src->cbeginValueOn(); it; ++it)
-            if (!(*it > thresholdHu)) leaf.setValueOff(it.pos(), false);
     });
-    FloatConstAccessor huAcc(hu);
-    for (auto it = out->beginValueOn(); it; ++it) {
-        if (it.isVoxelValue()) continue;
-        if (!(huAcc.getValue(it.getCoord()) > thresholdHu)) it.setValueOff();
-    }
-    out->voxelizeActiveTiles();
     pruneInactive(*out);
     return out;
+}
+
+/// The face-connected components of the candidates (active voxels of `hu` above `thresholdHu`)
+/// that hold a voxel of `seeds`: a flood fill from the seeds through the candidates. Only
+/// these components can touch the colon air's reach; the others (most of the skeleton) are
+/// never visited.
+BoolTree::Ptr candidatesConnectedTo(const FloatTree& hu, const BoolTree& seeds, float thresholdHu)
+{
+    auto reached = std::make_shared<BoolTree>(seeds);
+    openvdb::tree::ValueAccessor<BoolTree> reachedAcc(*reached);
+    FloatConstAccessor huAcc(hu);
+    std::vector<Coord> stack;
+    for (auto it = seeds.cbeginValueOn(); it; ++it) {
+        stack.push_back(it.getCoord());
+        while (!stack.empty()) {
+            const Coord c = stack.back();
+            stack.pop_back();
+            for (const Coord& d : FACE_STEPS) {
+                const Coord q = c + d;
+                if (reachedAcc.isValueOn(q)) continue;
+                float v;
+                if (!huAcc.probeValue(q, v) || !(v > thresholdHu)) continue;
+                reachedAcc.setValueOn(q, true);
+                stack.push_back(q);
+            }
+        }
+    }
+    return reached;
 }
 
 /// True when one of the LEVEL_REACH_VOXELS voxels above `ijk` (against `down`) is air.
@@ -198,14 +219,16 @@ TaggedFluid findTaggedFluid(const openvdb::FloatGrid& hu, const BoolTree& colonA
     const openvdb::math::Transform& xf = hu.transform();
     const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
 
-    BoolTree::Ptr candidates = candidatesAbove(huTree, static_cast<float>(params.fluidThresholdHu));
-    if (candidates->empty()) return out;
-    // Fluid under an air-fluid level lies within the partial-volume reach of the air.
+    // Fluid under an air-fluid level lies within the partial-volume reach of the air: only the
+    // candidate components with a voxel there matter, so only they are found (a flood fill from
+    // the candidates near the air), not every voxel above the threshold (bone).
+    const float threshold = static_cast<float>(params.fluidThresholdHu);
     BoolTree near(colonAir);
     dilateVoxels(near, LEVEL_REACH_VOXELS, Neighbours::All);
-    BoolTree nearCandidates(*candidates);
-    nearCandidates.topologyIntersection(near);
-    if (nearCandidates.empty()) return out;
+    const BoolTree::Ptr nearCandidatesPtr = candidatesWithin(huTree, near, threshold);
+    const BoolTree& nearCandidates = *nearCandidatesPtr;
+    if (nearCandidates.activeVoxelCount() == 0) return out;
+    const BoolTree::Ptr candidates = candidatesConnectedTo(huTree, nearCandidates, threshold);
 
     // Gravity: the direction along which most fluid near the air has that air above it.
     const auto counts = countLevelsPerDirection(nearCandidates, colonAir);
@@ -223,7 +246,9 @@ TaggedFluid findTaggedFluid(const openvdb::FloatGrid& hu, const BoolTree& colonA
     for (const BoolTree::Ptr& component : connectedComponents(*candidates)) {
         BoolTree touching(*component);
         touching.topologyIntersection(near);
-        if (touching.empty()) continue;  // far from the colon air: bone, vessels, organs
+        // Far from the colon air: bone, vessels, organs. (Not empty(): an intersection keeps
+        // nodes without active voxels.)
+        if (touching.activeVoxelCount() == 0) continue;
         const PoolStats s = measurePool(*component, near, colonAir, huTree, xf, down);
         FluidPool pool;
         pool.volumeMl = double(s.voxels) * voxelMl;

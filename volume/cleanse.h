@@ -3,7 +3,8 @@
 ///        tagged fluid that lies under the colon air across an air-fluid level, and the
 ///        partial-volume rim between the two, so that both join the lumen.
 ///
-/// Fluid candidates are the active voxels above SegmentParams::fluidThresholdHu, split into
+/// Fluid candidates are the active voxels above SegmentParams::fluidThresholdHu (only the
+/// components with a voxel within LEVEL_REACH_VOXELS of the air are looked at), split into
 /// face-connected components (bone and contrast-filled vessels are candidates too). The
 /// direction of gravity is the index axis direction g along which most candidates near the
 /// kept air have that air "above" them (at v - a g, 1 <= a <= LEVEL_REACH_VOXELS); it is

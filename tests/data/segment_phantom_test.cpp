@@ -158,6 +158,25 @@ TEST(SegmentPhantom, CleanPhantomDiceAndNoLungOrSmallBowel)
     EXPECT_EQ(small, int(c.anatomy.gasPockets.size()));
 }
 
+// Bug: the cleanse listed bone far from the colon (the spine, ~0.4 L on the full phantom) as a
+// fluid pool "near the air" with reason "no level below air": it tested BoolTree::empty() on
+// an intersection, which keeps nodes without active voxels. Only candidate components with a
+// voxel within the air's partial-volume reach are pools now (and only those are looked at).
+TEST(SegmentPhantom, BoneFarFromTheColonIsNoFluidPool)
+{
+    const Case c = makeCase(variant(1, false, false));
+    SCOPED_TRACE(describe(c.params));
+    const SegmentParams params;
+    openvdb::Index64 above = 0;
+    for (auto it = c.hu->tree().cbeginValueOn(); it; ++it) above += *it > params.fluidThresholdHu;
+    ASSERT_GT(above, 1000u) << "the phantom should hold bone above the fluid threshold";
+    const LumenSegmentation seg = segmentLumen(*c.hu, params);
+    for (const FluidPool& pool : seg.fluidPools)
+        ADD_FAILURE() << "a phantom without fluid lists a pool of " << pool.volumeMl << " mL, mean " << pool.meanHu
+                      << " HU (" << pool.reason << ")";
+    EXPECT_EQ(seg.fluidVolumeMl, 0.0);
+}
+
 TEST(SegmentPhantom, TaggedFluidJoinsTheLumen)
 {
     const Case c = makeCase(variant(2, true, false));

@@ -1,0 +1,75 @@
+// The mesh made beside the segment stage's contact cut (pipeline/speculative_mesh.h) is the
+// mesh of the lumen the segment stage hands on: kept when the cut removes nothing, dropped
+// when it cuts (issue 15).
+
+#include "data/phantom.h"
+#include "pipeline/phantom_io.h"
+#include "study_fixture.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <filesystem>
+
+namespace fs = std::filesystem;
+using namespace flyover;
+using namespace flyover::test;
+
+namespace {
+
+nlohmann::json stageEntry(const nlohmann::json& manifest, const std::string& stage)
+{
+    for (const auto& e : manifest["stages"])
+        if (e["stage"] == stage) return e;
+    ADD_FAILURE() << "no " << stage << " entry in the manifest";
+    return nlohmann::json::object();
+}
+
+/// The mesh of one run through the mesh stage, and of the mesh stage run in a second call from
+/// the lumen.vdb of a first that stopped after segment (no mesh beside the cut there).
+void expectSameMeshEitherWay(RunOptions one, RunOptions two, bool besideExpected, int cutExpected)
+{
+    one.untilStage = "mesh";
+    const nlohmann::json a = runPipeline(one);
+    const nlohmann::json segA = stageEntry(a, "segment"), meshA = stageEntry(a, "mesh");
+    EXPECT_EQ(segA["report"]["contacts"]["cut"].get<int>(), cutExpected);
+    EXPECT_TRUE(meshA["computed"].get<bool>());
+    EXPECT_EQ(meshA["report"]["made_beside_contact_cut"].get<bool>(), besideExpected)
+        << "contacts cut: " << segA["report"]["contacts"]["cut"];
+
+    two.untilStage = "segment";
+    runPipeline(two);
+    two.untilStage = "mesh";
+    const nlohmann::json b = runPipeline(two);
+    const nlohmann::json meshB = stageEntry(b, "mesh");
+    EXPECT_TRUE(meshB["computed"].get<bool>());
+    EXPECT_FALSE(meshB["report"]["made_beside_contact_cut"].get<bool>());
+    EXPECT_EQ(stageEntry(b, "segment")["outputs"], segA["outputs"]) << "the same lumen.vdb";
+    EXPECT_EQ(meshB["outputs"], meshA["outputs"]) << "surface.ply differs between the mesh made beside the "
+                                                     "contact cut and the mesh stage's own";
+    EXPECT_EQ(meshB["report"]["faces"], meshA["report"]["faces"]);
+    EXPECT_EQ(meshB["key"], meshA["key"]);
+}
+
+} // namespace
+
+TEST_F(StudyTest, MeshBesideAContactCutThatRemovesNothingIsKept)
+{
+    // Two threads at least (with one, nothing is meshed beside the cut), whatever the machine.
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
+    expectSameMeshEitherWay(options("beside-one"), options("beside-two"), true, 0);
+}
+
+TEST_F(StudyTest, MeshBesideAContactCutThatCutsIsDropped)
+{
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
+    PhantomParams pp;
+    pp.size = PhantomSize::Small;
+    pp.seed = 1;
+    pp.touching = 2;
+    const std::string ct = (sRoot / "touching.nii.gz").string();
+    writePhantom(makePhantom(pp), pp, ct, (sRoot / "touching.json").string(), "");
+    RunOptions one = options("cut-one"), two = options("cut-two");
+    one.ctPath = two.ctPath = ct;
+    expectSameMeshEitherWay(one, two, false, 2);
+}
