@@ -64,14 +64,16 @@ json segmentationJson(const LumenSegmentation& seg)
         json axis = json::array();
         for (const Vec3d& p : t.axisMm) axis.push_back(vec3Json(p));
         tube = json{{"found", true},
-                    {"handling", "left out of the lumen, the surface and the path; its tip is the centerline's rectum "
-                                 "hint unless rectum_mm is set"},
+                    {"handling", "left out of the lumen, the surface and the path: cut where it leaves the colon, "
+                                 "filled (given to the lumen) where the colon's air surrounds it; its tip is the "
+                                 "centerline's rectum hint unless rectum_mm is set"},
                     {"tip_mm", vec3Json(t.tipMm)},
                     {"entry_mm", vec3Json(t.entryMm)},
                     {"outer_end_mm", vec3Json(t.outerEndMm)},
                     {"length_mm", t.lengthMm},
                     {"diameter_mm", t.diameterMm},
                     {"volume_ml", t.volumeMl},
+                    {"filled_ml", t.filledMl},
                     {"axis_mm", axis}};
     }
     return json{{"lumen_volume_ml", seg.lumenVolumeMl},

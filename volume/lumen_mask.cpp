@@ -337,10 +337,14 @@ RectalTube cutMaskRectalTube(FloatTree& indicator, const ImageGeometry& g, const
         return false;
     };
     RectalTube tube;
-    const BoolTree::Ptr cut = detail::findRectalTube(inside, xf, search, tube);
+    BoolTree::Ptr fill;
+    const BoolTree::Ptr cut = detail::findRectalTube(inside, xf, search, tube, &fill);
     if (!tube.found) return tube;
     openvdb::tree::ValueAccessor<FloatTree> acc(indicator);
     for (auto it = cut->cbeginValueOn(); it; ++it) acc.setValueOff(it.getCoord(), 0.0f);
+    // The tube inside the rectum's air becomes lumen (rectal_tube.h, step 5).
+    if (fill)
+        for (auto it = fill->cbeginValueOn(); it; ++it) acc.setValueOn(it.getCoord(), 1.0f);
     return tube;
 }
 

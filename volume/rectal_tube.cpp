@@ -25,8 +25,10 @@ constexpr double PI = 3.14159265358979323846;
 constexpr double AXIS_BIN_MM = 2.0;
 /// Largest piece looked at (mL): a 10 mm tube 500 mm long.
 constexpr double TUBE_MAX_VOLUME_ML = 40.0;
-/// From a CT: the tube's wall (or the tissue around it) is denser than this (HU).
-constexpr float RING_MIN_HU = -200.0f;
+/// From a CT: the tube's wall (or the tissue around it) is not air: above this (HU). Not
+/// higher: at 2.5 mm voxels partial volume leaves a 2 mm wall at -500..0 HU in most
+/// directions (-200 found the ring in 5-9 of 12 directions on the small phantom, -500 in 10-12).
+constexpr float RING_MIN_HU = -500.0f;
 /// From a CT: inside the tube's lumen, air below this (HU).
 constexpr float LUMEN_MAX_HU = -500.0f;
 /// How far the tube is followed into the rectum at most (mm).
@@ -37,6 +39,13 @@ constexpr double LOWEST_END_REACH_MM = 60.0;
 constexpr int RING_DIRECTIONS = 12;
 /// The ring must show in at least this many of them.
 constexpr int RING_MIN_HITS = 9;
+/// The tube is followed into the rectum along directions up to this far (degrees) from the
+/// piece's last direction, in this many tilts and azimuths.
+constexpr double FOLLOW_CONE_DEG = 90.0;
+constexpr int FOLLOW_CONE_STEPS = 6;
+constexpr int FOLLOW_CONE_AZIMUTHS = 8;
+/// Straight runs at most (the tube bends where it enters the rectum, rarely more).
+constexpr int FOLLOW_MAX_RUNS = 4;
 
 const Coord FACE[6] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
 
@@ -137,6 +146,13 @@ PieceAxis measurePiece(const BoolTree& piece, const BoolTree& wide, const openvd
         }
     }
     out.outerEnd = toWorld(xf, farthestVoxel.asVec3d());
+    // The outside beyond the wall around the outer end (CT: a closed or connected outer end).
+    const int reach = search.outsideReachVoxels;
+    if (!out.touchesOutside && search.outside && reach > 0) {
+        const openvdb::CoordBBox around(farthestVoxel - Coord(reach), farthestVoxel + Coord(reach));
+        for (auto it = around.begin(); it && !out.touchesOutside; ++it)
+            out.touchesOutside = search.outside(*it);
+    }
     // Axis: centroids of the geodesic distance bins.
     const int bins = int(farthest * h / AXIS_BIN_MM) + 1;
     std::vector<openvdb::Vec3d> sum(std::size_t(bins), openvdb::Vec3d(0.0));
@@ -174,18 +190,72 @@ PieceAxis measurePiece(const BoolTree& piece, const BoolTree& wide, const openvd
     return out;
 }
 
-/// World z of the lowest active voxel of `tree` (LPS: z is superior).
+/// World z of the lowest active voxel of `tree` (LPS: z is superior). Leaves whose corners
+/// all lie above the lowest voxel found so far are skipped (z is affine in the index).
 double lowestZ(const BoolTree& tree, const openvdb::math::Transform& xf)
 {
     double z = std::numeric_limits<double>::max();
-    for (auto it = tree.cbeginValueOn(); it; ++it) z = std::min(z, toWorld(xf, it.getCoord().asVec3d()).z);
+    for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
+        const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
+        double cornerLow = std::numeric_limits<double>::max();
+        for (int c = 0; c < 8; ++c) {
+            const Coord corner((c & 1) ? box.max().x() : box.min().x(), (c & 2) ? box.max().y() : box.min().y(),
+                               (c & 4) ? box.max().z() : box.min().z());
+            cornerLow = std::min(cornerLow, toWorld(xf, corner.asVec3d()).z);
+        }
+        if (cornerLow >= z) continue;
+        for (auto it = leaf->cbeginValueOn(); it; ++it) z = std::min(z, toWorld(xf, it.getCoord().asVec3d()).z);
+    }
+    // Active tiles (none in practice: the sets are voxelised), by their origin as before.
+    auto tiles = tree.cbeginValueOn();
+    tiles.setMaxDepth(BoolTree::ValueOnCIter::LEAF_DEPTH - 1);
+    for (; tiles; ++tiles) z = std::min(z, toWorld(xf, tiles.getCoord().asVec3d()).z);
     return z;
 }
 
 } // namespace
 
+int tubeWallReachVoxels(double voxelMm)
+{
+    return std::max(1, int(std::ceil((TUBE_MAX_WALL_MM + voxelMm) / voxelMm)));
+}
+
+bool nearInactive(const BoolTree& set, const openvdb::FloatTree& hu, int reach)
+{
+    using FloatLeaf = openvdb::FloatTree::LeafNodeType;
+    const int dim = int(FloatLeaf::DIM);
+    FloatConstAccessor huAcc(hu);
+    // Whether every voxel of `box` is active in `hu`, leaf by leaf (or tile by tile).
+    auto allActive = [&](const openvdb::CoordBBox& box) {
+        for (int x = box.min().x() & ~(dim - 1); x <= box.max().x(); x += dim)
+            for (int y = box.min().y() & ~(dim - 1); y <= box.max().y(); y += dim)
+                for (int z = box.min().z() & ~(dim - 1); z <= box.max().z(); z += dim) {
+                    const Coord origin(x, y, z);
+                    if (const FloatLeaf* leaf = huAcc.probeConstLeaf(origin)) {
+                        if (!leaf->getValueMask().isOn()) return false;
+                    } else if (!huAcc.isValueOn(origin)) {
+                        return false;  // an inactive tile or the background
+                    }
+                }
+        return true;
+    };
+    for (auto leaf = set.cbeginLeaf(); leaf; ++leaf) {
+        if (leaf->isEmpty()) continue;
+        openvdb::CoordBBox box = leaf->getNodeBoundingBox();
+        box.expand(reach);
+        if (allActive(box)) continue;
+        for (auto it = leaf->cbeginValueOn(); it; ++it) {
+            const openvdb::CoordBBox around(it.getCoord() - Coord(reach), it.getCoord() + Coord(reach));
+            if (allActive(around)) continue;
+            for (auto c = around.begin(); c; ++c)
+                if (!huAcc.isValueOn(*c)) return true;
+        }
+    }
+    return false;
+}
+
 BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform& xf, const TubeSearch& search,
-                             RectalTube& info)
+                             RectalTube& info, BoolTree::Ptr* fill)
 {
     auto none = std::make_shared<BoolTree>(false);
     const double h = xf.voxelSize()[0];
@@ -198,9 +268,16 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     BoolTree wide(set);
     erodeVoxels(wide, n, Neighbours::All);
     if (wide.empty()) return none;
-    for (int i = 0; i < m; ++i) {
-        dilateVoxels(wide, 1, Neighbours::All);
-        wide.topologyIntersection(set);
+    // Grown back one step at a time within the set; each step grows from the voxels the
+    // previous one added (the rest of `wide` grew already): the same voxels as dilating the
+    // whole of `wide` m times, at the cost of a shell.
+    BoolTree::Ptr added = std::make_shared<BoolTree>(wide);
+    for (int i = 0; i < m && !added->empty(); ++i) {
+        dilateVoxels(*added, 1, Neighbours::All);
+        added->topologyIntersection(set);
+        added->topologyDifference(wide);
+        pruneInactive(*added);
+        wide.topologyUnion(*added);
     }
     BoolTree thin(set);
     thin.topologyDifference(wide);
@@ -239,13 +316,14 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     }
     if (!tubePiece) return none;
 
-    // 3. Follow it into the rectum along its axis while the cross-section shows the tube: the
-    //    lumen inside, and around it the wall (CT: dense; mask: not in the set).
+    // 3. Follow it into the rectum while the cross-section shows the tube: the lumen inside,
+    //    and around it the wall (CT: dense; mask: not in the set). A catheter may bend where
+    //    it enters the rectum (the anal canal points elsewhere than the rectum's axis), so the
+    //    straight run is looked for in a cone around the piece's last direction: the
+    //    direction that follows the tube farthest (the least tilted of equal ones).
     const double radius = 0.5 * tube.diameterMm;
     const std::size_t back = std::min<std::size_t>(tube.axis.size() - 1, std::size_t(std::ceil(10.0 / AXIS_BIN_MM)));
     const Vec3d dir = normalize(tube.axis.front() - tube.axis[back]);
-    Vec3d u, v;
-    perpendiculars(dir, u, v);
     BoolConstAccessor setAcc(set);
     std::optional<FloatConstAccessor> huAcc;
     if (search.hu) huAcc.emplace(*search.hu);
@@ -265,7 +343,7 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         }
         return !setAcc.isValueOn(c);
     };
-    auto ringAround = [&](const Vec3d& p) {
+    auto ringAround = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
         int hits = 0;
         for (int j = 0; j < RING_DIRECTIONS; ++j) {
             const double t = 2.0 * PI * j / RING_DIRECTIONS;
@@ -279,25 +357,61 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         return hits >= RING_MIN_HITS;
     };
     const Vec3d start = tube.axis.front();
-    Vec3d tip = start;
-    int misses = 0;
-    for (double t = 0; t <= MAX_FOLLOW_MM; t += 0.5 * h) {
-        const Vec3d p = start + dir * t;
-        if (inLumen(p) && ringAround(p)) {
-            tip = p;
-            misses = 0;
-        } else if (++misses > 2) {
-            break;
+    // The last point of the straight run from `from` along `d` (misses of up to two steps
+    // allowed), at most `maxMm` long.
+    auto follow = [&](const Vec3d& from, const Vec3d& d, double maxMm) {
+        Vec3d u, v;
+        perpendiculars(d, u, v);
+        Vec3d last = from;
+        int misses = 0;
+        for (double t = 0; t <= maxMm; t += 0.5 * h) {
+            const Vec3d p = from + d * t;
+            if (inLumen(p) && ringAround(p, u, v)) {
+                last = p;
+                misses = 0;
+            } else if (++misses > 2) {
+                break;
+            }
         }
+        return last;
+    };
+    // Straight runs, each from the end of the previous one along the direction (within the
+    // cone around the previous direction) that goes farthest: the followed polyline.
+    std::vector<Vec3d> followed{start};
+    double followedMm = 0;
+    Vec3d heading = dir;
+    for (int run = 0; run < FOLLOW_MAX_RUNS && followedMm < MAX_FOLLOW_MM; ++run) {
+        const Vec3d from = followed.back();
+        const double maxMm = MAX_FOLLOW_MM - followedMm;
+        Vec3d best = follow(from, heading, maxMm), bestDir = heading;
+        Vec3d u, v;
+        perpendiculars(heading, u, v);
+        for (int tilt = 1; tilt <= FOLLOW_CONE_STEPS; ++tilt) {
+            const double a = FOLLOW_CONE_DEG * PI / 180.0 * tilt / FOLLOW_CONE_STEPS;
+            for (int k = 0; k < FOLLOW_CONE_AZIMUTHS; ++k) {
+                const double b = 2.0 * PI * k / FOLLOW_CONE_AZIMUTHS;
+                const Vec3d d = normalize(heading * std::cos(a) + (u * std::cos(b) + v * std::sin(b)) * std::sin(a));
+                const Vec3d q = follow(from, d, maxMm);
+                if (distance(from, q) > distance(from, best) + h) {
+                    best = q;
+                    bestDir = d;
+                }
+            }
+        }
+        if (distance(from, best) < h) break;  // no run of a voxel or more: the tip
+        followedMm += distance(from, best);
+        followed.push_back(best);
+        heading = bestDir;
     }
+    const Vec3d tip = followed.back();
 
     // 4. The tube's voxels: the thin piece, and the set's voxels within its lumen radius + a
     //    voxel of the followed stretch.
     auto cut = std::make_shared<BoolTree>(*tubePiece);
     const double reach = radius + h;
-    if (distance(start, tip) > 0) {
+    for (std::size_t i = 0; i + 1 < followed.size(); ++i) {
         openvdb::CoordBBox box;
-        for (const Vec3d& p : {start, tip}) {
+        for (const Vec3d& p : {followed[i], followed[i + 1]}) {
             const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z));
             box.expand(Coord::floor(ijk));
             box.expand(Coord::floor(ijk) + Coord(1));
@@ -307,7 +421,8 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         for (auto it = box.begin(); it; ++it) {
             const Coord c = *it;
             if (!setAcc.isValueOn(c)) continue;
-            if (distanceToSegment(toWorld(xf, c.asVec3d()), start, tip) <= reach) cutAcc.setValueOn(c, true);
+            if (distanceToSegment(toWorld(xf, c.asVec3d()), followed[i], followed[i + 1]) <= reach)
+                cutAcc.setValueOn(c, true);
         }
     }
 
@@ -316,10 +431,10 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     info.tipMm = tip;
     info.outerEndMm = tube.outerEnd;
     info.diameterMm = tube.diameterMm;
-    info.lengthMm = tube.lengthMm + distance(start, tip);
+    info.lengthMm = tube.lengthMm + followedMm;
     info.volumeMl = double(cut->activeVoxelCount()) * voxelMl;
     info.axisMm.assign(tube.axis.rbegin(), tube.axis.rend());
-    if (distance(start, tip) > 0) info.axisMm.push_back(tip);
+    info.axisMm.insert(info.axisMm.end(), followed.begin() + 1, followed.end());
     // The body surface (CT): going inwards from the outer end, the first axis point with the
     // body all around (active voxels beyond the wall); from a mask: the outer end.
     info.entryMm = tube.outerEnd;
@@ -340,6 +455,79 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
                 break;
             }
         }
+    }
+
+    // 5. The tube within the colon's air: along its axis, where the colon's air lies all
+    //    around beyond its wall, its lumen and wall (the lumen radius + TUBE_MAX_WALL_MM + a voxel) are
+    //    given to the lumen, so that the surface and the path see the rectum as if the tube
+    //    were not there (its rod would split the rectum's medial axis around it).
+    if (fill) {
+        *fill = std::make_shared<BoolTree>(false);
+        // The wall's outside, and a voxel of its partial volume (a CT's rim of not-quite-air).
+        const double fillRadius = radius + TUBE_MAX_WALL_MM + h;
+        const double probe = fillRadius + h;
+        BoolConstAccessor cutRead(*cut);
+        auto colonAir = [&](const Vec3d& q) {
+            const Coord c = nearestIndex(xf, q);
+            return setAcc.isValueOn(c) && !cutRead.isValueOn(c);
+        };
+        openvdb::tree::ValueAccessor<BoolTree> fillAcc(**fill);
+        const std::vector<Vec3d>& ax = info.axisMm;
+        for (std::size_t i = 0; i + 1 < ax.size(); ++i) {
+            const double len = distance(ax[i], ax[i + 1]);
+            if (len <= 0) continue;
+            const Vec3d d = (ax[i + 1] - ax[i]) / len;
+            Vec3d u, v;
+            perpendiculars(d, u, v);
+            auto surrounded = [&](const Vec3d& q, const Vec3d& u, const Vec3d& v) {
+                int hits = 0;
+                for (int j = 0; j < RING_DIRECTIONS; ++j) {
+                    const double t = 2.0 * PI * j / RING_DIRECTIONS;
+                    hits += colonAir(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
+                }
+                return hits >= RING_MIN_HITS;
+            };
+            const int samples = std::max(1, int(std::ceil(len / (0.5 * h))));
+            bool previous = surrounded(ax[i], u, v);
+            Vec3d pu, pv;
+            const Vec3d pd = i > 0 ? normalize(ax[i] - ax[i - 1]) : d;
+            perpendiculars(pd, pu, pv);
+            if (previous && i > 0 && surrounded(ax[i] - pd * fillRadius, pu, pv) &&
+                surrounded(ax[i] + d * fillRadius, u, v)) {
+                // The joint with the previous stretch, well inside: a ball (no wedge left out
+                // on the outside of a bend).
+                const Vec3d& q = ax[i];
+                const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
+                openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
+                box.expand(int(std::ceil(fillRadius / h)) + 1);
+                for (auto it = box.begin(); it; ++it)
+                    if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
+            }
+            for (int k = 0; k < samples; ++k) {
+                const Vec3d q0 = ax[i] + d * (len * k / samples);
+                const Vec3d q1 = ax[i] + d * (len * (k + 1) / samples);
+                const bool next = surrounded(q1, u, v);
+                const bool both = previous && next;
+                previous = next;
+                if (!both) continue;
+                // The voxels within fillRadius of [q0, q1] that project onto it.
+                openvdb::CoordBBox box;
+                for (const Vec3d& p : {q0, q1}) {
+                    const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z));
+                    box.expand(Coord::floor(ijk));
+                    box.expand(Coord::floor(ijk) + Coord(1));
+                }
+                box.expand(int(std::ceil(fillRadius / h)) + 1);
+                const double piece = distance(q0, q1);
+                for (auto it = box.begin(); it; ++it) {
+                    const Vec3d w = toWorld(xf, (*it).asVec3d());
+                    const double t = dot(w - q0, d);
+                    if (t < 0 || t > piece) continue;
+                    if (distance(w, q0 + d * t) <= fillRadius) fillAcc.setValueOn(*it, true);
+                }
+            }
+        }
+        info.filledMl = double((*fill)->activeVoxelCount()) * voxelMl;
     }
     return cut;
 }

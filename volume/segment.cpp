@@ -24,6 +24,7 @@
 #include <iomanip>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 
 namespace flyover {
@@ -164,23 +165,30 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
 }
 
 /// A rectal tube joins the colon's air to the air outside the body, so the colon's component
-/// touches the outside. Each such component of at least minComponentMl is searched for a tube
+/// touches the outside, or comes within the tube's wall of it (an outer end closed outside the
+/// body, or closed by partial volume at coarse voxels). Each such component of at least
+/// minComponentMl is searched for a tube
 /// (volume/rectal_tube.h); when one is found and the air left after cutting it has a piece
 /// of at least minComponentMl that no longer touches the outside, the component is replaced
 /// by the tube's air (marked rectalTube) and the pieces left. One tube at most. Keeps the
 /// lists sorted by volume, largest first.
 void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentStats>& stats, const FloatTree& hu,
                    const openvdb::math::Transform& xf, double voxelMl, const SegmentParams& params,
-                   RectalTube& found)
+                   RectalTube& found, BoolTree::Ptr& fill)
 {
     FloatConstAccessor huAcc(hu);
     detail::TubeSearch search;
     search.hu = &hu;
     search.outside = [&huAcc](const Coord& c) { return !huAcc.isValueOn(c); };
+    search.outsideReachVoxels = detail::tubeWallReachVoxels(xf.voxelSize()[0]);
     for (std::size_t i = 0; i < segments.size(); ++i) {
-        if (!stats[i].border || stats[i].info.volumeMl < params.minComponentMl) continue;
+        // A tube closed outside the body (or whose wall partial volume closes it) leaves its
+        // component apart from the outside air: the outside lies beyond the tube's wall.
+        if (stats[i].info.volumeMl < params.minComponentMl) continue;
+        if (!stats[i].border && !detail::nearInactive(*segments[i], hu, search.outsideReachVoxels)) continue;
         RectalTube tube;
-        BoolTree::Ptr cut = detail::findRectalTube(*segments[i], xf, search, tube);
+        BoolTree::Ptr tubeFill;
+        BoolTree::Ptr cut = detail::findRectalTube(*segments[i], xf, search, tube, &tubeFill);
         if (cut->empty()) continue;
         BoolTree rest(*segments[i]);
         rest.topologyDifference(*cut);
@@ -213,6 +221,7 @@ void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentSt
         segments.swap(sortedSegments);
         stats.swap(sortedStats);
         found = tube;
+        fill = tubeFill;
         return;
     }
 }
@@ -488,7 +497,8 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     std::vector<ComponentStats> stats;
     stats.reserve(segments.size());
     for (const auto& seg : segments) stats.push_back(measureComponent(*seg, huTree, xf, voxelMl));
-    cutRectalTube(segments, stats, huTree, xf, voxelMl, params, result.rectalTube);
+    BoolTree::Ptr tubeFill;  // the tube inside the rectum, given to the lumen (rectal_tube.h)
+    cutRectalTube(segments, stats, huTree, xf, voxelMl, params, result.rectalTube, tubeFill);
     std::size_t seeded = segments.size();
     if (params.seedMm) {
         seeded = seededComponent(segments, stats, xf, *params.seedMm);
@@ -533,6 +543,7 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     lumen.topologyUnion(*fluid.rim);
     result.fluidVolumeMl = double(lumen.activeVoxelCount()) * voxelMl;
     lumen.topologyUnion(kept);
+    if (tubeFill) lumen.topologyUnion(*tubeFill);
     reportProgress(progress, 0.4, "lumen level set input");
 
     // 5. Sub-voxel surface: a field f, negative inside, on the lumen dilated by bandVoxels + 2
@@ -571,10 +582,13 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     forEachActive(*f, [&](FloatLeaf& leaf) {
         FloatConstAccessor huAcc(huTree);
         BoolConstAccessor keptAcc(kept), foreignAcc(foreign), rimAcc(*fluid.rim);
+        std::optional<BoolConstAccessor> fillAcc;
+        if (tubeFill) fillAcc.emplace(*tubeFill);
         for (auto it = leaf.beginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
             float v;
-            if (keptAcc.isValueOn(ijk)) v = huAcc.getValue(ijk) - iso;
+            if (fillAcc && fillAcc->isValueOn(ijk)) v = pureAir;
+            else if (keptAcc.isValueOn(ijk)) v = huAcc.getValue(ijk) - iso;
             else if (rimAcc.isValueOn(ijk)) v = pureAir;
             else if (!huAcc.isValueOn(ijk)) v = FORCED_OUTSIDE_HU;
             else if (foreignAcc.isValueOn(ijk)) v = std::max(huAcc.getValue(ijk) - iso, FORCED_OUTSIDE_HU);

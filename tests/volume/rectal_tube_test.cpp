@@ -72,21 +72,48 @@ double distanceToTubeAxis(const Vec3d& p)
     return distance(p, TUBE_OUTER + ab * t);
 }
 
-/// The truth lumen: the colon's air, not the tube's (its wall and lumen).
-bool truthLumen(const Vec3d& local, bool withTube)
+/// The point of the tube's axis nearest to p.
+Vec3d nearestOnTubeAxis(const Vec3d& p)
 {
-    return test::featureDistanceMm(colon(), local) < 0 && (!withTube || distanceToTubeAxis(local) > TUBE_WALL_RADIUS);
+    const Vec3d ab = TUBE_TIP - TUBE_OUTER;
+    const double t = std::clamp(dot(p - TUBE_OUTER, ab) / dot(ab, ab), 0.0, 1.0);
+    return TUBE_OUTER + ab * t;
 }
 
-/// Deep in the tube's lumen, more than one outer radius from the tip.
+/// Where the colon's air surrounds the tube beyond its wall (its axis deeper in the colon
+/// than the wall's radius and a few mm), the tube is given to the lumen (rectal_tube.h, 5).
+bool tubeSurrounded(const Vec3d& local)
+{
+    return test::featureDistanceMm(colon(), nearestOnTubeAxis(local)) < -(TUBE_WALL_RADIUS + 3.0);
+}
+
+/// The truth lumen: the colon's air, not the tube's (its wall and lumen) except where the
+/// colon's air surrounds the tube.
+bool truthLumen(const Vec3d& local, bool withTube)
+{
+    return test::featureDistanceMm(colon(), local) < 0 &&
+           (!withTube || distanceToTubeAxis(local) > TUBE_WALL_RADIUS || tubeSurrounded(local));
+}
+
+/// Deep in the tube's lumen, more than one outer radius from the tip, outside the colon.
 bool deepInTube(const Vec3d& local)
 {
-    return distanceToTubeAxis(local) < TUBE_LUMEN_RADIUS - 0.5 && distance(local, TUBE_TIP) > TUBE_WALL_RADIUS;
+    return distanceToTubeAxis(local) < TUBE_LUMEN_RADIUS - 0.5 && distance(local, TUBE_TIP) > TUBE_WALL_RADIUS &&
+           test::featureDistanceMm(colon(), local) > 0;
+}
+
+/// On the tube's axis well inside the rectum (axis deeper than the wall's radius + 4 mm).
+bool tubeAxisInRectum(const Vec3d& local)
+{
+    return distanceToTubeAxis(local) < 1.0 && local.z < TUBE_TIP.z - 2.0 &&
+           test::featureDistanceMm(colon(), nearestOnTubeAxis(local)) < -(TUBE_WALL_RADIUS + 4.0);
 }
 
 struct Overlap {
     double dice = 0;
     std::size_t tubeVoxelsInLumen = 0, tubeVoxels = 0;
+    std::size_t tubeInRectumInLumen = 0, tubeInRectum = 0;  ///< the filled tube inside the rectum
+    std::ostringstream notFilled;                             ///< local mm of those not in the lumen
 };
 
 /// Compares the lumen mask with the truth over local lattice points (local mm = index * 1 mm
@@ -112,6 +139,11 @@ Overlap overlap(const LumenSegmentation& seg, bool withTube, const std::array<in
                 if (deepInTube(local) && local.z >= 0) {
                     ++o.tubeVoxels;
                     o.tubeVoxelsInLumen += in;
+                }
+                if (withTube && tubeAxisInRectum(local)) {
+                    ++o.tubeInRectum;
+                    o.tubeInRectumInLumen += in;
+                    if (!in) o.notFilled << " (" << local.x << ", " << local.y << ", " << local.z << ")";
                 }
             }
     o.dice = 2.0 * double(both) / double(truth + mine);
@@ -157,6 +189,10 @@ TEST(RectalTube, CtTubeIsCutFromTheLumenAndTheRectumKept)
     EXPECT_GE(o.dice, 0.98);
     ASSERT_GT(o.tubeVoxels, 300u);
     EXPECT_EQ(o.tubeVoxelsInLumen, 0u) << "of " << o.tubeVoxels << " voxels deep in the tube's lumen";
+    // Inside the rectum the tube is filled: the rectum's lumen has no rod in it.
+    ASSERT_GT(o.tubeInRectum, 10u);
+    EXPECT_EQ(o.tubeInRectumInLumen, o.tubeInRectum) << "voxels of the tube's axis inside the rectum in the lumen; not:" << o.notFilled.str();
+    EXPECT_GT(t.filledMl, 0.5);
 
     // The tip is handed to the centerline stage in the level set's metadata.
     const auto meta = seg.sdf->getMetadata<openvdb::Vec3DMetadata>(RECTAL_TUBE_TIP_META);
@@ -243,6 +279,8 @@ TEST(RectalTube, ThresholdMaskTubeCutWithItsTip)
     EXPECT_GE(o.dice, 0.98);
     ASSERT_GT(o.tubeVoxels, 300u);
     EXPECT_EQ(o.tubeVoxelsInLumen, 0u) << "of " << o.tubeVoxels << " voxels deep in the tube's lumen";
+    ASSERT_GT(o.tubeInRectum, 10u);
+    EXPECT_EQ(o.tubeInRectumInLumen, o.tubeInRectum) << "voxels of the tube's axis inside the rectum in the lumen; not:" << o.notFilled.str();
 }
 
 TEST(RectalTube, FilledMaskTubeBelowTheRectumCutRectumKept)
