@@ -6,13 +6,16 @@
 //
 //   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--seed N]
 //                 [--touching N] [--redundant] [--rectal-tube] [--spacing SX,SY,SZ] [--ct FILE]
-//                 [--mask | --centerline]
+//                 [--mask | --centerline] [--mask-file FILE [--contacts]]
 //
 // The phantom options are those of `flyover phantom`; --ct FILE ingests that CT (any format
 // openImage() reads, e.g. one written by `flyover phantom`) instead of generating a phantom.
 //
 // --centerline: instead, segment + centerline as before contacts were cut ("centerline") against
 // segment + contact cutting + centerline ("contacts", volume/contacts.h), time and peak memory.
+//
+// --mask-file FILE: the mask-only path on that mask file (e.g. a real segmentation) instead of a
+// phantom's; with --contacts, followed by cutContacts (volume/contacts.h), each step timed.
 //
 // The phantom is generated and ingested once and saved as a temporary .vdb; each measured
 // pass then runs in a fresh child process (this program with --grid FILE --mode MODE) that
@@ -119,7 +122,7 @@ struct StepTimes : Progress {
     }
 };
 
-int maskChild(const std::string& maskPath, int runs)
+int maskChild(const std::string& maskPath, int runs, bool contacts)
 {
     openvdb::initialize();
     const double loadedMb = currentRssMb();
@@ -131,10 +134,17 @@ int maskChild(const std::string& maskPath, int runs)
         const auto t0 = std::chrono::steady_clock::now();
         steps.start();
         auto source = openImage(maskPath);
-        const LumenSegmentation seg = segmentFromMask(*source, SegmentParams{}, nullptr, &steps);
+        LumenSegmentation seg = segmentFromMask(*source, SegmentParams{}, nullptr, &steps);
         std::ostringstream s;
         s << seg.pieces.size() << " piece(s), lumen " << seg.lumenVolumeMl << " mL, mask " << seg.maskVolumeMl
           << " mL, rectal tube " << (seg.rectalTube.found ? "found" : "none");
+        if (contacts) {
+            const ContactReport cr = cutContacts(*seg.sdf, seg.mask.get(), ContactParams{}, &steps);
+            std::size_t cut = 0;
+            for (const ContactInfo& c : cr.contacts) cut += c.cut;
+            s << ", " << cr.regions << " regions, " << cr.links << " links, " << cut << " contact(s) cut";
+        }
+        steps.update(1.0, "end");
         what = s.str();
         seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
         cpu.push_back(cpuSeconds() - c0);
@@ -149,7 +159,7 @@ int maskChild(const std::string& maskPath, int runs)
 
 int child(const std::string& gridPath, const std::string& mode, int runs)
 {
-    if (mode == "mask") return maskChild(gridPath, runs);
+    if (mode == "mask" || mode == "maskcontacts") return maskChild(gridPath, runs, mode == "maskcontacts");
     openvdb::initialize();
     openvdb::io::File file(gridPath);
     file.open();
@@ -231,7 +241,8 @@ int main(int argc, char** argv)
 {
     std::string size = "full", grid, mode;
     int runs = 5;
-    bool fluid = false, collapse = false, mask = false, centerline = false;
+    bool fluid = false, collapse = false, mask = false, centerline = false, contacts = false;
+    std::string maskFile;
     PhantomParams pp;
     std::string ctPath, spacingText;
     for (int i = 1; i < argc; ++i) {
@@ -244,6 +255,8 @@ int main(int argc, char** argv)
         else if (a == "--collapse") collapse = true;
         else if (a == "--mask") mask = true;
         else if (a == "--centerline") centerline = true;
+        else if (a == "--mask-file" && i + 1 < argc) maskFile = argv[++i];
+        else if (a == "--contacts") contacts = true;
         else if (a == "--seed" && i + 1 < argc) pp.seed = std::strtoull(argv[++i], nullptr, 10);
         else if (a == "--touching" && i + 1 < argc) pp.touching = std::atoi(argv[++i]);
         else if (a == "--redundant") pp.redundant = true;
@@ -253,7 +266,7 @@ int main(int argc, char** argv)
         else {
             std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--seed N] "
                          "[--touching N] [--redundant] [--rectal-tube] [--spacing SX,SY,SZ] [--ct FILE] "
-                         "[--mask | --centerline]\n";
+                         "[--mask | --centerline] [--mask-file FILE [--contacts]]\n";
             return 2;
         }
     }
@@ -273,6 +286,14 @@ int main(int argc, char** argv)
     }
     try {
         if (!grid.empty()) return child(grid, mode, runs);
+        if (!maskFile.empty()) {
+            const std::string self = fs::read_symlink("/proc/self/exe").string();
+            const Measure m = runChild(self, maskFile, contacts ? "maskcontacts" : "mask", runs);
+            std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS peak %.0f MB;%s\n",
+                        contacts ? "segmentFromMask+contacts" : "segmentFromMask (file)", m.median, m.min, m.max,
+                        runs, m.cpuMedian, m.peakMb, m.what.c_str());
+            return 0;
+        }
 
         openvdb::initialize();
         pp.size = parsePhantomSize(size);

@@ -409,21 +409,40 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
 
     // The way round: the shortest path through the lumen from `from` to `to` over voxels
     // deeper than `above` and not removed (26-steps); +inf when longer than boundMm.
+    // A* search: a voxel is taken in order of its distance from `from` plus its straight
+    // distance to `to` (a lower bound of the rest of the way: every 26-step is as long as the
+    // straight line between its ends), scaled down by 1e-4 so that float rounding (of sums of up to ~10^4 steps) keeps
+    // it a lower bound. With a lower bound and re-opened voxels, the first time `to` is taken
+    // its distance is the shortest (the same as Dijkstra's), and a voxel whose distance plus
+    // bound exceeds boundMm lies on no way round shorter than boundMm; but it visits the voxels
+    // towards `to` first, instead of a ball of radius boundMm around `from`.
     std::vector<std::uint8_t> removed(n, 0);
     std::vector<float> reach(n, std::numeric_limits<float>::infinity());
     auto wayRoundMm = [&](Slot from, Slot to, float above, double boundMm) {
         std::vector<Slot> touched;
-        using Entry = std::pair<float, Slot>;
+        struct Entry {
+            float f, g;  ///< g + the bound of the rest, g = the distance from `from`
+            Slot s;
+            bool operator>(const Entry& o) const { return f != o.f ? f > o.f : s > o.s; }
+        };
         std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> heap;
+        const Coord target = index.coord(to);
+        const double boundScale = voxelMm * (1.0 - 1e-4);
+        auto restMm = [&](Slot t) {
+            const Coord d = index.coord(t) - target;
+            return boundScale * std::sqrt(double(d.x()) * d.x() + double(d.y()) * d.y() + double(d.z()) * d.z());
+        };
         reach[from] = 0.0f;
         touched.push_back(from);
-        heap.push({0.0f, from});
+        heap.push({static_cast<float>(restMm(from)), 0.0f, from});
         double found = std::numeric_limits<double>::infinity();
         std::size_t pops = 0;
         while (!heap.empty()) {
-            const auto [d, u] = heap.top();
+            const Entry e = heap.top();
             heap.pop();
             if ((++pops & 0xfffff) == 0) checkCancelled(progress);
+            const float d = e.g;
+            const Slot u = e.s;
             if (d > reach[u]) continue;
             if (u == to) {
                 found = d;
@@ -432,10 +451,12 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
             index.forEachNeighbour(u, [&](Slot t, int k) {
                 if (removed[t] || !(index.depthMm[t] > above)) return;
                 const float nd = d + static_cast<float>(STEPS[k].lengthVoxels * voxelMm);
-                if (nd < reach[t] && nd <= boundMm) {
+                if (!(nd < reach[t])) return;
+                const double rest = restMm(t);
+                if (nd + rest <= boundMm) {
                     if (reach[t] == std::numeric_limits<float>::infinity()) touched.push_back(t);
                     reach[t] = nd;
-                    heap.push({nd, t});
+                    heap.push({static_cast<float>(nd + rest), nd, t});
                 }
             });
         }

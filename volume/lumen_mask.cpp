@@ -179,9 +179,10 @@ public:
         std::vector<std::vector<std::pair<float, float>>> band(leaves.leafCount());
         leaves.foreach([&](const FloatLeaf& leaf, std::size_t n) {
             FloatConstAccessor indAcc(indicator);
+            const FloatLeaf* indLeaf = indicator.probeConstLeaf(leaf.origin());
             double s = 0;
             for (auto it = leaf.cbeginValueOn(); it; ++it) {
-                const float ind = indAcc.getValue(it.getCoord());
+                const float ind = indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord());
                 const double lo = term(*it, ind, -maxOffsetMm), hi = term(*it, ind, maxOffsetMm);
                 if (lo == hi) s += lo;
                 else band[n].emplace_back(*it, ind);
@@ -220,24 +221,68 @@ void constrainedSmoothing(FloatTree& phi, const BoolTree& work, const FloatTree&
                           int iterations, float marginMm)
 {
     openvdb::tree::LeafManager<const BoolTree> leaves(work);
-    std::vector<std::array<float, FloatLeaf::SIZE>> next(leaves.leafCount());
-    static const Coord STEPS[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+    const std::size_t count = leaves.leafCount();
+    std::vector<std::array<float, FloatLeaf::SIZE>> next(count);
+    // Per work leaf, found once: its phi leaf (work has phi's topology), the six face-neighbour
+    // phi leaves (-/+ x, -/+ y, -/+ z; nullptr: read through an accessor) and its indicator
+    // leaf, so that the iterations read neighbours by offset instead of tree look-ups.
+    constexpr int DIM = int(FloatLeaf::DIM);
+    constexpr int STRIDE[3] = {DIM * DIM, DIM, 1};
+    std::vector<FloatLeaf*> phiLeaf(count);
+    std::vector<std::array<const FloatLeaf*, 6>> nbLeaf(count);
+    std::vector<const FloatLeaf*> indLeaf(count);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 64), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t n = r.begin(); n != r.end(); ++n) {
+            const Coord o = leaves.leaf(n).origin();
+            phiLeaf[n] = phi.probeLeaf(o);
+            indLeaf[n] = indicator.probeConstLeaf(o);
+            for (int axis = 0; axis < 3; ++axis)
+                for (int side = 0; side < 2; ++side) {
+                    Coord q = o;
+                    q[axis] += side ? -DIM : DIM;  // slot 2 axis: +, 2 axis + 1: -
+                    nbLeaf[n][std::size_t(2 * axis + side)] = phi.probeConstLeaf(q);
+                }
+        }
+    });
     for (int iter = 0; iter < iterations; ++iter) {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.leafCount(), 8),
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 8),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             FloatConstAccessor phiAcc(phi), indAcc(indicator);
-            for (std::size_t n = r.begin(); n != r.end(); ++n)
+            for (std::size_t n = r.begin(); n != r.end(); ++n) {
+                const FloatLeaf* centre = phiLeaf[n];
+                if (!centre) continue;
+                const float* c = centre->buffer().data();
+                const float* ind = indLeaf[n] ? indLeaf[n]->buffer().data() : nullptr;
                 for (auto it = leaves.leaf(n).cbeginValueOn(); it; ++it) {
-                    const Coord ijk = it.getCoord();
+                    const int pos = int(it.pos());
+                    const int local[3] = {pos >> 6, (pos >> 3) & 7, pos & 7};
+                    // The six neighbours in the order +x, -x, +y, -y, +z, -z (the sum's order).
                     float sum = 0;
-                    for (const Coord& d : STEPS) sum += phiAcc.getValue(ijk + d);
-                    next[n][it.pos()] = constrained(sum / 6.0f, indAcc.getValue(ijk), marginMm);
+                    for (int axis = 0; axis < 3; ++axis)
+                        for (int side = 0; side < 2; ++side) {
+                            const bool plus = side == 0;
+                            float v;
+                            if (plus ? local[axis] < DIM - 1 : local[axis] > 0) {
+                                v = c[plus ? pos + STRIDE[axis] : pos - STRIDE[axis]];
+                            } else if (const FloatLeaf* other = nbLeaf[n][std::size_t(2 * axis + side)]) {
+                                v = other->buffer().data()[plus ? pos - (DIM - 1) * STRIDE[axis]
+                                                                : pos + (DIM - 1) * STRIDE[axis]];
+                            } else {
+                                Coord q = it.getCoord();
+                                q[axis] += plus ? 1 : -1;
+                                v = phiAcc.getValue(q);
+                            }
+                            sum += v;
+                        }
+                    const float indicatorValue = ind ? ind[pos] : indAcc.getValue(it.getCoord());
+                    next[n][std::size_t(pos)] = constrained(sum / 6.0f, indicatorValue, marginMm);
                 }
+            }
         });
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.leafCount(), 8),
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 8),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             for (std::size_t n = r.begin(); n != r.end(); ++n) {
-                FloatLeaf* target = phi.probeLeaf(leaves.leaf(n).origin());
+                FloatLeaf* target = phiLeaf[n];
                 if (!target) continue;
                 for (auto it = leaves.leaf(n).cbeginValueOn(); it; ++it)
                     target->setValueOnly(it.pos(), next[n][it.pos()]);
@@ -376,7 +421,9 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
         openvdb::tree::LeafManager<FloatTree> leaves(*f);
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
             FloatConstAccessor indAcc(*indicator);
-            for (auto it = leaf.beginValueOn(); it; ++it) it.setValue(0.5f - indAcc.getValue(it.getCoord()));
+            const FloatLeaf* indLeaf = indicator->probeConstLeaf(leaf.origin());
+            for (auto it = leaf.beginValueOn(); it; ++it)
+                it.setValue(0.5f - (indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord())));
         });
     }
     FloatGrid::Ptr fGrid = FloatGrid::create(f);
@@ -408,6 +455,7 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
             for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOff(it.pos());
         });
     }
+    reportProgress(progress, 0.4, "mask level set: distance near the surface");
     FloatGrid::Ptr phi = detail::redistance(*fGrid);
 
     const float marginMm = static_cast<float>(CONSTRAINT_MARGIN_VOXELS * h);
@@ -432,6 +480,7 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
             for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOnly(it.pos(), *it);
         });
         f->topologyUnion(*deep);
+        reportProgress(progress, 0.6, "mask level set: whole lumen distance");
         phi = detail::redistance(*fGrid);
     }
     fGrid.reset();
@@ -453,8 +502,11 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
         openvdb::tree::LeafManager<FloatTree> leaves(phi->tree());
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
             FloatConstAccessor indAcc(*indicator);
+            const FloatLeaf* indLeaf = indicator->probeConstLeaf(leaf.origin());
             for (auto it = leaf.beginValueOn(); it; ++it)
-                it.setValue(constrained(*it - volumeOffsetMm, indAcc.getValue(it.getCoord()), marginMm));
+                it.setValue(constrained(*it - volumeOffsetMm,
+                                        indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord()),
+                                        marginMm));
         });
     }
     indicator.reset();

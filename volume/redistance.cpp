@@ -27,6 +27,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <unordered_map>
 #include <vector>
@@ -90,11 +91,11 @@ inline float across(const float* leaf, const float* nb, int pos, int local, int 
 /// Godunov's update of one voxel from the absolute values of its neighbours (a: -/+ x, -/+ y,
 /// -/+ z), written as OpenVDB's FastSweeping::SweepingKernel::sweep() writes it, operation for
 /// operation, so that the float results agree to the last bit.
-inline void godunov(float& value, const float (&nb)[6], float h, float sqrt2h)
+inline bool godunov(float& value, const float (&nb)[6], float h, float sqrt2h)
 {
     float d1 = std::min(nb[0], nb[1]), d2 = std::min(nb[2], nb[3]), d3 = std::min(nb[4], nb[5]);
     // A neighbour farther than 1000 world units is unset (+-FLT_MAX): OpenVDB's validity test.
-    if (!(d1 < 1000.0f || d2 < 1000.0f || d3 < 1000.0f)) return;
+    if (!(d1 < 1000.0f || d2 < 1000.0f || d3 < 1000.0f)) return false;
     const float sign = value >= 0.0f ? 1.0f : -1.0f;
     const float absV = std::abs(value);
     if (d2 < d1) std::swap(d1, d2);
@@ -102,62 +103,79 @@ inline void godunov(float& value, const float (&nb)[6], float h, float sqrt2h)
     if (d2 < d1) std::swap(d1, d2);
     float update = d1 + h;
     if (update <= d2) {
-        if (update < absV) value = sign * update;
-        return;
+        if (!(update < absV)) return false;
+        value = sign * update;
+        return true;
     }
     if (d2 <= sqrt2h + d1) {
         const float diff = d1 - d2;
         const float D = 2.0f * h * h - diff * diff;
         update = 0.5f * (d1 + d2 + std::sqrt(D));
         if (update > d2 && update <= d3) {
-            if (update < absV) value = sign * update;
-            return;
+            if (!(update < absV)) return false;
+            value = sign * update;
+            return true;
         }
     }
     const float d123 = d1 + d2 + d3;
     const float D = d123 * d123 - 3.0f * (d1 * d1 + d2 * d2 + d3 * d3 - h * h);
     if (D >= 0.0f) {
         update = float(1.0 / 3.0) * (d123 + std::sqrt(D));
-        if (update < absV) value = sign * update;
+        if (update < absV) {
+            value = sign * update;
+            return true;
+        }
     }
+    return false;
 }
 
 /// One sweep of one leaf in direction `dir` (bit a set: negative along axis a). The leaf's
 /// values and its face neighbours' adjacent layers are copied into a padded 10^3 block first,
 /// so that the update reads every neighbour at a fixed offset (missing neighbours: +FLT_MAX).
-void sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& sweep, int dir, float h, float sqrt2h)
+/// Returns whether any value changed.
+bool sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& sweep, int dir, float h, float sqrt2h)
 {
-    if (sweep.isOff()) return;
+    if (sweep.isOff()) return false;
     constexpr int P = DIM + 2;
     constexpr int PS[3] = {P * P, P, 1};  // padded strides of x, y, z
     float buf[P * P * P];
     auto padded = [&](int x, int y, int z) { return (x + 1) * PS[0] + (y + 1) * PS[1] + (z + 1); };
+    // Rows along z are contiguous in both layouts: the leaf and its faces are copied row by row.
     for (int x = 0; x < DIM; ++x)
-        for (int y = 0; y < DIM; ++y)
-            for (int z = 0; z < DIM; ++z) buf[padded(x, y, z)] = v[(x << 6) | (y << 3) | z];
-    // The six faces: (a, b) run over the face, `axis` is its normal.
-    for (int axis = 0; axis < 3; ++axis) {
-        const int ua = axis == 0 ? 1 : 0, ub = axis == 2 ? 1 : 2;
-        for (int side = 0; side < 2; ++side) {
-            const float* other = nb[std::size_t(slot(axis, side == 1))];
-            for (int a = 0; a < DIM; ++a)
-                for (int b = 0; b < DIM; ++b) {
-                    int c[3];
-                    c[axis] = side ? DIM : -1;
-                    c[ua] = a;
-                    c[ub] = b;
-                    float value = FLT_BIG;
-                    if (other) {
-                        int l[3] = {c[0], c[1], c[2]};
-                        l[axis] = side ? 0 : DIM - 1;
-                        value = other[(l[0] << 6) | (l[1] << 3) | l[2]];
-                    }
-                    buf[padded(c[0], c[1], c[2])] = value;
-                }
+        for (int y = 0; y < DIM; ++y) std::memcpy(&buf[padded(x, y, 0)], &v[(x << 6) | (y << 3)], DIM * sizeof(float));
+    // The six faces (-/+ x, -/+ y, -/+ z): the neighbour's adjacent layer, or +FLT_MAX.
+    auto row = [&](float* to, const float* from) {
+        if (from) std::memcpy(to, from, DIM * sizeof(float));
+        else std::fill(to, to + DIM, FLT_BIG);
+    };
+    {
+        const float* lo = nb[std::size_t(slot(0, false))];
+        const float* hi = nb[std::size_t(slot(0, true))];
+        for (int y = 0; y < DIM; ++y) {
+            row(&buf[padded(-1, y, 0)], lo ? lo + ((DIM - 1) << 6 | y << 3) : nullptr);
+            row(&buf[padded(DIM, y, 0)], hi ? hi + (y << 3) : nullptr);
         }
+    }
+    {
+        const float* lo = nb[std::size_t(slot(1, false))];
+        const float* hi = nb[std::size_t(slot(1, true))];
+        for (int x = 0; x < DIM; ++x) {
+            row(&buf[padded(x, -1, 0)], lo ? lo + (x << 6 | (DIM - 1) << 3) : nullptr);
+            row(&buf[padded(x, DIM, 0)], hi ? hi + (x << 6) : nullptr);
+        }
+    }
+    {
+        const float* lo = nb[std::size_t(slot(2, false))];
+        const float* hi = nb[std::size_t(slot(2, true))];
+        for (int x = 0; x < DIM; ++x)
+            for (int y = 0; y < DIM; ++y) {
+                buf[padded(x, y, -1)] = lo ? lo[(x << 6) | (y << 3) | (DIM - 1)] : FLT_BIG;
+                buf[padded(x, y, DIM)] = hi ? hi[(x << 6) | (y << 3)] : FLT_BIG;
+            }
     }
     const bool neg[3] = {(dir & 1) != 0, (dir & 2) != 0, (dir & 4) != 0};
     float n[6];
+    bool changed = false;
     for (int xi = 0; xi < DIM; ++xi) {
         const int x = neg[0] ? DIM - 1 - xi : xi;
         const LeafMask::Word word = sweep.getWord<LeafMask::Word>(x);  // bits y << 3 | z
@@ -176,19 +194,21 @@ void sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& 
                 n[3] = std::abs(buf[i + PS[1]]);
                 n[4] = std::abs(buf[i - PS[2]]);
                 n[5] = std::abs(buf[i + PS[2]]);
-                godunov(buf[i], n, h, sqrt2h);
+                changed |= godunov(buf[i], n, h, sqrt2h);
             }
         }
     }
+    if (!changed) return false;
     for (int x = 0; x < DIM; ++x)
-        for (int y = 0; y < DIM; ++y)
-            for (int z = 0; z < DIM; ++z) v[(x << 6) | (y << 3) | z] = buf[padded(x, y, z)];
+        for (int y = 0; y < DIM; ++y) std::memcpy(&v[(x << 6) | (y << 3)], &buf[padded(x, y, 0)], DIM * sizeof(float));
+    return true;
 }
 
 } // namespace
 
-openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f)
+openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLeafSweeps)
 {
+    if (skippedLeafSweeps) *skippedLeafSweeps = 0;
     FloatTree& inTree = f.tree();
     if (inTree.hasActiveTiles())
         OPENVDB_THROW(openvdb::RuntimeError, "redistance: the input has active tiles (voxelize them first)");
@@ -295,12 +315,28 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f)
 
     // 2. The eight sweeps, in OpenVDB's order: +++, ---, ++-, --+, +-+, -+-, +--, -++
     // (bit a of `dir` set: negative along axis a).
+    //
+    // A leaf is skipped in a sweep when sweeping it cannot change it. A voxel's update reads only
+    // its own value and its six face neighbours, in any sweep direction; so when every voxel of
+    // a leaf kept its value in a sweep (the leaf is "stable" on what it read), a later sweep
+    // that reads the same values changes nothing either, whatever its direction. The leaf read
+    // its upwind face-neighbour leaves after their sweep of that round, the downwind ones before
+    // theirs (a leaf starts when its upwind neighbours are done, and its downwind ones wait for
+    // it); each leaf records in which sweeps it changed, so that "has any neighbour changed
+    // between what the leaf read when it was last stable and what it would read now" is a test
+    // of a few bits. Skipping thus gives the values of the full sweeps, bit for bit.
     static constexpr int DIRECTIONS[8] = {0, 7, 4, 3, 2, 5, 6, 1};
     std::vector<const float*> data(leafCount);
     for (std::size_t n = 0; n < leafCount; ++n) data[n] = graph.leaves[n]->buffer().data();
     std::vector<std::atomic<int>> pending(leafCount);
+    std::vector<std::uint8_t> changedIn(leafCount, 0);  // bit r: changed in round r (sweep DIRECTIONS[r])
+    std::vector<std::int8_t> lastStable(leafCount, -1);  // the last round the leaf was stable in, or -1
     std::vector<std::int32_t> ready;
-    for (const int dir : DIRECTIONS) {
+    std::atomic<std::size_t> skipped{0};
+    // Whether slot `s`'s neighbour is upwind in direction `dir` (swept before the leaf).
+    auto isUpwind = [](int dir, int s) { return ((s & 1) != 0) == (((dir >> (s / 2)) & 1) != 0); };
+    for (int round = 0; round < 8; ++round) {
+        const int dir = DIRECTIONS[round];
         auto upwind = [&](int axis) { return slot(axis, ((dir >> axis) & 1) != 0); };
         auto downwind = [&](int axis) { return slot(axis, ((dir >> axis) & 1) == 0); };
         ready.clear();
@@ -312,16 +348,43 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f)
         }
         tbb::parallel_for_each(ready.begin(), ready.end(), [&](std::int32_t n, tbb::feeder<std::int32_t>& feeder) {
             const auto& nbIndex = graph.neighbours[std::size_t(n)];
-            std::array<const float*, 6> nb{};
-            for (int s = 0; s < 6; ++s)
-                nb[std::size_t(s)] = nbIndex[std::size_t(s)] < 0 ? nullptr : data[std::size_t(nbIndex[std::size_t(s)])];
-            sweepLeaf(graph.leaves[std::size_t(n)]->buffer().data(), nb, sweepMask[std::size_t(n)], dir, h, sqrt2h);
+            bool skip = false;
+            if (const int stable = lastStable[std::size_t(n)]; stable >= 0) {
+                skip = true;
+                for (int s = 0; s < 6 && skip; ++s) {
+                    const std::int32_t m = nbIndex[std::size_t(s)];
+                    if (m < 0) continue;
+                    // The rounds after which the neighbour's values were read then and now.
+                    const int then = isUpwind(DIRECTIONS[stable], s) ? stable : stable - 1;
+                    const int now = isUpwind(dir, s) ? round : round - 1;
+                    const unsigned between = ((1u << (now + 1)) - 1u) & ~((1u << (then + 1)) - 1u);
+                    if (changedIn[std::size_t(m)] & between) skip = false;
+                }
+            }
+            if (skip) {
+                skipped.fetch_add(1, std::memory_order_relaxed);
+                lastStable[std::size_t(n)] = std::int8_t(round);
+            } else {
+                std::array<const float*, 6> nb{};
+                for (int s = 0; s < 6; ++s)
+                    nb[std::size_t(s)] =
+                        nbIndex[std::size_t(s)] < 0 ? nullptr : data[std::size_t(nbIndex[std::size_t(s)])];
+                if (sweepLeaf(graph.leaves[std::size_t(n)]->buffer().data(), nb, sweepMask[std::size_t(n)], dir, h,
+                              sqrt2h)) {
+                    changedIn[std::size_t(n)] = std::uint8_t(changedIn[std::size_t(n)] | (1u << round));
+                    lastStable[std::size_t(n)] = -1;
+                } else {
+                    lastStable[std::size_t(n)] = std::int8_t(round);
+                }
+            }
             for (int axis = 0; axis < 3; ++axis) {
                 const std::int32_t m = nbIndex[std::size_t(downwind(axis))];
                 if (m >= 0 && pending[std::size_t(m)].fetch_sub(1, std::memory_order_acq_rel) == 1) feeder.add(m);
             }
         });
     }
+
+    if (skippedLeafSweeps) *skippedLeafSweeps = skipped.load();
 
     // 3. Finalisation (sweep(nIter, finalize = true)): the extrema of the active values that were
     // reached; unreached active voxels take them, and the inactive values and the background

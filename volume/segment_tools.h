@@ -49,7 +49,9 @@ openvdb::BoolTree::Ptr reachableWithin(const openvdb::BoolTree& seed,
 /// @note Values of exactly 0 in `f` are first set to the smallest positive float (outside):
 ///       the sweeping's sign is ambiguous there (integer HU equal to the iso-value, a
 ///       resampled mask at exactly one half), and such a voxel can come out deep inside.
-openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f);
+/// @param skippedLeafSweeps when given, receives how many (leaf, sweep) pairs were skipped
+///        because the sweep could not change the leaf (tests; see redistance.cpp)
+openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLeafSweeps = nullptr);
 
 /// Deactivates exterior voxels farther than `bandMm` from the surface, sets the background
 /// to +bandMm (inside tiles: -bandMm) and prunes: a level set with a full interior and an

@@ -158,6 +158,35 @@ TEST(Redistance, SameAsSdfToSdfOnABinaryBall)
     expectSameAsSdfToSdf(*binaryBall());
 }
 
+/// A binary torus (tube radius 11 voxels around a 30-voxel circle) in a shell of 6 voxels:
+/// thick enough that many leaves stop changing before the eighth sweep and are skipped.
+FloatGrid::Ptr binaryTorus()
+{
+    auto grid = FloatGrid::create(0.5f);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(0.7));
+    auto acc = grid->getAccessor();
+    for (int i = -48; i <= 48; ++i)
+        for (int j = -48; j <= 48; ++j)
+            for (int k = -18; k <= 18; ++k) {
+                const double ring = std::hypot(double(i), double(j)) - 30.0;
+                const double r = std::hypot(ring, double(k) + 0.3);
+                if (r < 17.0) acc.setValue(Coord(i, j, k), r < 11.0 ? -0.5f : 0.5f);
+            }
+    return grid;
+}
+
+TEST(Redistance, SameAsSdfToSdfWhenLeavesAreSkipped)
+{
+    const FloatGrid::Ptr f = binaryTorus();
+    FloatGrid::Ptr copy = f->deepCopy();
+    std::size_t skipped = 0;
+    detail::redistance(*copy, &skipped);
+    // Leaves are skipped (else this test would not test the skipping) ...
+    EXPECT_GT(skipped, 0u) << "no leaf sweep was skipped on the torus";
+    // ... and the values are still those of the full sweeps.
+    expectSameAsSdfToSdf(*f);
+}
+
 TEST(Redistance, SameAsSdfToSdfWithNothingToSweepFrom)
 {
     // No sign change: sdfToSdf returns its initialisation, unswept.
