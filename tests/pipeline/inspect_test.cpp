@@ -5,6 +5,7 @@
 #include "cli_runner.h"
 #include "part_fixture.h"
 #include "pipeline/artifact_io.h"
+#include "pipeline/artifact_store.h"
 
 #include <gtest/gtest.h>
 
