@@ -33,7 +33,8 @@ struct PartRenderParams {
     int turntableFrames = 72;   ///< frames per turn (one turn about the superior axis)
     int videoFps = 24;          ///< video frame rate
     int videoPx = 384;          ///< each turntable panel (pixels, square)
-    static constexpr int VERSION = 1;
+    /// 2: visibility.json counts every ray (ost_rays), not only each pixel's centre ray.
+    static constexpr int VERSION = 2;
 };
 
 struct InspectParams {

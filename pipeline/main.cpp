@@ -331,10 +331,12 @@ int main(int argc, char** argv)
             return 0;
         }
         if (*statusCmd) {
-            status.paramsGiven = !statusConfig.empty() || !statusAssignments.empty();
-            if (!statusConfig.empty()) applyParamsJson(status.params, readConfigFile(statusConfig), statusConfig);
-            for (const auto& a : statusAssignments) applyParamAssignment(status.params, a);
-            for (const auto& st : studyStatus(status))
+            // Applied by studyStatus: a part study's sections are inspect's.
+            StatusParamText text;
+            if (!statusConfig.empty()) text.config = readConfigFile(statusConfig);
+            text.configSource = statusConfig;
+            text.assignments = statusAssignments;
+            for (const auto& st : studyStatus(status, text))
                 std::cout << st.stage << std::string(12 - std::min<std::size_t>(11, st.stage.size()), ' ') << st.state
                           << (st.reason.empty() ? "" : "  (" + st.reason + ")") << "\n";
             return 0;

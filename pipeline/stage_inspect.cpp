@@ -183,11 +183,11 @@ RenderOptions partRenderOptions(const PartRenderParams& rp, int px, bool ost)
     return ro;
 }
 
-/// Pixels of each void (index id) in a hit image.
-std::vector<int64_t> voidPixels(const HitImage& hits, const PartScene& ps)
+/// Pixels of each void (index id) in a hit image, or rays in a list of every ray's hit.
+std::vector<int64_t> voidPixels(const std::vector<uint32_t>& primIds, const PartScene& ps)
 {
     std::vector<int64_t> count(ps.voids.size() + 1, 0);
-    for (const uint32_t prim : hits.primId)
+    for (const uint32_t prim : primIds)
         if (prim < ps.faceVoid.size()) {
             const int id = ps.faceVoid[prim];
             if (id > 0 && std::size_t(id) < count.size()) ++count[std::size_t(id)];
@@ -360,27 +360,33 @@ json runPartOverviews(StudyRun& run, Progress* progress)
     const RenderOptions ostOptions = partRenderOptions(rp, rp.overviewPx, true);
     const RenderOptions normalOptions = partRenderOptions(rp, rp.overviewPx, false);
     json cameras = json::object(), views = json::object();
-    std::vector<int64_t> bestOst(ps.voids.size() + 1, 0), totalNormal(ps.voids.size() + 1, 0);
+    std::vector<int64_t> bestOst(ps.voids.size() + 1, 0), bestOstRays(ps.voids.size() + 1, 0),
+        totalNormal(ps.voids.size() + 1, 0), totalNormalRays(ps.voids.size() + 1, 0);
     std::vector<std::vector<std::string>> seenIn(ps.voids.size() + 1);
     RgbImage anterior;
     std::size_t done = 0;
     for (const CanonicalView& view : canonicalViews()) {
         const Camera cam = overviewCamera(ps.scene->boundsMin(), ps.scene->boundsMax(), view.viewDir, view.up, 30.0);
         HitImage ostHits, normalHits;
-        RgbImage ost = renderFaceColours(*ps.scene, cam, ostOptions, ps.faceColours, &ostHits);
-        RgbImage normal = renderFaceColours(*ps.scene, cam, normalOptions, ps.faceColours, &normalHits);
-        const auto ostPx = voidPixels(ostHits, ps), normalPx = voidPixels(normalHits, ps);
-        json ostJ = json::object(), normalJ = json::object();
+        std::vector<uint32_t> ostRays, normalRays;
+        RgbImage ost = renderFaceColours(*ps.scene, cam, ostOptions, ps.faceColours, &ostHits, &ostRays);
+        RgbImage normal = renderFaceColours(*ps.scene, cam, normalOptions, ps.faceColours, &normalHits, &normalRays);
+        const auto ostPx = voidPixels(ostHits.primId, ps), normalPx = voidPixels(normalHits.primId, ps);
+        const auto ostRy = voidPixels(ostRays, ps), normalRy = voidPixels(normalRays, ps);
+        json ostJ = json::object(), normalJ = json::object(), ostRayJ = json::object();
         for (const auto& v : ps.voids) {
             const std::size_t id = std::size_t(v.id);
             if (id >= ostPx.size()) continue;
             ostJ[std::to_string(id)] = ostPx[id];
             normalJ[std::to_string(id)] = normalPx[id];
+            ostRayJ[std::to_string(id)] = ostRy[id];
             bestOst[id] = std::max(bestOst[id], ostPx[id]);
+            bestOstRays[id] = std::max(bestOstRays[id], ostRy[id]);
             totalNormal[id] += normalPx[id];
-            if (ostPx[id] > 0) seenIn[id].push_back(view.name);
+            totalNormalRays[id] += normalRy[id];
+            if (ostRy[id] > 0) seenIn[id].push_back(view.name);
         }
-        views[view.name] = json{{"ost_pixels", ostJ}, {"normal_pixels", normalJ}};
+        views[view.name] = json{{"ost_pixels", ostJ}, {"ost_rays", ostRayJ}, {"normal_pixels", normalJ}};
         cameras[view.name] = cameraJson(cam);
         RgbImage image = comparisonImage(std::move(ost), std::move(normal), ps.scale);
         writePng(overviews.path(std::string(view.name) + ".png"), image);
@@ -393,9 +399,10 @@ json runPartOverviews(StudyRun& run, Progress* progress)
         const std::size_t id = std::size_t(v.id);
         if (id >= bestOst.size()) continue;
         perVoid.push_back(json{{"id", v.id}, {"ost_views", seenIn[id]}, {"ost_pixels_max", bestOst[id]},
+                               {"ost_rays_max", bestOstRays[id]}, {"normal_rays_total", totalNormalRays[id]},
                                {"normal_pixels_total", totalNormal[id]}});
-        if (bestOst[id] == 0) ++unseen;
-        if (totalNormal[id] > 0) ++showingInNormal;
+        if (bestOstRays[id] == 0) ++unseen;
+        if (totalNormalRays[id] > 0) ++showingInNormal;
     }
     const json render{{"panel_px", rp.overviewPx}, {"supersample", rp.supersample},
                       {"smooth_shading", rp.smoothShading}, {"depth_cue", rp.depthCue}};
@@ -406,7 +413,10 @@ json runPartOverviews(StudyRun& run, Progress* progress)
                                                    {"cameras", cameras}});
     writeJson(overviews.path("visibility.json"),
               json{{"schema", "flyover.part_visibility/1"},
-                   {"counted", "pixels whose centre ray first hits a triangle of the void's surface"},
+                   {"counted", "ost_pixels: pixels whose centre ray first hits a triangle of the void's surface; "
+                               "ost_rays: rays (supersample x supersample per pixel) that do, so a void smaller than "
+                               "a pixel still counts; a void is seen in a view (ost_views) when ost_rays > 0, "
+                               "normal_rays_total / normal_pixels_total: rays of the normal renders, all views"},
                    {"views", views},
                    {"voids", perVoid},
                    {"voids_unseen_in_ost", unseen},

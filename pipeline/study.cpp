@@ -293,6 +293,54 @@ nlohmann::json runPipeline(const RunOptions& options)
     if (hasMask) digests["mask"] = stamps.digest(options.maskPath);
     std::map<std::string, json> entries;
     std::set<std::string> usedRecords;
+
+    // The manifest: the entries of this run's stages so far, plus earlier entries of stages this
+    // run does not touch. It is rewritten (atomically) each time a stage's files and cache record
+    // are in place, with "complete": false, so that a killed run leaves a manifest that names
+    // what finished; the last write says whether every wanted stage finished.
+    const json previous = readManifest(run.dir);
+    json runParameters = json::object();
+    if (kind == StudyKind::Part)
+        for (const auto& section : inspectSections()) runParameters[section] = inspectParamsToJson(options.inspect, section);
+    else
+        for (const auto& section : stageNames()) runParameters[section] = stageParamsToJson(options.params, section);
+    auto manifestOf = [&](const std::map<std::string, json>& done, bool keepPrevious, bool complete) {
+        json stages = json::array();
+        for (const auto& spec : specs) {
+            const auto it = done.find(spec.name);
+            if (it != done.end()) stages.push_back(it->second);
+            else if (keepPrevious && !wanted.count(spec.name) && !(spec.name == "ingest" && !hasCt)) {
+                json e = manifestEntry(previous, spec.name);
+                if (!e.is_null()) stages.push_back(e);
+            }
+        }
+        json m{{"schema", "flyover.manifest/1"},
+               {"world_frame", WORLD_FRAME},
+               {"input", hasCt ? json(fs::absolute(options.ctPath).string()) : json(nullptr)},
+               {"input_digest", hasCt ? json(digests.at("input")) : json(nullptr)},
+               {"mask", hasMask ? json(fs::absolute(options.maskPath).string()) : json(nullptr)},
+               {"mask_digest", hasMask ? json(digests.at("mask")) : json(nullptr)},
+               {"complete", complete},
+               {"parameters", runParameters},
+               {"stages", stages}};
+        if (kind == StudyKind::Part) m["pipeline"] = "inspect";
+        return m;
+    };
+    std::mutex manifestMutex;              // guards finished and the progress writes
+    std::map<std::string, json> finished;  // stages whose files and record are in place
+    // A reused stage is only noted (an unchanged re-run stays a single manifest write); the next
+    // computed stage's write lists it.
+    auto recordFinished = [&](const std::string& name, const json& entry) {
+        std::lock_guard<std::mutex> g(manifestMutex);
+        finished[name] = entry;
+        if (!entry.value("computed", true)) return;
+        json m;
+        {
+            std::lock_guard<std::mutex> g2(mutex);  // digests
+            m = manifestOf(finished, true, false);
+        }
+        writeJson(run.path("manifest.json"), m);
+    };
     // Write-behind: the finishing of each such stage (fsync, rename, record), joined before the
     // manifest is written (and, being std::async futures, on any way out of this function).
     std::vector<std::pair<std::string, std::future<void>>> behind;
@@ -324,11 +372,14 @@ nlohmann::json runPipeline(const RunOptions& options)
                 entry["reuse_seconds"] = secs;
                 entry["computed"] = false;
                 entry["report"] = record->value("report", json::object());
-                std::lock_guard<std::mutex> g(mutex);
-                for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
-                    digests[it.key()] = it.value().get<std::string>();
-                entries[spec.name] = entry;
-                usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+                {
+                    std::lock_guard<std::mutex> g(mutex);
+                    for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
+                        digests[it.key()] = it.value().get<std::string>();
+                    entries[spec.name] = entry;
+                    usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+                }
+                recordFinished(spec.name, entry);
                 if (log) log->stageFinished(spec.name, false, secs, "");
                 return;
             }
@@ -360,7 +411,7 @@ nlohmann::json runPipeline(const RunOptions& options)
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        auto finish = [&store, &stamps, deferred, record2, name = spec.name] {
+        auto finish = [&store, &stamps, &recordFinished, deferred, record2, entry, name = spec.name] {
             crashPoint(("writebehind:" + name + ":before-finish").c_str());
             deferred->finish();
             store.commit(record2);
@@ -371,13 +422,20 @@ nlohmann::json runPipeline(const RunOptions& options)
                 if (fs::is_regular_file(obj, ec)) stamps.hashed(obj, it.value().get<std::string>());
             }
             crashPoint(("stage:" + name + ":committed").c_str());
+            recordFinished(name, entry);
         };
-        if (!spec.writeBehind) finish();
-        std::lock_guard<std::mutex> g(mutex);
-        if (spec.writeBehind) behind.emplace_back(spec.name, std::async(std::launch::async, finish));
-        for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
-        entries[spec.name] = entry;
-        usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+        {
+            std::lock_guard<std::mutex> g(mutex);
+            for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
+            entries[spec.name] = entry;
+            usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+        }
+        if (spec.writeBehind) {
+            std::lock_guard<std::mutex> g(mutex);
+            behind.emplace_back(spec.name, std::async(std::launch::async, finish));
+        } else {
+            finish();
+        }
         if (log) log->stageFinished(spec.name, true, secs, spec.writeBehind ? "artifacts written behind" : "");
     };
 
@@ -419,23 +477,11 @@ nlohmann::json runPipeline(const RunOptions& options)
     }
 
     // The manifest: this run's entries, plus earlier entries of stages this run did not touch.
-    const json previous = readManifest(run.dir);
-    json stages = json::array();
-    for (const auto& spec : specs) {
-        if (entries.count(spec.name)) stages.push_back(entries[spec.name]);
-        else if (!failure && !wanted.count(spec.name) && !(spec.name == "ingest" && !hasCt)) {
-            json e = manifestEntry(previous, spec.name);
-            if (!e.is_null()) stages.push_back(e);
-        }
+    json manifest;
+    {
+        std::lock_guard<std::mutex> g(manifestMutex);
+        manifest = failure ? manifestOf(finished, false, false) : manifestOf(entries, true, true);
     }
-    json manifest{{"schema", "flyover.manifest/1"},
-                        {"world_frame", WORLD_FRAME},
-                        {"input", hasCt ? json(fs::absolute(options.ctPath).string()) : json(nullptr)},
-                        {"input_digest", hasCt ? json(digests["input"]) : json(nullptr)},
-                        {"mask", hasMask ? json(fs::absolute(options.maskPath).string()) : json(nullptr)},
-                        {"mask_digest", hasMask ? json(digests["mask"]) : json(nullptr)},
-                        {"stages", stages}};
-    if (kind == StudyKind::Part) manifest["pipeline"] = "inspect";
     writeJson(run.path("manifest.json"), manifest);
     stamps.save();
     if (failure) std::rethrow_exception(failure);
@@ -446,28 +492,50 @@ nlohmann::json runPipeline(const RunOptions& options)
     return manifest;
 }
 
-std::vector<StageStatus> studyStatus(const StatusOptions& options)
+std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusParamText& text)
 {
     const fs::path dir(options.studyDir);
     const json manifest = readManifest(dir);
-    if (!fs::exists(dir / ".flyover") || manifest.is_null())
-        throw InputError(options.studyDir + ": not a flyover study (no manifest.json; run 'flyover run' first)");
-    // A part study (flyover inspect) is compared with the parameters of its last run.
+    if (!fs::exists(dir / ".flyover"))
+        throw InputError(options.studyDir + ": not a flyover study (no .flyover/; run 'flyover run' or 'flyover inspect' first)");
+    if (manifest.is_null())
+        throw InputError(options.studyDir + ": no stage of this study has finished yet (no manifest.json: its first run "
+                                            "was stopped or is still running); run 'flyover run' or 'flyover inspect' again");
+    // A part study (flyover inspect) takes inspect's parameters.
     const StudyKind kind = manifest.value("pipeline", "") == "inspect" ? StudyKind::Part : StudyKind::Colon;
+    const bool complete = manifest.value("complete", true);
     PipelineParams params = options.params;
     InspectParams inspect;
-    if (!options.paramsGiven || kind == StudyKind::Part)
+    const bool given = options.paramsGiven || !text.assignments.empty() || !text.config.is_null();
+    if (given) {
+        if (kind == StudyKind::Part) {
+            if (!text.config.is_null()) applyInspectParamsJson(inspect, text.config, text.configSource);
+            for (const auto& a : text.assignments) applyInspectAssignment(inspect, a);
+            validateInspectParams(inspect);
+        } else {
+            if (!text.config.is_null()) applyParamsJson(params, text.config, text.configSource);
+            for (const auto& a : text.assignments) applyParamAssignment(params, a);
+            validateParams(params);
+        }
+    } else {
+        // The last run's: its parameters (all sections), then each stage's recorded ones (a stage
+        // that the last run did not touch keeps those of the run that made it).
+        auto apply = [&](const json& sections) {
+            try {
+                if (kind == StudyKind::Part) applyInspectParamsJson(inspect, sections, "manifest.json");
+                else applyParamsJson(params, sections, "manifest.json");
+            } catch (const ParameterError&) {
+                // parameters of an older stage version: the stage will show as stale
+            }
+        };
+        if (manifest.contains("parameters") && manifest["parameters"].is_object())
+            for (auto it = manifest["parameters"].begin(); it != manifest["parameters"].end(); ++it)
+                apply(json{{it.key(), it.value()}});
         for (const auto& spec : stageSpecs(kind)) {
             const json e = manifestEntry(manifest, spec.name);
-            if (!e.is_null() && e.contains("parameters")) {
-                try {
-                    if (spec.part) applyInspectParamsJson(inspect, json{{paramStageOf(spec), e["parameters"]}}, "manifest.json");
-                    else applyParamsJson(params, json{{paramStageOf(spec), e["parameters"]}}, "manifest.json");
-                } catch (const ParameterError&) {
-                    // parameters of an older stage version: the stage will show as stale
-                }
-            }
+            if (!e.is_null() && e.contains("parameters")) apply(json{{paramStageOf(spec), e["parameters"]}});
         }
+    }
     const std::string ctPath = options.ctPath.empty() ? recordedPath(manifest, "input") : options.ctPath;
     const std::string maskPath = options.maskPath.empty() ? recordedPath(manifest, "mask") : options.maskPath;
     const bool hasCt = !ctPath.empty(), hasMask = !maskPath.empty();
@@ -522,7 +590,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options)
         }
         if (last.is_null()) {
             st.state = "missing";
-            st.reason = "never run";
+            st.reason = complete ? "never run" : "not finished by the last run (stopped, failed, or still running)";
         } else {
             st.state = "stale";
             if (last.value("version", -1) != stageVersionOf(spec)) st.reason = "stage version changed";

@@ -78,9 +78,19 @@ struct StatusOptions {
     bool paramsGiven = false;     ///< false: compare with the parameters of the last run
 };
 
-/// What `run` would do with these options, stage by stage, and why.
-/// @throw InputError when DIR is not a study.
-std::vector<StageStatus> studyStatus(const StatusOptions& options);
+/// `flyover status --config/--set` as given on the command line: applied by the study's kind,
+/// to StatusOptions::params for a colon study, to inspect's defaults for a part study.
+struct StatusParamText {
+    nlohmann::json config;                 ///< null: none
+    std::string configSource;
+    std::vector<std::string> assignments;
+};
+
+/// What `run` (or `inspect`, for a part study) would do with these options, stage by stage,
+/// and why. Without given parameters the last run's are used: each stage's recorded ones,
+/// else the manifest's "parameters" (a killed run's stages that never finished).
+/// @throw InputError when DIR is not a study; ParameterError for a bad --set/--config.
+std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusParamText& given = {});
 
 /// Removes every artifact, the manifest and the cache of a study (takes the lock).
 void cleanStudy(const std::string& studyDir);

@@ -92,7 +92,7 @@ Rgb8 SizeColourScale::colourAt(double t)
 Rgb8 SizeColourScale::colour(double diameterMm) const { return colourAt(position(diameterMm)); }
 
 RgbImage renderFaceColours(const RayScene& scene, const Camera& camera, const RenderOptions& options,
-                           const std::vector<Rgb8>& faceColours, HitImage* hits)
+                           const std::vector<Rgb8>& faceColours, HitImage* hits, std::vector<uint32_t>* sampleHits)
 {
     const int w = options.widthPx, h = options.heightPx, n = options.supersample;
     if (!(w >= 1 && h >= 1 && w <= 65536 && h <= 65536))
@@ -111,9 +111,10 @@ RgbImage renderFaceColours(const RayScene& scene, const Camera& camera, const Re
     const double cueRange = options.depthCueRangeMm > 0 ? options.depthCueRangeMm : 0.5 * length(hi - lo);
     const double cueStart = std::max(nearest, camera.nearMm);
 
-    std::vector<std::array<double, 3>> linear(faceColours.size());
-    for (std::size_t f = 0; f < faceColours.size(); ++f)
-        for (std::size_t k = 0; k < 3; ++k) linear[f][k] = toLinear(faceColours[f][k]);
+    // Linear values by display byte (a table, not a copy per face: the scene has millions of
+    // faces and a turntable renders it hundreds of times).
+    std::array<double, 256> linear;
+    for (std::size_t b = 0; b < 256; ++b) linear[b] = toLinear(uint8_t(b));
     std::array<double, 3> background;
     for (std::size_t k = 0; k < 3; ++k) background[k] = toLinear(PART_BACKGROUND[k]);
 
@@ -127,6 +128,7 @@ RgbImage renderFaceColours(const RayScene& scene, const Camera& camera, const Re
         hits->t.assign(std::size_t(w) * std::size_t(h), -1.0f);
         hits->primId.assign(std::size_t(w) * std::size_t(h), std::numeric_limits<uint32_t>::max());
     }
+    if (sampleHits) sampleHits->assign(std::size_t(w) * std::size_t(h) * std::size_t(n * n), std::numeric_limits<uint32_t>::max());
     tbb::parallel_for(0, h, [&](int y) {
         for (int x = 0; x < w; ++x) {
             std::array<double, 3> sum{0, 0, 0};
@@ -137,6 +139,9 @@ RgbImage renderFaceColours(const RayScene& scene, const Camera& camera, const Re
                     const Vec3d dir = pixelDirection(camera, w, h, px, py);
                     const RayHit hit = scene.intersect(camera.position, dir, camera.nearMm,
                                                        std::numeric_limits<double>::infinity(), options.ost);
+                    if (sampleHits && hit.hit)
+                        (*sampleHits)[(std::size_t(y) * std::size_t(w) + std::size_t(x)) * std::size_t(n * n) +
+                                      std::size_t(sy * n + sx)] = hit.primId;
                     if (!hit.hit) {
                         for (std::size_t k = 0; k < 3; ++k) sum[k] += background[k];
                         continue;
@@ -149,7 +154,7 @@ RgbImage renderFaceColours(const RayScene& scene, const Camera& camera, const Re
                     const Vec3d nrm = scene.shadingNormal(hit.primId, hit.u, hit.v, options.smoothShading);
                     double shade = AMBIENT + DIFFUSE * std::fabs(dot(nrm, normalize(dir)));
                     if (options.depthCue) shade /= 1.0 + std::max(0.0, hit.t - cueStart) / cueRange;
-                    for (std::size_t k = 0; k < 3; ++k) sum[k] += shade * linear[hit.primId][k];
+                    for (std::size_t k = 0; k < 3; ++k) sum[k] += shade * linear[faceColours[hit.primId][k]];
                 }
             uint8_t* p = image.rgb.data() + (std::size_t(y) * std::size_t(w) + std::size_t(x)) * 3;
             for (std::size_t k = 0; k < 3; ++k) p[k] = toDisplay(sum[k] / double(n * n));

@@ -38,10 +38,13 @@ struct SizeColourScale {
 /// headlight diffuse shading (ambient 0.25) with the scene's smooth normals, `options.ost`
 /// discarding back faces, n x n supersampling averaged in linear colour, optional depth cue
 /// (brightness / (1 + depth beyond the scene's nearest bounding-box corner / half its diagonal)).
-/// `hits` receives the centre ray's hit per pixel.
+/// `hits` receives the centre ray's hit per pixel; `sampleHits` every ray's hit triangle
+/// (UINT32_MAX for a miss), n x n per pixel, pixels row by row: a void smaller than a pixel
+/// that no centre ray meets is still seen by the samples that meet it.
 /// @throw ParameterError for a size, supersampling or colour count out of range.
 RgbImage renderFaceColours(const RayScene& scene, const Camera& camera, const RenderOptions& options,
-                           const std::vector<Rgb8>& faceColours, HitImage* hits = nullptr);
+                           const std::vector<Rgb8>& faceColours, HitImage* hits = nullptr,
+                           std::vector<uint32_t>* sampleHits = nullptr);
 
 /// Width and height (pixels) of `text` drawn by drawText at `scale`.
 std::array<int, 2> textSize(const std::string& text, int scale);

@@ -1,5 +1,7 @@
 #include "surface/mesh_checks.h"
 
+#include "surface/ray_winding.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
@@ -9,6 +11,7 @@
 #include <cstddef>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <vector>
 
 namespace flyover {
@@ -18,6 +21,9 @@ namespace {
 using Vec3d = OpenMesh::Vec3d;
 
 constexpr double PI = 3.14159265358979323846;
+
+/// Below this many (probes x faces) a container's probes get the solid-angle sum directly.
+constexpr std::size_t RAY_NESTING_MIN_WORK = std::size_t(1) << 22;
 
 Vec3d pointOf(const TriMesh& mesh, TriMesh::VertexHandle v)
 {
@@ -273,13 +279,41 @@ MeshCheck checkMesh(const TriMesh& mesh)
     }
 
     // Nesting: component c lies inside d when one of its vertices has winding number +-1 with
-    // respect to d (capped). Only pairs whose bounding boxes nest are evaluated.
-    for (std::size_t c = 0; c < work.size(); ++c)
-        for (std::size_t d = 0; d < work.size(); ++d) {
-            if (c == d || !work[d].box.contains(work[c].box)) continue;
+    // respect to d (capped). Only pairs whose bounding boxes nest are evaluated. A component
+    // that holds few others gets the solid-angle sum over its faces per probe; one that holds
+    // many (a part's outer surface around its voids) counts ray crossings instead
+    // (ray_winding.h: the same integer, O(faces) once plus a few faces per probe), and any
+    // probe whose rays are all too close to call gets the solid-angle sum.
+    for (std::size_t d = 0; d < work.size(); ++d) {
+        std::vector<std::size_t> inside;
+        for (std::size_t c = 0; c < work.size(); ++c)
+            if (c != d && work[d].box.contains(work[c].box)) inside.push_back(c);
+        if (inside.empty()) continue;
+        const std::size_t faces = componentFaces[d].size() + work[d].caps.size();
+        if (inside.size() * faces <= RAY_NESTING_MIN_WORK) {
+            for (const std::size_t c : inside) {
+                const double wn = windingNumber(mesh, componentFaces[d], work[d].caps, work[c].probe);
+                if (std::fabs(wn) > 0.5) ++work[c].info.nestingDepth;
+            }
+            continue;
+        }
+        std::vector<std::size_t> undecided = inside;
+        for (const auto& direction : RayWindingCounter::directions()) {
+            if (undecided.empty()) break;
+            const RayWindingCounter counter(mesh, componentFaces[d], work[d].caps, direction);
+            std::vector<std::size_t> next;
+            for (const std::size_t c : undecided) {
+                const std::optional<int> wn = counter.winding(work[c].probe);
+                if (!wn) next.push_back(c);
+                else if (*wn != 0) ++work[c].info.nestingDepth;
+            }
+            undecided.swap(next);
+        }
+        for (const std::size_t c : undecided) {
             const double wn = windingNumber(mesh, componentFaces[d], work[d].caps, work[c].probe);
             if (std::fabs(wn) > 0.5) ++work[c].info.nestingDepth;
         }
+    }
 
     std::vector<std::size_t> order(work.size());
     std::iota(order.begin(), order.end(), std::size_t(0));

@@ -65,8 +65,11 @@ struct MeshCheck {
     bool isClosed() const { return boundaryEdges == 0; }
 };
 
-/// Measures `mesh`. Cost: linear in its size, plus one winding-number evaluation per pair of
-/// components whose bounding boxes nest.
+/// Measures `mesh`. Cost: linear in its size, plus, per component d whose bounding box holds
+/// others: one solid-angle winding number over d's faces per held component when they are
+/// few, else one ray-crossing grid over d's faces (ray_winding.h) and a few faces per held
+/// component. Both give the same integer winding number (the crossing count answers only
+/// when no crossing is within rounding of an edge; otherwise the solid-angle sum decides).
 MeshCheck checkMesh(const TriMesh& mesh);
 
 /// A triangle is degenerate when twice its area is below 1e-6 times its longest edge

@@ -5,6 +5,7 @@
 #include "cli_runner.h"
 #include "part_fixture.h"
 #include "pipeline/artifact_io.h"
+#include "pipeline/artifact_store.h"
 
 #include <gtest/gtest.h>
 
@@ -204,6 +205,8 @@ TEST_F(InspectTest, PartPhantomEveryInternalVoidListedAndVisible)
     for (const auto& v : vis.at("voids")) {
         EXPECT_GT(v.at("ost_pixels_max").get<int64_t>(), 0) << "shows in no OST overview: " << v.dump();
         EXPECT_EQ(v.at("normal_pixels_total").get<int64_t>(), 0) << "shows in the normal render: " << v.dump();
+        EXPECT_GE(v.at("ost_rays_max").get<int64_t>(), v.at("ost_pixels_max").get<int64_t>()) << v.dump();
+        EXPECT_EQ(v.at("normal_rays_total").get<int64_t>(), 0) << "a ray of the normal render meets it: " << v.dump();
     }
 }
 
@@ -249,6 +252,84 @@ TEST_F(InspectTest, BadInputIsOneLineAndExit1)
                          2, "segment");
     // Nothing half-written that a later run trusts: no voids.csv after a refusal.
     EXPECT_FALSE(fs::exists(path("bad1") + "/voids.csv"));
+}
+
+} // namespace
+} // namespace flyover
+
+namespace flyover {
+namespace {
+
+/// Runs flyover with FLYOVER_CRASH_AT=point (the process kills itself there); its exit status.
+int runCrashingAt(const std::string& point, const std::string& args)
+{
+    return std::system(("FLYOVER_CRASH_AT=" + point + " " + std::string(FLYOVER_BIN) + " " + args + " 2>/dev/null").c_str());
+}
+
+std::string statusLineOf(const std::string& out, const std::string& stage)
+{
+    std::istringstream in(out);
+    for (std::string line; std::getline(in, line);)
+        if (line.rfind(stage + " ", 0) == 0) return line;
+    return "";
+}
+
+TEST_F(InspectTest, KilledRunLeavesAManifestOfTheFinishedStagesAndStatusTakesInspectParameters)
+{
+    const std::string study = path("killed");
+    const std::string args = "inspect " + path("part.nrrd") + " --study " + study + " " + QUICK + video() + " --quiet";
+
+    // Killed as the first stage's record is written: nothing finished, no manifest; status says
+    // so and names both commands (it used to name 'flyover run' only).
+    EXPECT_NE(runCrashingAt("stage:ingest:committed", args), 0);
+    EXPECT_FALSE(fs::exists(study + "/manifest.json"));
+    const auto none = test::runFlyover("status --study " + study);
+    EXPECT_EQ(none.exitCode, 1);
+    EXPECT_EQ(test::lineCount(none.err), 1) << none.err;
+    EXPECT_NE(none.err.find("no stage of this study has finished yet"), std::string::npos) << none.err;
+    EXPECT_NE(none.err.find("flyover inspect"), std::string::npos) << none.err;
+
+    // Killed right after the surfaces stage's cache record: the manifest lists what finished
+    // before (the voids stage at least), marked incomplete, and not the surfaces stage.
+    EXPECT_NE(runCrashingAt("stage:surfaces:committed", args), 0);
+    ASSERT_TRUE(fs::exists(study + "/manifest.json")) << "a killed run must leave the manifest of its finished stages";
+    const json m = readJson(study + "/manifest.json");
+    EXPECT_EQ(m.at("pipeline"), "inspect");
+    EXPECT_EQ(m.at("complete"), false);
+    std::map<std::string, json> listed;
+    for (const auto& s : m.at("stages")) listed[s.at("stage").get<std::string>()] = s;
+    EXPECT_TRUE(listed.count("voids")) << m.dump();
+    EXPECT_FALSE(listed.count("surfaces")) << m.dump();
+    EXPECT_FALSE(listed.count("overviews")) << m.dump();
+    for (const auto& [stage, entry] : listed)
+        for (auto it = entry.at("outputs").begin(); it != entry.at("outputs").end(); ++it)
+            EXPECT_EQ(artifactDigest(study + "/" + it.key()), it.value().get<std::string>()) << stage << " " << it.key();
+    const auto st = test::runFlyover("status --study " + study);
+    ASSERT_EQ(st.exitCode, 0) << st.err;
+    EXPECT_NE(statusLineOf(st.out, "voids").find("fresh"), std::string::npos) << st.out;
+    // Its record was committed before the kill: the cache has it, the run restores nothing.
+    EXPECT_NE(statusLineOf(st.out, "surfaces").find("fresh"), std::string::npos) << st.out;
+    EXPECT_NE(statusLineOf(st.out, "overviews").find("not finished by the last run"), std::string::npos) << st.out;
+
+    // The run finishes; status with inspect's --set (a render parameter of the overviews).
+    const auto r = test::runFlyover(args);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json done = readJson(study + "/manifest.json");
+    EXPECT_EQ(done.at("complete"), true);
+    EXPECT_EQ(done.at("stages").size(), 5u);
+    EXPECT_EQ(computed(done).at("voids"), false) << "the killed run's voids are reused";
+    const auto set = test::runFlyover("status --study " + study + " " + QUICK + video() + " --set render.overview_px=96");
+    ASSERT_EQ(set.exitCode, 0) << set.err;
+    EXPECT_NE(statusLineOf(set.out, "overviews").find("stale"), std::string::npos) << set.out;
+    EXPECT_NE(statusLineOf(set.out, "overviews").find("render.overview_px"), std::string::npos) << set.out;
+    EXPECT_NE(statusLineOf(set.out, "turntable").find("fresh"), std::string::npos) << set.out;
+    EXPECT_NE(statusLineOf(set.out, "voids").find("fresh"), std::string::npos) << set.out;
+    const auto threshold = test::runFlyover("status --study " + study + " --set voids.threshold=20000");
+    ASSERT_EQ(threshold.exitCode, 0) << threshold.err;
+    EXPECT_NE(statusLineOf(threshold.out, "voids").find("voids.threshold"), std::string::npos) << threshold.out;
+    const auto bad = test::runFlyover("status --study " + study + " --set voids.no_such=1");
+    EXPECT_EQ(bad.exitCode, 2) << bad.err;
+    EXPECT_EQ(test::lineCount(bad.err), 1) << bad.err;
 }
 
 } // namespace

@@ -145,6 +145,43 @@ TEST_F(PartSurfaceRenderTest, EveryVoidShowsInAnOstOverviewAndNoneInTheNormalRen
     }
 }
 
+TEST_F(PartSurfaceRenderTest, SampleHitsHoldEveryRayTheCentreOnesAmongThem)
+{
+    std::vector<float> xyz;
+    std::vector<uint32_t> tris;
+    const TriMesh& mesh = surface->mesh;
+    for (const auto v : mesh.vertices())
+        for (int d = 0; d < 3; ++d) xyz.push_back(mesh.point(v)[d]);
+    for (const auto f : mesh.faces())
+        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    const RayScene scene(std::move(xyz), std::move(tris));
+    const std::vector<Rgb8> colours(scene.triangleCount(), PART_GREY);
+    const CanonicalView& view = canonicalViews().front();
+    const Camera cam = overviewCamera(scene.boundsMin(), scene.boundsMax(), view.viewDir, view.up, 30.0);
+    for (const int n : {1, 2, 3}) {
+        RenderOptions ro;
+        ro.widthPx = ro.heightPx = 40;  // coarse: voids a pixel or two across
+        ro.supersample = n;
+        ro.ost = true;
+        HitImage hits;
+        std::vector<uint32_t> rays;
+        renderFaceColours(scene, cam, ro, colours, &hits, &rays);
+        ASSERT_EQ(rays.size(), std::size_t(40 * 40 * n * n));
+        const std::size_t centre = n == 1 ? 0 : std::size_t((n / 2) * n + n / 2);
+        int64_t voidPixels = 0, voidRays = 0;
+        for (std::size_t p = 0; p < hits.primId.size(); ++p) {
+            ASSERT_EQ(rays[p * std::size_t(n * n) + centre], hits.primId[p]) << "pixel " << p << ", supersample " << n;
+            if (hits.primId[p] != UINT32_MAX && surface->voidOfFace(int64_t(hits.primId[p])) > 0) ++voidPixels;
+        }
+        for (const uint32_t prim : rays) {
+            ASSERT_TRUE(prim == UINT32_MAX || prim < scene.triangleCount());
+            if (prim != UINT32_MAX && surface->voidOfFace(int64_t(prim)) > 0) ++voidRays;
+        }
+        EXPECT_GT(voidRays, 0) << "supersample " << n;
+        EXPECT_GE(voidRays, voidPixels) << "supersample " << n;
+    }
+}
+
 TEST(PartRender, SizeColoursAndLegend)
 {
     const SizeColourScale scale{0.5, 8.0};
