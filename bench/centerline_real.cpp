@@ -14,6 +14,7 @@
 // it. --dump writes the path (position, radius, nearest reference arc and error) and the depth
 // along the reference path as JSON for plotting.
 #include "volume/centerline.h"
+#include "volume/path_compare.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
@@ -72,35 +73,21 @@ int main(int argc, char** argv)
         std::vector<Vec3d> refPts;
         for (const auto& p : ref.at("position_mm"))
             refPts.push_back({p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>()});
-        std::vector<double> refArc(refPts.size(), 0.0);
-        for (std::size_t i = 1; i < refPts.size(); ++i)
-            refArc[i] = refArc[i - 1] + distance(refPts[i], refPts[i - 1]);
+
+        const std::vector<double> refArc = arcLengthsMm(refPts);
 
         const auto t0 = std::chrono::steady_clock::now();
         CenterlineReport report;
         const Centerline cl = extractCenterline(*sdf, params, nullptr, &report);
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
-        std::vector<double> err, arc;
-        for (const CenterlinePoint& p : cl.points) {
-            std::size_t best = 0;
-            for (std::size_t i = 0; i < refPts.size(); ++i)
-                if (distance(refPts[i], p.positionMm) < distance(refPts[best], p.positionMm)) best = i;
-            err.push_back(distance(refPts[best], p.positionMm));
-            arc.push_back(refArc[best]);
-        }
-        std::vector<double> sorted(err);
-        std::sort(sorted.begin(), sorted.end());
-        double mean = 0;
-        for (double e : err) mean += e / double(err.size());
-        const double p95 = sorted[std::size_t(0.95 * double(sorted.size() - 1))];
-        std::size_t jumpAt = 1;
-        double worst = 0;
-        for (std::size_t i = 1; i < arc.size(); ++i)
-            if (std::abs(arc[i] - arc[i - 1]) > worst) {
-                worst = std::abs(arc[i] - arc[i - 1]);
-                jumpAt = i;
-            }
+        std::vector<Vec3d> pathPts;
+        for (const CenterlinePoint& p : cl.points) pathPts.push_back(p.positionMm);
+        const PathComparison cmp = comparePathToReference(pathPts, refPts);
+        const std::vector<double>& err = cmp.errorMm;
+        const std::vector<double>& arc = cmp.referenceArcMm;
+        const double mean = cmp.meanErrorMm, p95 = cmp.p95ErrorMm, worst = cmp.worstJumpMm;
+        const std::size_t jumpAt = std::max<std::size_t>(cmp.worstJumpAt, 1);
         const double refLength = arc.back() - arc.front();
         std::printf("centerline %.1f s; path %.1f mm, reference over the same stretch %.1f mm (ratio %.3f), "
                     "arc %.1f -> %.1f; error mean %.2f p95 %.2f mm; worst jump %.1f mm at path arc %.1f "

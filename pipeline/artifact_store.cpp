@@ -63,15 +63,17 @@ std::string stageKey(const std::string& stage, int version, const json& params,
     return stringDigest(key.dump());
 }
 
-std::string artifactDigest(const std::string& path)
+std::string artifactDigest(const std::string& path,
+                           const std::function<std::string(const std::string&)>& fileDigestOf)
 {
-    if (!fs::is_directory(path)) return fileDigest(path);
+    const auto digestOf = [&](const std::string& f) { return fileDigestOf ? fileDigestOf(f) : fileDigest(f); };
+    if (!fs::is_directory(path)) return digestOf(path);
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(path))
         if (e.is_regular_file()) files.push_back(e.path());
     std::sort(files.begin(), files.end());
     std::string listing;
-    for (const auto& f : files) listing += f.filename().string() + ":" + fileDigest(f.string()) + "\n";
+    for (const auto& f : files) listing += f.filename().string() + ":" + digestOf(f.string()) + "\n";
     return stringDigest(listing);
 }
 

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -44,7 +45,9 @@ std::string stageKey(const std::string& stage, int version, const nlohmann::json
                      const std::map<std::string, std::string>& inputDigests);
 
 /// Digest of a file artifact, or of a folder artifact (names and digests of its files).
-std::string artifactDigest(const std::string& path);
+/// fileDigestOf digests one file (fileDigest, or a cache of it such as DigestStamps').
+std::string artifactDigest(const std::string& path,
+                           const std::function<std::string(const std::string&)>& fileDigestOf = {});
 
 class DigestStamps;
 

@@ -81,15 +81,8 @@ std::string DigestStamps::fileDigest(const std::string& path)
 
 std::string DigestStamps::digest(const std::string& path)
 {
-    if (!fs::is_directory(path)) return fileDigest(path);
-    // As artifactDigest: the sorted names and digests of the folder's files.
-    std::vector<fs::path> files;
-    for (const auto& e : fs::directory_iterator(path))
-        if (e.is_regular_file()) files.push_back(e.path());
-    std::sort(files.begin(), files.end());
-    std::string listing;
-    for (const auto& f : files) listing += f.filename().string() + ":" + fileDigest(f.string()) + "\n";
-    return stringDigest(listing);
+    // artifactDigest's digest, each file's digest from its stamp where it still holds.
+    return artifactDigest(path, [this](const std::string& f) { return fileDigest(f); });
 }
 
 void DigestStamps::hashed(const std::string& path, const std::string& digest)

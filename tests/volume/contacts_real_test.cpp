@@ -5,6 +5,7 @@
 #include "volume/contacts.h"
 #include "volume/image_io.h"
 #include "volume/lumen_mask.h"
+#include "volume/path_compare.h"
 #include "volume/segment.h"
 
 #include <gtest/gtest.h>
@@ -33,8 +34,6 @@ TEST(RealColonContacts, GcaPathRunsAnusToCecumWithoutShortcut)
     const nlohmann::json ref = nlohmann::json::parse(refFile);
     std::vector<Vec3d> refPts;
     for (const auto& p : ref.at("position_mm")) refPts.push_back({p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>()});
-    std::vector<double> refArc(refPts.size(), 0.0);
-    for (std::size_t i = 1; i < refPts.size(); ++i) refArc[i] = refArc[i - 1] + distance(refPts[i], refPts[i - 1]);
     const auto& lm = ref.at("landmarks");
     const double valveArc = lm.at("ileocaecal_valve_caecum").at("arc_mm").get<double>();
 
@@ -54,24 +53,12 @@ TEST(RealColonContacts, GcaPathRunsAnusToCecumWithoutShortcut)
     ASSERT_GE(cl.points.size(), 100u);
 
     // Each path point -> the nearest reference point: error and reference arc.
-    std::vector<double> err, arc;
-    for (const CenterlinePoint& p : cl.points) {
-        std::size_t best = 0;
-        for (std::size_t i = 0; i < refPts.size(); ++i)
-            if (distance(refPts[i], p.positionMm) < distance(refPts[best], p.positionMm)) best = i;
-        err.push_back(distance(refPts[best], p.positionMm));
-        arc.push_back(refArc[best]);
-    }
-    std::vector<double> sorted(err);
-    std::sort(sorted.begin(), sorted.end());
-    double mean = 0;
-    for (double e : err) mean += e / double(err.size());
-    const double p95 = sorted[std::size_t(0.95 * double(sorted.size() - 1))];
-    double worstJump = 0, backwards = 0;
-    for (std::size_t i = 1; i < arc.size(); ++i) {
-        worstJump = std::max(worstJump, std::abs(arc[i] - arc[i - 1]));
-        backwards = std::max(backwards, arc[i - 1] - arc[i]);
-    }
+    std::vector<Vec3d> pathPts;
+    for (const CenterlinePoint& p : cl.points) pathPts.push_back(p.positionMm);
+    const PathComparison cmp = comparePathToReference(pathPts, refPts);
+    const std::vector<double>& err = cmp.errorMm;
+    const std::vector<double>& arc = cmp.referenceArcMm;
+    const double mean = cmp.meanErrorMm, p95 = cmp.p95ErrorMm, worstJump = cmp.worstJumpMm;
     // Length against the reference from the anus to where our path ends along it.
     const double refLength = arc.back() - arc.front();
     std::size_t cut = 0;
