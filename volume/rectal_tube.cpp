@@ -527,6 +527,26 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
                 }
             }
         }
+        // The tube's closed tip: its cap of wall lies beyond the last axis point. Where the
+        // colon's air surrounds the tip, a ball of fillRadius there gives the cap to the lumen.
+        if (ax.size() >= 2) {
+            const Vec3d& q = ax.back();
+            const Vec3d d = normalize(ax.back() - ax[ax.size() - 2]);
+            Vec3d u, v;
+            perpendiculars(d, u, v);
+            int hits = 0;
+            for (int j = 0; j < RING_DIRECTIONS; ++j) {
+                const double t = 2.0 * PI * j / RING_DIRECTIONS;
+                hits += colonAir(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
+            }
+            if (hits >= RING_MIN_HITS && colonAir(q + d * probe)) {
+                const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
+                openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
+                box.expand(int(std::ceil(fillRadius / h)) + 1);
+                for (auto it = box.begin(); it; ++it)
+                    if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
+            }
+        }
         info.filledMl = double((*fill)->activeVoxelCount()) * voxelMl;
     }
     return cut;

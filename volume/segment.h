@@ -65,7 +65,7 @@ struct SegmentParams {
     double maskSmoothingVoxels = 1.0;
     /// Contacts between touching loops, cut at the end of the segment stage (contacts.h).
     ContactParams contacts;
-    static constexpr int VERSION = 3;  ///< 3: rectal tube found at coarse voxels, filled inside the rectum
+    static constexpr int VERSION = 4;  ///< 3: rectal tube found at coarse voxels, filled inside the rectum; 4: its closed tip too
 };
 
 /// How far from the seed (mm) an air component may lie and still be taken as the seeded one.

@@ -127,6 +127,10 @@ TEST(RectalTubePhantom, FoundFromTheCtAtCoarseVoxels)
         const Phantom ph = makePhantom(pp);
         const Figures f = runFromCt(ph, label);
         expectStandard(f, 0, double(ph.truth.centerlineMm.size() - 1));
+        // The tube's closed tip (its cap of wall beyond the last axis point) is given to the
+        // lumen with the rest of the tube inside the rectum: the path used to bend round it,
+        // 9-13 mm off the truth for 60 mm (p95 5.3 mm).
+        EXPECT_LE(f.p95Mm, 3.0) << "p95 distance to the truth (mm): the path bends round the tube's tip";
     }
 }
 
