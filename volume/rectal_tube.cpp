@@ -472,6 +472,23 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
             return setAcc.isValueOn(c) && !cutRead.isValueOn(c);
         };
         openvdb::tree::ValueAccessor<BoolTree> fillAcc(**fill);
+        // The colon's air all round q, a probe radius out in the plane of u and v.
+        auto surrounded = [&](const Vec3d& q, const Vec3d& u, const Vec3d& v) {
+            int hits = 0;
+            for (int j = 0; j < RING_DIRECTIONS; ++j) {
+                const double t = 2.0 * PI * j / RING_DIRECTIONS;
+                hits += colonAir(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
+            }
+            return hits >= RING_MIN_HITS;
+        };
+        // A ball of fillRadius at q given to the lumen.
+        auto fillBall = [&](const Vec3d& q) {
+            const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
+            openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
+            box.expand(int(std::ceil(fillRadius / h)) + 1);
+            for (auto it = box.begin(); it; ++it)
+                if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
+        };
         const std::vector<Vec3d>& ax = info.axisMm;
         for (std::size_t i = 0; i + 1 < ax.size(); ++i) {
             const double len = distance(ax[i], ax[i + 1]);
@@ -479,14 +496,6 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
             const Vec3d d = (ax[i + 1] - ax[i]) / len;
             Vec3d u, v;
             perpendiculars(d, u, v);
-            auto surrounded = [&](const Vec3d& q, const Vec3d& u, const Vec3d& v) {
-                int hits = 0;
-                for (int j = 0; j < RING_DIRECTIONS; ++j) {
-                    const double t = 2.0 * PI * j / RING_DIRECTIONS;
-                    hits += colonAir(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
-                }
-                return hits >= RING_MIN_HITS;
-            };
             const int samples = std::max(1, int(std::ceil(len / (0.5 * h))));
             bool previous = surrounded(ax[i], u, v);
             Vec3d pu, pv;
@@ -496,12 +505,7 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
                 surrounded(ax[i] + d * fillRadius, u, v)) {
                 // The joint with the previous stretch, well inside: a ball (no wedge left out
                 // on the outside of a bend).
-                const Vec3d& q = ax[i];
-                const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
-                openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
-                box.expand(int(std::ceil(fillRadius / h)) + 1);
-                for (auto it = box.begin(); it; ++it)
-                    if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
+                fillBall(ax[i]);
             }
             for (int k = 0; k < samples; ++k) {
                 const Vec3d q0 = ax[i] + d * (len * k / samples);
@@ -534,18 +538,7 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
             const Vec3d d = normalize(ax.back() - ax[ax.size() - 2]);
             Vec3d u, v;
             perpendiculars(d, u, v);
-            int hits = 0;
-            for (int j = 0; j < RING_DIRECTIONS; ++j) {
-                const double t = 2.0 * PI * j / RING_DIRECTIONS;
-                hits += colonAir(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
-            }
-            if (hits >= RING_MIN_HITS && colonAir(q + d * probe)) {
-                const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
-                openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
-                box.expand(int(std::ceil(fillRadius / h)) + 1);
-                for (auto it = box.begin(); it; ++it)
-                    if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
-            }
+            if (surrounded(q, u, v) && colonAir(q + d * probe)) fillBall(q);
         }
         info.filledMl = double((*fill)->activeVoxelCount()) * voxelMl;
     }
