@@ -15,7 +15,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
+#include <limits>
 #include <iomanip>
 #include <optional>
 #include <set>
@@ -117,39 +119,60 @@ FloatTree::Ptr indicatorOnGrid(const BoolTree& label, const ImageGeometry& g,
         for (auto it = label.cbeginValueOn(); it; ++it) acc.setValue(it.getCoord() + *offset, 1.0f);
         return out;
     }
-    // Output voxels near a label voxel: the nearest one to each label centre, grown by the
-    // mask's largest spacing in output voxels.
-    BoolTree near(false);
+    // The label as a dense bit set over the mask's lattice (1 bit a voxel: 11 MB for
+    // 512 x 512 x 460), so that each trilinear sample reads bits instead of tree look-ups.
+    const int64_t nx = g.size[0], ny = g.size[1], nz = g.size[2];
+    std::vector<std::uint64_t> bits(static_cast<std::size_t>((nx * ny * nz + 63) / 64), 0);
+    for (auto it = label.cbeginValueOn(); it; ++it) {
+        const Coord m = it.getCoord();
+        const int64_t v = (int64_t(m.z()) * ny + m.y()) * nx + m.x();
+        bits[std::size_t(v >> 6)] |= std::uint64_t(1) << (v & 63);
+    }
+    auto isLabel = [&](const Coord& m) {
+        if (m.x() < 0 || m.y() < 0 || m.z() < 0 || m.x() >= nx || m.y() >= ny || m.z() >= nz) return false;
+        const int64_t v = (int64_t(m.z()) * ny + m.y()) * nx + m.x();
+        return ((bits[std::size_t(v >> 6)] >> (v & 63)) & 1u) != 0;
+    };
+    // The output leaves that may hold a positive sample: those meeting the output index box
+    // of a label leaf grown by one mask voxel (a sample reads the label voxels within one
+    // mask voxel of its position), grown by one output voxel against rounding.
+    auto out = std::make_shared<FloatTree>(0.0f);
     {
-        openvdb::tree::ValueAccessor<BoolTree> acc(near);
-        for (auto it = label.cbeginValueOn(); it; ++it) {
-            const Coord m = it.getCoord();
-            const Vec3d w = g.worldFromIndex({double(m.x()), double(m.y()), double(m.z())});
-            acc.setValueOn(Coord::round(xf.worldToIndex(toVdb(w))), true);
+        constexpr int LEAF = int(BoolLeaf::DIM);
+        for (auto leaf = label.cbeginLeaf(); leaf; ++leaf) {
+            const Coord o = leaf->origin();
+            Coord lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
+            for (int corner = 0; corner < 8; ++corner) {
+                const Vec3d m((corner & 1) ? o.x() + LEAF : o.x() - 1.0, (corner & 2) ? o.y() + LEAF : o.y() - 1.0,
+                              (corner & 4) ? o.z() + LEAF : o.z() - 1.0);
+                const openvdb::Vec3d u = xf.worldToIndex(toVdb(g.worldFromIndex(m)));
+                for (int a = 0; a < 3; ++a) {
+                    lo[a] = std::min(lo[a], int(std::floor(u[a])) - 1);
+                    hi[a] = std::max(hi[a], int(std::ceil(u[a])) + 1);
+                }
+            }
+            for (int x = lo.x() & ~(LEAF - 1); x <= hi.x(); x += LEAF)
+                for (int y = lo.y() & ~(LEAF - 1); y <= hi.y(); y += LEAF)
+                    for (int z = lo.z() & ~(LEAF - 1); z <= hi.z(); z += LEAF) out->touchLeaf(Coord(x, y, z));
         }
     }
-    const double h = xf.voxelSize()[0];
-    const double maxSpacing = std::max({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z});
-    detail::dilateVoxels(near, int(std::ceil(maxSpacing / h)) + 1, Neighbours::All);
-
-    auto out = std::make_shared<FloatTree>(near, 0.0f, openvdb::TopologyCopy());
     openvdb::tree::LeafManager<FloatTree> leaves(*out);
     leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-        BoolConstAccessor labelAcc(label);
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const Vec3d u = g.indexFromWorld(fromVdb(xf.indexToWorld(it.getCoord())));
+        for (openvdb::Index pos = 0; pos < FloatLeaf::SIZE; ++pos) {
+            const Coord c = leaf.offsetToGlobalCoord(pos);
+            const Vec3d u = g.indexFromWorld(fromVdb(xf.indexToWorld(c)));
             const Coord base(int(std::floor(u.x)), int(std::floor(u.y)), int(std::floor(u.z)));
             const double fx = u.x - base.x(), fy = u.y - base.y(), fz = u.z - base.z();
             double value = 0;
             for (int dz = 0; dz < 2; ++dz)
                 for (int dy = 0; dy < 2; ++dy)
                     for (int dx = 0; dx < 2; ++dx)
-                        if (labelAcc.isValueOn(base.offsetBy(dx, dy, dz)))
+                        if (isLabel(base.offsetBy(dx, dy, dz)))
                             value += (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
-            if (value > 1e-6) it.setValue(static_cast<float>(std::min(value, 1.0)));
-            else it.setValueOff();
+            if (value > 1e-6) leaf.setValueOn(pos, static_cast<float>(std::min(value, 1.0)));
         }
     });
+    detail::pruneInactive(*out);
     return out;
 }
 

@@ -74,5 +74,6 @@ void trimExteriorBand(openvdb::FloatTree& sdf, float bandMm)
 }
 
 void pruneInactive(openvdb::BoolTree& tree) { openvdb::tools::pruneInactive(tree); }
+void pruneInactive(openvdb::FloatTree& tree) { openvdb::tools::pruneInactive(tree); }
 
 } // namespace flyover::detail

@@ -60,6 +60,7 @@ void trimExteriorBand(openvdb::FloatTree& sdf, float bandMm);
 
 /// Removes inactive leaves and tiles.
 void pruneInactive(openvdb::BoolTree& tree);
+void pruneInactive(openvdb::FloatTree& tree);
 
 // ---- shared by segmentLumen() and segmentFromMask(); defined in segment.cpp
 
