@@ -190,8 +190,8 @@ inline float constrained(float phi, float indicator, float marginMm)
 /// clamp(0.5 - phi' / h, 0, 1), phi' = the constrained value of phi - offset, which keeps every
 /// mask centre on its side. Each voxel's term is monotone in the offset, so a voxel whose term
 /// is the same at both ends of the range contributes a constant (summed once); the others
-/// (about a voxel either side of the surface) are kept in a flat list, so that each call
-/// of insideVoxels() costs a pass over that band only (the bisection calls it 40 times).
+/// (about a voxel either side of the surface) are kept in a flat list, which solve()'s
+/// bisection narrows as its bracket narrows.
 class VolumeOfOffset {
 public:
     VolumeOfOffset(const FloatTree& phi, const FloatTree& indicator, double maxOffsetMm, double h, float marginMm)
@@ -216,11 +216,30 @@ public:
         for (const auto& b : band) mBand.insert(mBand.end(), b.begin(), b.end());
     }
 
-    double insideVoxels(double offsetMm) const
+    /// The offset in [lo, hi] at which the volume reaches targetVoxels, by `iterations`
+    /// bisection steps. After each step the band keeps only the voxels whose term still
+    /// differs between the ends of the bracket (the others are constant on it and are summed
+    /// once), so the band halves at each step: a few passes over it instead of one per step.
+    /// The decisions are those of bisecting the whole band's sum (the sums differ by rounding
+    /// only, ~1e-9 voxels, far below what separates them from the target at any step).
+    double solve(double targetVoxels, double lo, double hi, int iterations)
     {
-        double s = mFixed;
-        for (const auto& [phi, ind] : mBand) s += term(phi, ind, offsetMm);
-        return s;
+        std::vector<std::pair<float, float>> band = mBand;
+        double fixed = mFixed;
+        for (int i = 0; i < iterations; ++i) {
+            const double mid = 0.5 * (lo + hi);
+            double s = fixed;
+            for (const auto& [phi, ind] : band) s += term(phi, ind, mid);
+            (s < targetVoxels ? lo : hi) = mid;
+            std::size_t kept = 0;
+            for (const auto& e : band) {
+                const double a = term(e.first, e.second, lo), b = term(e.first, e.second, hi);
+                if (a == b) fixed += a;
+                else band[kept++] = e;
+            }
+            band.resize(kept);
+        }
+        return 0.5 * (lo + hi);
     }
 
 private:
@@ -518,13 +537,8 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     // the level set equals the mask's voxel-count volume (no shrinking, no growing), with the
     // constraints applied after it, so that no mask centre changes side.
     const double targetVoxels = maskVolumeMl / voxelMl;
-    double lo = -h, hi = h;
-    const VolumeOfOffset volume(phi->tree(), *indicator, h, h, marginMm);
-    for (int i = 0; i < 40; ++i) {
-        const double mid = 0.5 * (lo + hi);
-        (volume.insideVoxels(mid) < targetVoxels ? lo : hi) = mid;
-    }
-    const float volumeOffsetMm = static_cast<float>(0.5 * (lo + hi));
+    VolumeOfOffset volume(phi->tree(), *indicator, h, h, marginMm);
+    const float volumeOffsetMm = static_cast<float>(volume.solve(targetVoxels, -h, h, 40));
     {
         openvdb::tree::LeafManager<FloatTree> leaves(phi->tree());
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
