@@ -637,6 +637,62 @@ TEST(SegmentFromMask, AnisotropicMaskMatchedToTheCtGrid)
     }
 }
 
+TEST(SegmentFromMask, ResampledMaskKeepsEveryCentreOnItsSideUpToTheImageBorder)
+{
+    // A label touching three faces of an oblique, anisotropic mask (1.3 x 1.3 x 2.1 mm), put
+    // on a 1.3 mm lattice (resampled, trilinearly). The constraints promise: every output voxel
+    // where the label's trilinear sample is >= 0.75 is lumen, every one where it is <= 0.25 is
+    // not, the image's border included (the sample is computed here by brute force).
+    const ImageGeometry g = obliqueGeometry({20, 16, 12}, {1.3, 1.3, 2.1});
+    const Image3<float> mask = labelImage(g, [](const Vec3d& p) {
+        return std::hypot(p.y - 5.0, p.z - 4.0) - 8.0;  // a cylinder along x, through the x faces
+    }, 1.0f);
+    MaskSummary summary;
+    const LumenSegmentation seg = segmentFromMask(mask, SegmentParams{}, nullptr, nullptr, &summary);
+    ASSERT_TRUE(summary.resampled);
+    auto isLabel = [&](int64_t i, int64_t j, int64_t k) {
+        return i >= 0 && j >= 0 && k >= 0 && i < g.size[0] && j < g.size[1] && k < g.size[2] &&
+               mask.at(i, j, k) == 1.0f;
+    };
+    const auto& xf = seg.sdf->transform();
+    auto acc = seg.mask->getConstAccessor();
+    std::size_t inside = 0, outside = 0, insideAtBorder = 0, wrong = 0;
+    std::string first;
+    for (int x = -8; x < 40; ++x)
+        for (int y = -8; y < 40; ++y)
+            for (int z = -8; z < 40; ++z) {
+                const openvdb::Vec3d w = xf.indexToWorld(openvdb::Coord(x, y, z));
+                const Vec3d u = g.indexFromWorld({w[0], w[1], w[2]});
+                const int64_t bi = int64_t(std::floor(u.x)), bj = int64_t(std::floor(u.y)), bk = int64_t(std::floor(u.z));
+                const double fx = u.x - double(bi), fy = u.y - double(bj), fz = u.z - double(bk);
+                double sample = 0;
+                for (int c = 0; c < 8; ++c) {
+                    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+                    if (isLabel(bi + dx, bj + dy, bk + dz))
+                        sample += (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
+                }
+                const bool lumen = acc.isValueOn(openvdb::Coord(x, y, z));
+                if (sample >= 0.75) {
+                    ++inside;
+                    insideAtBorder += u.x < 0.5 || u.y < 0.5 || u.z < 0.5 || u.x > double(g.size[0]) - 1.5;
+                } else if (sample <= 0.25) {
+                    ++outside;
+                } else {
+                    continue;
+                }
+                if (lumen != (sample >= 0.75)) {
+                    if (!wrong++)
+                        first = "voxel (" + std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) +
+                                ") with sample " + std::to_string(sample) + (lumen ? " is lumen" : " is not lumen");
+                }
+            }
+    EXPECT_GT(insideAtBorder, 50u) << "the label should reach the image's border";
+    EXPECT_GT(inside, 1000u);
+    EXPECT_GT(outside, 1000u);
+    EXPECT_EQ(wrong, 0u) << "expected every voxel with a sample >= 0.75 in the lumen and every one <= 0.25 out; "
+                         << wrong << " were not, the first: " << first;
+}
+
 TEST(RasterizeLumen, HuLumenOnAnotherLattice)
 {
     // The HU segmentation of the tube, rasterised on the grid's own lattice, is its mask; on a
