@@ -158,6 +158,32 @@ FloatTree::Ptr indicatorOnGrid(const BoolTree& label, const ImageGeometry& g,
     }
     openvdb::tree::LeafManager<FloatTree> leaves(*out);
     leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+        // A leaf whose samples read no label voxel stays empty: the mask index box of its
+        // corners (every voxel's position lies between them, the maps being affine), grown by
+        // a voxel against rounding, holds no label bit.
+        {
+            constexpr double BIG = std::numeric_limits<double>::max();
+            Vec3d lo(BIG, BIG, BIG), hi(-BIG, -BIG, -BIG);
+            const Coord o = leaf.origin();
+            constexpr int LAST = int(FloatLeaf::DIM) - 1;
+            for (int corner = 0; corner < 8; ++corner) {
+                const Coord c = o.offsetBy((corner & 1) ? LAST : 0, (corner & 2) ? LAST : 0, (corner & 4) ? LAST : 0);
+                const Vec3d u = g.indexFromWorld(fromVdb(xf.indexToWorld(c)));
+                for (int a = 0; a < 3; ++a) {
+                    lo[a] = std::min(lo[a], u[a]);
+                    hi[a] = std::max(hi[a], u[a]);
+                }
+            }
+            bool any = false;
+            for (int64_t k = std::max<int64_t>(0, int64_t(std::floor(lo.z)) - 1);
+                 !any && k <= std::min<int64_t>(nz - 1, int64_t(std::floor(hi.z)) + 2); ++k)
+                for (int64_t j = std::max<int64_t>(0, int64_t(std::floor(lo.y)) - 1);
+                     !any && j <= std::min<int64_t>(ny - 1, int64_t(std::floor(hi.y)) + 2); ++j)
+                    for (int64_t i = std::max<int64_t>(0, int64_t(std::floor(lo.x)) - 1);
+                         !any && i <= std::min<int64_t>(nx - 1, int64_t(std::floor(hi.x)) + 2); ++i)
+                        any = isLabel(Coord(int(i), int(j), int(k)));
+            if (!any) return;
+        }
         for (openvdb::Index pos = 0; pos < FloatLeaf::SIZE; ++pos) {
             const Coord c = leaf.offsetToGlobalCoord(pos);
             const Vec3d u = g.indexFromWorld(fromVdb(xf.indexToWorld(c)));
