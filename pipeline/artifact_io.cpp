@@ -239,11 +239,13 @@ void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids, VdbVa
     });
 }
 
-openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& gridName)
+namespace {
+
+openvdb::GridBase::Ptr readGridLoading(const std::string& path, const std::string& gridName, bool delayLoad)
 {
     try {
         openvdb::io::File file(path);
-        file.open(/*delayLoad=*/false);
+        file.open(delayLoad);
         if (!file.hasGrid(gridName)) {
             file.close();
             throw InputError(path + ": has no grid named '" + gridName + "'");
@@ -254,6 +256,18 @@ openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& grid
     } catch (const openvdb::Exception& e) {
         throw InputError(path + ": cannot read VDB: " + e.what());
     }
+}
+
+} // namespace
+
+openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& gridName)
+{
+    return readGridLoading(path, gridName, false);
+}
+
+openvdb::GridBase::Ptr readGridDelayed(const std::string& path, const std::string& gridName)
+{
+    return readGridLoading(path, gridName, true);
 }
 
 void writeMesh(const std::string& path, const TriMesh& mesh)

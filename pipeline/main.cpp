@@ -208,7 +208,10 @@ int main(int argc, char** argv)
     StageCommandOptions stageOpt;
     std::vector<std::string> stageAssignments;
     std::string stageConfig;
-    stageCmd->add_option("name", stageOpt.stage, "ingest, segment, centerline, mesh or render")->required();
+    stageCmd->add_option("name", stageOpt.stage, "ingest, segment, centerline, mesh or render; a part study's "
+                                                  "(flyover inspect): inspect:ingest, inspect:voids, inspect:surfaces, "
+                                                  "inspect:overviews, inspect:turntable (the prefix may be left out "
+                                                  "once the study exists)")->required();
     stageCmd->add_option("--study", stageOpt.studyDir, "study folder")->required();
     stageCmd->add_option("--ct", stageOpt.ctPath, "CT scan (default: the one recorded in the study)");
     stageCmd->add_option("--mask", stageOpt.maskPath, "lumen mask (default: the one recorded in the study, if any)");
@@ -363,8 +366,14 @@ int main(int argc, char** argv)
         }
         if (*viewCmd) return runViewCommand(viewStudy, viewPort, viewCt, std::cout);
         if (*stageCmd) {
-            if (!stageConfig.empty()) applyParamsJson(stageOpt.params, readConfigFile(stageConfig), stageConfig);
-            for (const auto& a : stageAssignments) applyParamAssignment(stageOpt.params, a);
+            resolveStageKind(stageOpt);  // inspect:NAME, or a part study's manifest: inspect's parameters
+            if (stageOpt.kind == StudyKind::Part) {
+                if (!stageConfig.empty()) applyInspectParamsJson(stageOpt.inspect, readConfigFile(stageConfig), stageConfig);
+                for (const auto& a : stageAssignments) applyInspectAssignment(stageOpt.inspect, a);
+            } else {
+                if (!stageConfig.empty()) applyParamsJson(stageOpt.params, readConfigFile(stageConfig), stageConfig);
+                for (const auto& a : stageAssignments) applyParamAssignment(stageOpt.params, a);
+            }
             stageOpt.log = &runLog;
             const auto receipt = runStageCommand(stageOpt);
             log("study " + fs::absolute(stageOpt.studyDir).string() + ": " + stageOpt.stage + " " +

@@ -43,15 +43,25 @@ std::string oneLine(std::string s)
     return s;
 }
 
+/// Stage names a study of this kind knows, by their parameter-level names (colon: stageNames();
+/// part: its five stages, each its own).
+std::vector<std::string> stageNamesOf(StudyKind kind)
+{
+    if (kind == StudyKind::Colon) return stageNames();
+    return stagesAffectedBy("ingest", StudyKind::Part);
+}
+
+bool startsWith(const std::string& s, const std::string& prefix) { return s.rfind(prefix, 0) == 0; }
+
 /// Refuses unless every stage upstream of `stage` is fresh for these inputs and parameters.
 void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPath, const std::string& maskPath,
                           const json& manifest)
 {
     // Stages by their parameter-level names only: a stage made of cached steps (render) is
     // run whole, its own steps are not "upstream".
-    const auto& names = stageNames();
+    const std::vector<std::string> names = stageNamesOf(o.kind);
     std::vector<std::string> upstream;
-    for (const auto& s : stagesNeededFor(o.stage))
+    for (const auto& s : stagesNeededFor(o.stage, o.kind))
         if (s != o.stage && std::find(names.begin(), names.end(), s) != names.end()) upstream.push_back(s);
     if (ctPath.empty()) upstream.erase(std::remove(upstream.begin(), upstream.end(), "ingest"), upstream.end());
     if (upstream.empty()) return;
@@ -63,6 +73,7 @@ void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPat
         so.ctPath = ctPath;
         so.maskPath = maskPath;
         so.params = o.params;
+        so.inspect = o.inspect;
         so.paramsGiven = true;
         for (const auto& st : studyStatus(so)) states[st.stage] = st;
     }
@@ -79,12 +90,24 @@ void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPat
             throw InputError(o.studyDir + ": " + u + " failed earlier on this study: " +
                              receipt.value("error", std::string("(no message)")));
         const std::string why = it == states.end() ? "has not run" : it->second.state + (it->second.reason.empty() ? "" : " (" + it->second.reason + ")");
-        throw StageNotReady(o.studyDir + ": cannot run " + o.stage + ": " + u + " " + why + "; run 'flyover stage " + u +
-                            "' first, with the same inputs and parameters");
+        const std::string prefix = o.kind == StudyKind::Part ? INSPECT_STAGE_PREFIX : "";
+        throw StageNotReady(o.studyDir + ": cannot run " + prefix + o.stage + ": " + u + " " + why +
+                            "; run 'flyover stage " + prefix + u + "' first, with the same inputs and parameters");
     }
 }
 
 } // namespace
+
+void resolveStageKind(StageCommandOptions& o)
+{
+    if (startsWith(o.stage, INSPECT_STAGE_PREFIX)) {
+        o.stage.erase(0, std::string(INSPECT_STAGE_PREFIX).size());
+        o.kind = StudyKind::Part;
+        return;
+    }
+    const json manifest = readIfPresent(fs::path(o.studyDir) / "manifest.json");
+    o.kind = manifest.is_object() && manifest.value("pipeline", "") == "inspect" ? StudyKind::Part : StudyKind::Colon;
+}
 
 std::string receiptPath(const std::string& studyDir, const std::string& stage)
 {
@@ -93,17 +116,38 @@ std::string receiptPath(const std::string& studyDir, const std::string& stage)
 
 json runStageCommand(const StageCommandOptions& o)
 {
-    const auto& names = stageNames();
+    const std::vector<std::string> names = stageNamesOf(o.kind);
     if (std::find(names.begin(), names.end(), o.stage) == names.end()) {
         std::string known;
         for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
-        throw ParameterError("stage: unknown stage '" + o.stage + "' (stages: " + known + ")");
+        if (o.kind == StudyKind::Colon)
+            for (const auto& n : stageNamesOf(StudyKind::Part)) known += ", " + std::string(INSPECT_STAGE_PREFIX) + n;
+        throw ParameterError("stage: unknown " + std::string(o.kind == StudyKind::Part ? "inspect " : "") + "stage '" +
+                             o.stage + "' (stages: " + known + ")");
     }
-    validateParams(o.params);
+    if (o.kind == StudyKind::Part) {
+        validateInspectParams(o.inspect);
+        if (!o.maskPath.empty()) throw ParameterError("stage " + o.stage + ": an inspect stage takes no --mask");
+    } else {
+        validateParams(o.params);
+    }
+    // A part study's stage on a colon study (or the other way round) would mix two stage graphs.
+    {
+        const json m = readIfPresent(fs::path(o.studyDir) / "manifest.json");
+        if (m.is_object()) {
+            const bool part = m.value("pipeline", "") == "inspect";
+            if (part != (o.kind == StudyKind::Part))
+                throw InputError(o.studyDir + ": a " + (part ? "part (flyover inspect)" : "colon (flyover run)") +
+                                 " study: stage " + o.stage + " is " + (part ? "the colon's" : "inspect's"));
+        }
+    }
     std::error_code ec;
     if (!fs::is_directory(o.studyDir, ec) && o.stage != "ingest" && !(o.stage == "segment" && !o.maskPath.empty()))
-        throw StageNotReady(o.studyDir + ": no such study folder; the first stage ('flyover stage ingest --ct CT' or "
-                            "'flyover stage segment --mask FILE') creates it");
+        throw StageNotReady(o.studyDir + (o.kind == StudyKind::Part
+                                              ? ": no such study folder; the first stage ('flyover stage inspect:ingest "
+                                                "--ct CT') creates it"
+                                              : ": no such study folder; the first stage ('flyover stage ingest --ct CT' "
+                                                "or 'flyover stage segment --mask FILE') creates it"));
     fs::remove(receiptPath(o.studyDir, o.stage), ec);
 
     const json manifest = readIfPresent(fs::path(o.studyDir) / "manifest.json");
@@ -116,6 +160,8 @@ json runStageCommand(const StageCommandOptions& o)
     requireFreshUpstream(o, ctPath, maskPath, manifest);
 
     RunOptions run;
+    run.kind = o.kind;
+    run.inspect = o.inspect;
     run.ctPath = ctPath;
     run.maskPath = maskPath;
     run.studyDir = o.studyDir;
@@ -164,12 +210,18 @@ void writeFailedReceipt(const std::string& studyDir, const std::string& stage, c
 {
     if (exitCode != EXIT_BAD_INPUT && exitCode != EXIT_BAD_PARAMETER) return;
     try {
-        const auto& names = stageNames();
-        if (studyDir.empty() || std::find(names.begin(), names.end(), stage) == names.end()) return;
+        // The name as given (inspect:NAME) or as resolved (NAME).
+        const bool part = startsWith(stage, INSPECT_STAGE_PREFIX);
+        const std::string name = part ? stage.substr(std::string(INSPECT_STAGE_PREFIX).size()) : stage;
+        const auto colon = stageNamesOf(StudyKind::Colon), inspect = stageNamesOf(StudyKind::Part);
+        const auto& names = part ? inspect : colon;
+        const bool known = std::find(names.begin(), names.end(), name) != names.end() ||
+                           std::find(inspect.begin(), inspect.end(), name) != inspect.end();
+        if (studyDir.empty() || !known) return;
         std::error_code ec;
         fs::create_directories(fs::path(studyDir) / "stages", ec);
-        writeJson(receiptPath(studyDir, stage), json{{"schema", "flyover.stage/1"},
-                                                     {"stage", stage},
+        writeJson(receiptPath(studyDir, name), json{{"schema", "flyover.stage/1"},
+                                                     {"stage", name},
                                                      {"status", "failed"},
                                                      {"exit_code", exitCode},
                                                      {"error", oneLine(error)},

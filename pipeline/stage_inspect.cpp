@@ -50,10 +50,13 @@ const char* const CT_GRID = "ct_grey";
 const char* const CSV_HEADER = "id,kind,volume_mm3,equivalent_diameter_mm,max_extent_mm,sphericity,"
                                "centroid_x_mm,centroid_y_mm,centroid_z_mm,distance_to_surface_mm";
 
-openvdb::FloatGrid::Ptr partGrid(StudyRun& run)
+/// The CT grid: from memory when this run holds it, else from ct.vdb (with `delayed`, each
+/// leaf's values read only when first accessed: for a stage that reads a small part of them).
+openvdb::FloatGrid::Ptr partGrid(StudyRun& run, bool delayed = false)
 {
     if (!run.state.hu)
-        run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), CT_GRID));
+        run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(delayed ? readGridDelayed(run.path("ct.vdb"), CT_GRID)
+                                                                         : readGrid(run.path("ct.vdb"), CT_GRID));
     if (!run.state.hu) throw InputError(run.path("ct.vdb") + ": grid " + CT_GRID + " is not a float grid");
     return run.state.hu;
 }
@@ -309,9 +312,19 @@ json runVoids(StudyRun& run, Progress* progress)
 
 json runPartSurfaces(StudyRun& run, Progress* progress)
 {
-    const openvdb::FloatGrid::Ptr ct = partGrid(run);
+    validatePartSurfaceParams(run.opt.inspect.surfaces);
     const std::shared_ptr<PartAnalysis> analysis = partAnalysis(run);
-    auto surface = std::make_shared<PartSurface>(makePartSurface(*ct, *analysis, run.opt.inspect.surfaces, progress));
+    PartField field;
+    {
+        // Only the grey values within 2.5 voxels of a surface are read (delayed loading).
+        const openvdb::FloatGrid::Ptr ct = partGrid(run, true);
+        field = makePartField(*ct, *analysis, progress);
+    }
+    // No later stage reads the grey values: the CT grid (4 B a voxel, the largest thing held)
+    // is freed before the mesh is made.
+    run.state.hu.reset();
+    auto surface = std::make_shared<PartSurface>(
+        meshPartField(std::move(field), *analysis, run.opt.inspect.surfaces, progress));
     writeMesh(run.path("part_surface.ply"), surface->mesh);
     json voids = json::array();
     int64_t voidsWithoutFaces = 0;

@@ -505,7 +505,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
     const StudyKind kind = manifest.value("pipeline", "") == "inspect" ? StudyKind::Part : StudyKind::Colon;
     const bool complete = manifest.value("complete", true);
     PipelineParams params = options.params;
-    InspectParams inspect;
+    InspectParams inspect = options.inspect;
     const bool given = options.paramsGiven || !text.assignments.empty() || !text.config.is_null();
     if (given) {
         if (kind == StudyKind::Part) {

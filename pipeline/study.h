@@ -75,6 +75,7 @@ struct StatusOptions {
     std::string ctPath;           ///< "" = the input recorded in the manifest
     std::string maskPath;         ///< "" = the mask recorded in the manifest (if any)
     PipelineParams params;
+    InspectParams inspect;        ///< a part study's given parameters (the base of StatusParamText's)
     bool paramsGiven = false;     ///< false: compare with the parameters of the last run
 };
 

@@ -7,6 +7,7 @@
 #include <tbb/combinable.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <optional>
@@ -48,12 +49,15 @@ int PartSurface::voidOfFace(int64_t face) const
     return 0;
 }
 
-PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& analysis,
-                            const PartSurfaceParams& params, Progress* progress)
+void validatePartSurfaceParams(const PartSurfaceParams& params)
 {
     if (params.smoothIterations < 0) throw ParameterError("surfaces.smooth_iterations: must be >= 0");
     if (!(params.smoothPassBand > 0 && params.smoothPassBand < 1))
         throw ParameterError("surfaces.smooth_pass_band: must be in (0, 1)");
+}
+
+PartField makePartField(const openvdb::FloatGrid& ct, const PartAnalysis& analysis, Progress* progress)
+{
     if (!analysis.material || analysis.material->activeVoxelCount() == 0)
         throw InputError("part surface: the analysis holds no material");
     using openvdb::Coord;
@@ -144,13 +148,30 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
         }
     });
     reportProgress(progress, 0.2, "field");
+    PartField out;
+    out.field = field;
+    out.air = air;
+    out.box = box;
+    out.transform = ct.transform().copy();
+    out.halfContrast = halfContrast;
+    return out;
+}
 
+PartSurface meshPartField(PartField&& partField, const PartAnalysis& analysis, const PartSurfaceParams& params,
+                          Progress* progress)
+{
+    validatePartSurfaceParams(params);
+    using openvdb::Coord;
+    const openvdb::math::Transform& xf = *partField.transform;
+    const double vox = xf.voxelSize()[0];
+    const openvdb::CoordBBox box = partField.box;
+    const openvdb::BoolGrid::Ptr air = partField.air;
     MeshParams mp;
     mp.smoothMethod = params.smoothIterations > 0 ? "taubin" : "none";
     mp.smoothIterations = params.smoothIterations;
     mp.smoothPassBand = params.smoothPassBand;
     PartSurface out;
-    out.halfContrast = halfContrast;
+    out.halfContrast = partField.halfContrast;
     TriMesh mesh;
     {
         struct Sub : Progress {
@@ -161,8 +182,9 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
         };
         std::optional<Sub> sub;
         if (progress) sub.emplace(progress);
-        mesh = makeLumenSurface(*field, mp, &out.report, sub ? &*sub : nullptr, false);
+        mesh = makeLumenSurface(*partField.field, mp, &out.report, sub ? &*sub : nullptr, false);
     }
+    partField.field.reset();  // the narrow band is not needed any more
 
     // Which void each connected component bounds: a vote of its faces, each looking up the air
     // just beside it (against its normal, which points into the material).
@@ -174,7 +196,6 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
         const openvdb::Int32Grid& labels = analysis.voidLabels ? *analysis.voidLabels : *noLabels;
         auto lab = labels.getConstAccessor();
         auto outside = air->getConstAccessor();
-        const openvdb::math::Transform& xf = ct.transform();
         std::vector<TriMesh::FaceHandle> stack;
         for (const auto f0 : mesh.faces()) {
             if (faceComponent[std::size_t(f0.idx())] >= 0) continue;
@@ -224,21 +245,41 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
 
     // The mesh again with its faces grouped: outer surface, then void 1, 2, ... Components are
     // disjoint and keep their own face order, so OpenMesh rebuilds each exactly.
-    std::vector<std::vector<int>> groups(std::size_t(nVoids) + 1);
+    // Built from compact copies (points, and the faces' vertex indices in group order) after
+    // the first mesh is freed, so two OpenMesh meshes (~150 B a face each) are never held at once.
+    std::vector<int64_t> groupStart(std::size_t(nVoids) + 2, 0);
     for (const auto f : mesh.faces())
-        groups[std::size_t(componentVoid[std::size_t(faceComponent[std::size_t(f.idx())])])].push_back(f.idx());
-    out.mesh.reserve(mesh.n_vertices(), mesh.n_edges(), mesh.n_faces());
-    for (const auto v : mesh.vertices()) out.mesh.add_vertex(mesh.point(v));
+        ++groupStart[std::size_t(componentVoid[std::size_t(faceComponent[std::size_t(f.idx())])]) + 1];
+    for (std::size_t g = 1; g < groupStart.size(); ++g) groupStart[g] += groupStart[g - 1];
+    std::vector<std::array<int, 3>> faceVertices(mesh.n_faces());
+    {
+        std::vector<int64_t> next(groupStart.begin(), groupStart.end() - 1);
+        for (const auto f : mesh.faces()) {
+            const int g = componentVoid[std::size_t(faceComponent[std::size_t(f.idx())])];
+            std::array<int, 3>& fv = faceVertices[std::size_t(next[std::size_t(g)]++)];
+            int k = 0;
+            for (const auto v : mesh.fv_range(f)) fv[std::size_t(k++)] = v.idx();
+        }
+    }
+    std::vector<TriMesh::Point> points;
+    points.reserve(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) points.push_back(mesh.point(v));
+    const std::size_t nEdges = mesh.n_edges();
+    std::vector<int>().swap(faceComponent);
+    mesh = TriMesh();  // frees its storage
+    out.mesh.reserve(points.size(), nEdges, faceVertices.size());
+    for (const auto& p : points) out.mesh.add_vertex(p);
+    std::vector<TriMesh::Point>().swap(points);
     out.voids.resize(std::size_t(nVoids));
     int64_t failed = 0;
-    for (std::size_t g = 0; g < groups.size(); ++g) {
+    for (std::size_t g = 0; g + 1 < groupStart.size(); ++g) {
         FaceRange& range = g == 0 ? out.outer : out.voids[g - 1];
         range.first = int64_t(out.mesh.n_faces());
-        for (const int f : groups[g]) {
-            std::array<TriMesh::VertexHandle, 3> vh;
-            int k = 0;
-            for (const auto v : mesh.fv_range(mesh.face_handle(f))) vh[std::size_t(k++)] = out.mesh.vertex_handle(v.idx());
-            if (!out.mesh.add_face(vh[0], vh[1], vh[2]).is_valid()) ++failed;
+        for (int64_t i = groupStart[g]; i < groupStart[g + 1]; ++i) {
+            const std::array<int, 3>& fv = faceVertices[std::size_t(i)];
+            if (!out.mesh.add_face(out.mesh.vertex_handle(fv[0]), out.mesh.vertex_handle(fv[1]), out.mesh.vertex_handle(fv[2]))
+                     .is_valid())
+                ++failed;
         }
         range.count = int64_t(out.mesh.n_faces()) - range.first;
     }
@@ -246,6 +287,13 @@ PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& an
         throw std::runtime_error("part surface: " + std::to_string(failed) + " faces could not be re-added after grouping");
     reportProgress(progress, 1.0, "surfaces");
     return out;
+}
+
+PartSurface makePartSurface(const openvdb::FloatGrid& ct, const PartAnalysis& analysis,
+                            const PartSurfaceParams& params, Progress* progress)
+{
+    validatePartSurfaceParams(params);
+    return meshPartField(makePartField(ct, analysis, progress), analysis, params, progress);
 }
 
 } // namespace flyover

@@ -64,6 +64,30 @@ struct PartSurface {
     int voidOfFace(int64_t face) const;
 };
 
+/// The narrow-band field the part's surface is extracted from (first half of makePartSurface).
+/// Holds no reference to the CT, so a caller can free the CT grid (the largest thing in
+/// memory: 4 B per voxel) before the mesh is made.
+struct PartField {
+    openvdb::FloatGrid::Ptr field;               ///< (threshold - grey) / half-contrast, mm, narrow band
+    openvdb::BoolGrid::Ptr air;                  ///< outside air and listed voids (the air with a surface)
+    openvdb::CoordBBox box;                      ///< the CT's active bounding box
+    openvdb::math::Transform::Ptr transform;     ///< the CT's
+    double halfContrast = 0;
+};
+
+/// @throw ParameterError for bad params (what makePartSurface checks first).
+void validatePartSurfaceParams(const PartSurfaceParams& params);
+
+/// The field of the part's surface from the CT and the analysis (see makePartSurface).
+PartField makePartField(const openvdb::FloatGrid& ct, const PartAnalysis& analysis, Progress* progress = nullptr);
+
+/// The mesh of a field from makePartField: makePartSurface without the CT. The field's grid is
+/// freed once the mesh is extracted.
+PartSurface meshPartField(PartField&& field, const PartAnalysis& analysis, const PartSurfaceParams& params,
+                          Progress* progress = nullptr);
+
+/// makeLumenSurface's result is regrouped by void through compact arrays (points and face
+/// vertex indices), so only one OpenMesh mesh is held at a time.
 /// @param ct        the grey-value grid analysePart read (same transform as the analysis grids)
 /// @param analysis  analysePart's result (material, outside air, labels of the listed voids)
 /// @throw InputError when there is no surface (no material); ParameterError for bad params.

@@ -332,5 +332,57 @@ TEST_F(InspectTest, KilledRunLeavesAManifestOfTheFinishedStagesAndStatusTakesIns
     EXPECT_EQ(test::lineCount(bad.err), 1) << bad.err;
 }
 
+// `flyover stage` (workflow engines) runs inspect's stages one by one: inspect:NAME, or the plain
+// name once the study says it is a part study; a receipt per stage; upstream checked with
+// inspect's parameters; a colon stage or parameter refused on a part study.
+TEST_F(InspectTest, StageCommandRunsInspectStagesOneByOne)
+{
+    const std::string study = path("staged");
+    const std::string args = " --study " + study + " " + QUICK + video();
+    auto receipt = [&](const std::string& stage) { return readJson(study + "/stages/" + stage + ".json"); };
+
+    const auto early = test::runFlyover("-q stage inspect:voids" + args + " --ct " + path("part.nrrd"));
+    EXPECT_EQ(early.exitCode, 4) << "voids before ingest: not ready; " << early.err;
+    EXPECT_NE(early.err.find("inspect:ingest"), std::string::npos) << early.err;
+
+    const auto ingest = test::runFlyover("-q stage inspect:ingest" + args + " --ct " + path("part.nrrd"));
+    ASSERT_EQ(ingest.exitCode, 0) << ingest.err;
+    EXPECT_EQ(readJson(study + "/manifest.json").at("pipeline"), "inspect");
+    // Plain names from here on: the manifest says it is a part study (the CT too comes from it).
+    for (const char* stage : {"voids", "inspect:surfaces", "overviews", "inspect:turntable"}) {
+        const auto r = test::runFlyover(std::string("-q stage ") + stage + args);
+        ASSERT_EQ(r.exitCode, 0) << stage << ": " << r.err;
+    }
+    for (const char* stage : {"ingest", "voids", "surfaces", "overviews", "turntable"}) {
+        const json rec = receipt(stage);
+        EXPECT_EQ(rec.value("status", ""), "ok") << stage << ": " << rec.dump();
+        EXPECT_EQ(rec.value("stage", ""), stage);
+        EXPECT_TRUE(rec.value("computed", false)) << stage << " was not computed by its own call";
+        EXPECT_FALSE(rec.at("outputs").empty()) << rec.dump();
+    }
+    EXPECT_TRUE(fs::exists(study + "/voids.csv"));
+    EXPECT_TRUE(fs::exists(study + "/overviews/visibility.json"));
+
+    // `flyover inspect` with the same parameters finds everything done.
+    const auto whole = test::runFlyover("inspect " + path("part.nrrd") + args + " --quiet");
+    ASSERT_EQ(whole.exitCode, 0) << whole.err;
+    for (const auto& [stage, was] : computed(readJson(study + "/manifest.json")))
+        EXPECT_FALSE(was) << stage << " recomputed after flyover stage made it";
+
+    // An inspect parameter upstream changed: the surfaces cannot run (voids stale), exit 4.
+    const auto stale = test::runFlyover("-q stage surfaces" + args + " --set voids.threshold=20000");
+    EXPECT_EQ(stale.exitCode, 4) << stale.err;
+    EXPECT_NE(stale.err.find("voids"), std::string::npos) << stale.err;
+    // A colon parameter or stage on a part study: refused in one line.
+    const auto colonParam = test::runFlyover("-q stage voids" + args + " --set segment.cleanse=false");
+    EXPECT_EQ(colonParam.exitCode, 2) << colonParam.err;
+    EXPECT_EQ(test::lineCount(colonParam.err), 1) << colonParam.err;
+    const auto colonStage = test::runFlyover("-q stage segment" + args);
+    EXPECT_EQ(colonStage.exitCode, 2) << colonStage.err;
+    EXPECT_NE(colonStage.err.find("unknown inspect stage"), std::string::npos) << colonStage.err;
+    const auto unknown = test::runFlyover("-q stage inspect:segment --study " + path("nowhere"));
+    EXPECT_EQ(unknown.exitCode, 2) << unknown.err;
+}
+
 } // namespace
 } // namespace flyover
