@@ -533,7 +533,7 @@ int countHitsWithin(const Camera& camera, const HitImage& hits, const Vec3d& cen
     return count;
 }
 
-RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
+void sideBySide(const RgbImage& left, const RgbImage& right, RgbImage& out, int gapPx)
 {
     auto consistent = [](const RgbImage& im) {
         return im.width >= 0 && im.height >= 0 &&
@@ -542,6 +542,7 @@ RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
     if (!consistent(left) || !consistent(right)) {
         throw ParameterError("sideBySide: an image's pixel buffer does not match its size");
     }
+    if (&out == &left || &out == &right) throw ParameterError("sideBySide: the output must not be an input image");
     if (left.height != right.height) {
         std::ostringstream msg;
         msg << "sideBySide: images must have the same height, got " << left.height << " and "
@@ -553,7 +554,6 @@ RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
         msg << "sideBySide: gapPx must be >= 0, got " << gapPx;
         throw ParameterError(msg.str());
     }
-    RgbImage out;
     out.width = left.width + gapPx + right.width;
     out.height = left.height;
     out.rgb.resize(std::size_t(out.width) * std::size_t(out.height) * 3);
@@ -566,6 +566,12 @@ RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
         std::copy_n(right.rgb.data() + std::size_t(y) * std::size_t(right.width) * 3, std::size_t(right.width) * 3,
                     gap + std::size_t(gapPx) * 3);
     }
+}
+
+RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
+{
+    RgbImage out;
+    sideBySide(left, right, out, gapPx);
     return out;
 }
 

@@ -462,5 +462,24 @@ TEST(SideBySide, PlacesImagesWithADarkSeparator)
     EXPECT_THROW(sideBySide(left, shorter), ParameterError);
 }
 
+// The render steps keep one pair image per thread: writing into an image that held a larger or
+// smaller pair must give exactly the pair a fresh image gets, and an input as the output is refused.
+TEST(SideBySide, IntoAReusedImageIsTheFreshPair)
+{
+    RgbImage left{2, 3, std::vector<uint8_t>(2 * 3 * 3, 200)};
+    RgbImage right{4, 3, std::vector<uint8_t>(4 * 3 * 3, 100)};
+    RgbImage small{1, 1, std::vector<uint8_t>(3, 7)};
+    RgbImage reused{20, 10, std::vector<uint8_t>(20 * 10 * 3, 55)};  // larger than the pair
+    sideBySide(left, right, reused, 3);
+    const RgbImage fresh = sideBySide(left, right, 3);
+    EXPECT_EQ(reused.width, fresh.width);
+    EXPECT_EQ(reused.height, fresh.height);
+    EXPECT_TRUE(reused.rgb == fresh.rgb) << "the pair written into a reused image differs from a fresh one";
+    sideBySide(small, small, reused, 1);  // then smaller
+    EXPECT_EQ(reused.width, 3);
+    EXPECT_EQ(reused.rgb.size(), std::size_t(3 * 1 * 3));
+    EXPECT_THROW(sideBySide(left, right, left), ParameterError);
+}
+
 } // namespace
 } // namespace flyover
