@@ -26,6 +26,7 @@
 #include "render/review.h"
 #include "volume/error.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -262,6 +263,12 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
 }
 
 /// The fly-over cameras' settings and the frame images' options, as every step derives them.
+/// A pair's two views and the pair image, kept from one pair to the next (one set per thread)
+/// so that rendering a pair allocates nothing.
+struct PairBuffers {
+    RgbImage left, right, pair;
+};
+
 struct FlyoverSetup {
     FlyoverParams fp;
     RenderOptions ro;
@@ -343,13 +350,17 @@ json runFrames(StudyRun& run, Progress* progress)
     StagedFolder frames(run.dir, "frames");
     std::vector<json> poses(indices.size());
     double firstRenderSeconds = 0, firstPngSeconds = 0;
+    tbb::enumerable_thread_specific<PairBuffers> buffers;
     auto renderPair = [&](std::size_t f) {
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
         const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
-        const RgbImage pair = sideBySide(renderView(scene, cams[0], s.ro), renderView(scene, cams[1], s.ro));
+        PairBuffers& b = buffers.local();
+        renderView(scene, cams[0], s.ro, b.left);
+        renderView(scene, cams[1], s.ro, b.right);
+        sideBySide(b.left, b.right, b.pair);
         const auto t1 = Clock::now();
-        writePng(frames.path(pairName(f)), pair);
+        writePng(frames.path(pairName(f)), b.pair);
         if (f == 0) {
             firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
             firstPngSeconds = secondsSince(t1);
@@ -419,12 +430,16 @@ json runFlythrough(StudyRun& run, Progress* progress)
         const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
         std::vector<json> ftPoses(indices.size());
         std::atomic<std::size_t> done{0};
+        tbb::enumerable_thread_specific<PairBuffers> buffers;
         tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
             const CenterlinePoint& p = cl.points[indices[f]];
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
-            writePng(flythrough.path(pairName(f)),
-                     sideBySide(renderView(*in.scene, fwd, s.ro), renderView(*in.scene, back, s.ro)));
+            PairBuffers& b = buffers.local();
+            renderView(*in.scene, fwd, s.ro, b.left);
+            renderView(*in.scene, back, s.ro, b.right);
+            sideBySide(b.left, b.right, b.pair);
+            writePng(flythrough.path(pairName(f)), b.pair);
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
                               {"centerline_index", indices[f]},
@@ -519,24 +534,24 @@ json runVideo(StudyRun& run, Progress* progress)
         std::size_t reused = 0;
         writeAtomically(videoDir.path("flyover.mp4"), [&](const std::string& tmp) {
             FfmpegVideo video(ffmpeg, tmp, videoDir.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
-            RgbImage left, right;
+            PairBuffers b;  // one set for every frame: no allocation per frame
             for (std::size_t k = 0; k < vIdx.size(); ++k) {
                 const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
                 const std::string* file = framePairFile(vIdx[k]);
-                std::optional<RgbImage> pair;
                 if (file) {
-                    pair = readPng(*file);
-                    if (pair->width != pairWidth || pair->height != rp.heightPx)
-                        throw std::runtime_error(*file + ": a fly-over pair of " + std::to_string(pair->width) + " x " +
-                                                 std::to_string(pair->height) + " px where the video needs " +
+                    const RgbImage pair = readPng(*file);
+                    if (pair.width != pairWidth || pair.height != rp.heightPx)
+                        throw std::runtime_error(*file + ": a fly-over pair of " + std::to_string(pair.width) + " x " +
+                                                 std::to_string(pair.height) + " px where the video needs " +
                                                  std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
                     ++reused;
+                    video.write(pair);
                 } else {
-                    renderView(*in.scene, cams[0], s.ro, left);
-                    renderView(*in.scene, cams[1], s.ro, right);
-                    pair = sideBySide(left, right);
+                    renderView(*in.scene, cams[0], s.ro, b.left);
+                    renderView(*in.scene, cams[1], s.ro, b.right);
+                    sideBySide(b.left, b.right, b.pair);
+                    video.write(b.pair);
                 }
-                video.write(*pair);
                 vPoses.push_back(json{{"frame", k},
                                       {"centerline_index", vIdx[k]},
                                       {"arc_mm", double(vIdx[k]) * s.clStep},

@@ -1,5 +1,6 @@
 #include "render/render_view.h"
 
+#include "render/headlight_shade.h"
 #include "render/ray_scene_impl.h"
 #include "volume/error.h"
 
@@ -30,8 +31,8 @@ constexpr float INF_F = std::numeric_limits<float>::infinity();
 constexpr std::array<double, 3> TISSUE_DISPLAY = {0.93, 0.62, 0.55};
 constexpr std::array<uint8_t, 3> BACKGROUND = {20, 20, 28};
 constexpr std::array<uint8_t, 3> SEPARATOR = {6, 6, 8};
-constexpr float AMBIENT = 0.15f;
-constexpr float DIFFUSE = 0.85f;
+using detail::headlightShade;
+using detail::headlightShadeLanes;
 
 double toLinear(double display) { return std::pow(display, GAMMA); }
 
@@ -235,9 +236,8 @@ struct Shader {
             ny[i] = n[1];
             nz[i] = n[2];
         }
-        for (int i = 0; i < LANES; ++i)
-            shades[i] = shadeFrom(packet.ray.dir_x[i], packet.ray.dir_y[i], packet.ray.dir_z[i], nx[i], ny[i],
-                                  nz[i], packet.ray.tfar[i]);
+        headlightShadeLanes(packet.ray.dir_x, packet.ray.dir_y, packet.ray.dir_z, nx, ny, nz, packet.ray.tfar, LANES,
+                            invCueRangeMm, cueStartMm, shades);
     }
 
 private:
@@ -261,12 +261,7 @@ private:
 
     float shadeFrom(float dx, float dy, float dz, float nx, float ny, float nz, float t) const
     {
-        const float norms = (dx * dx + dy * dy + dz * dz) * (nx * nx + ny * ny + nz * nz);
-        // A zero normal (degenerate face, or a miss) gives cos = 0: |0| / sqrt(FLT_MIN) = 0.
-        const float cosine = std::fabs(dx * nx + dy * ny + dz * nz) / std::sqrt(std::max(norms, 1e-30f));
-        float s = AMBIENT + DIFFUSE * std::min(cosine, 1.0f);
-        if (invCueRangeMm > 0.0f) s /= 1.0f + std::max(0.0f, t - cueStartMm) * invCueRangeMm;
-        return s;
+        return headlightShade(dx, dy, dz, nx, ny, nz, t, invCueRangeMm, cueStartMm);
     }
 };
 
@@ -538,7 +533,7 @@ int countHitsWithin(const Camera& camera, const HitImage& hits, const Vec3d& cen
     return count;
 }
 
-RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
+void sideBySide(const RgbImage& left, const RgbImage& right, RgbImage& out, int gapPx)
 {
     auto consistent = [](const RgbImage& im) {
         return im.width >= 0 && im.height >= 0 &&
@@ -547,6 +542,7 @@ RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
     if (!consistent(left) || !consistent(right)) {
         throw ParameterError("sideBySide: an image's pixel buffer does not match its size");
     }
+    if (&out == &left || &out == &right) throw ParameterError("sideBySide: the output must not be an input image");
     if (left.height != right.height) {
         std::ostringstream msg;
         msg << "sideBySide: images must have the same height, got " << left.height << " and "
@@ -558,7 +554,6 @@ RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
         msg << "sideBySide: gapPx must be >= 0, got " << gapPx;
         throw ParameterError(msg.str());
     }
-    RgbImage out;
     out.width = left.width + gapPx + right.width;
     out.height = left.height;
     out.rgb.resize(std::size_t(out.width) * std::size_t(out.height) * 3);
@@ -571,6 +566,12 @@ RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
         std::copy_n(right.rgb.data() + std::size_t(y) * std::size_t(right.width) * 3, std::size_t(right.width) * 3,
                     gap + std::size_t(gapPx) * 3);
     }
+}
+
+RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx)
+{
+    RgbImage out;
+    sideBySide(left, right, out, gapPx);
     return out;
 }
 

@@ -87,4 +87,8 @@ int countHitsWithin(const Camera& camera, const HitImage& hits, const Vec3d& cen
 /// Places two images side by side (same height) with a `gapPx` dark separator.
 RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx = 4);
 
+/// The same into `out`, reusing its buffer (no allocation when the size is unchanged); `out`
+/// must be neither input.
+void sideBySide(const RgbImage& left, const RgbImage& right, RgbImage& out, int gapPx = 4);
+
 } // namespace flyover

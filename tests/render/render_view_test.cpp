@@ -3,6 +3,7 @@
 // source location, so ignoring it around the includes silences only third-party code.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include "render/headlight_shade.h"
 #include "render/render_view.h"
 
 #include "test_meshes.h"
@@ -12,6 +13,8 @@
 #include <tbb/global_control.h>
 
 #include <cmath>
+#include <cstring>
+#include <random>
 #include <cstdlib>
 #include <limits>
 #include <string>
@@ -119,6 +122,51 @@ TEST(RenderView, DepthIsAlongForwardAndTheNearClipIsAPlane)
     renderView(scene, cam, options, &hits);
     EXPECT_EQ(hitCount(hits), 0);
     for (const uint32_t id : hits.primId) EXPECT_EQ(id, std::numeric_limits<uint32_t>::max());
+}
+
+// renderView shades a packet's lanes four at a time (SSE); each lane must be the scalar rule's
+// float bit for bit, so images are the same bytes as with the one-lane code: random rays and
+// normals of any length, zero normals (misses), parallel vectors (cosine rounding above 1),
+// depths before the cue's start, infinite depths (misses) and NaN.
+TEST(RenderView, ShadeOfFourLanesAtOnceIsTheScalarShadeBitForBit)
+{
+    constexpr int N = 4096;
+    alignas(16) static float dx[N], dy[N], dz[N], nx[N], ny[N], nz[N], t[N], out[N];
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), scale(0.01f, 100.0f), depth(0.0f, 300.0f);
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    for (int i = 0; i < N; ++i) {
+        const float s = scale(rng);
+        dx[i] = unit(rng);
+        dy[i] = unit(rng);
+        dz[i] = unit(rng);
+        nx[i] = s * unit(rng);
+        ny[i] = s * unit(rng);
+        nz[i] = s * unit(rng);
+        t[i] = depth(rng);
+        switch (i % 8) {
+        case 1: nx[i] = ny[i] = nz[i] = 0.0f; t[i] = inf; break;  // a miss
+        case 2: nx[i] = 3.0f * dx[i]; ny[i] = 3.0f * dy[i]; nz[i] = 3.0f * dz[i]; break;  // parallel
+        case 3: t[i] = 0.5f; break;  // before the cue's start
+        case 4: if (i % 64 == 4) nx[i] = nan; break;
+        case 5: if (i % 64 == 5) t[i] = nan; break;
+        case 6: nx[i] *= 1e-20f; ny[i] *= 1e-20f; nz[i] *= 1e-20f; break;  // norms below 1e-30
+        default: break;
+        }
+    }
+    for (const float invCue : {0.0f, 1.0f / 70.0f}) {
+        detail::headlightShadeLanes(dx, dy, dz, nx, ny, nz, t, N, invCue, 2.0f, out);
+        int differing = 0, firstDiffering = -1;
+        for (int i = 0; i < N; ++i) {
+            const float expected = detail::headlightShade(dx[i], dy[i], dz[i], nx[i], ny[i], nz[i], t[i], invCue, 2.0f);
+            if (std::memcmp(&expected, &out[i], sizeof(float)) != 0) {
+                if (firstDiffering < 0) firstDiffering = i;
+                ++differing;
+            }
+        }
+        EXPECT_EQ(differing, 0) << "depth cue 1/" << (invCue > 0 ? 1.0f / invCue : 0.0f) << " mm: " << differing
+                                << " of " << N << " lanes differ from the scalar shade, the first lane " << firstDiffering;
+    }
 }
 
 TEST(RenderView, OstEqualsPlainRenderOfTheFacesFacingTheEye)
@@ -412,6 +460,25 @@ TEST(SideBySide, PlacesImagesWithADarkSeparator)
             }
     RgbImage shorter{4, 2, std::vector<uint8_t>(4 * 2 * 3, 0)};
     EXPECT_THROW(sideBySide(left, shorter), ParameterError);
+}
+
+// The render steps keep one pair image per thread: writing into an image that held a larger or
+// smaller pair must give exactly the pair a fresh image gets, and an input as the output is refused.
+TEST(SideBySide, IntoAReusedImageIsTheFreshPair)
+{
+    RgbImage left{2, 3, std::vector<uint8_t>(2 * 3 * 3, 200)};
+    RgbImage right{4, 3, std::vector<uint8_t>(4 * 3 * 3, 100)};
+    RgbImage small{1, 1, std::vector<uint8_t>(3, 7)};
+    RgbImage reused{20, 10, std::vector<uint8_t>(20 * 10 * 3, 55)};  // larger than the pair
+    sideBySide(left, right, reused, 3);
+    const RgbImage fresh = sideBySide(left, right, 3);
+    EXPECT_EQ(reused.width, fresh.width);
+    EXPECT_EQ(reused.height, fresh.height);
+    EXPECT_TRUE(reused.rgb == fresh.rgb) << "the pair written into a reused image differs from a fresh one";
+    sideBySide(small, small, reused, 1);  // then smaller
+    EXPECT_EQ(reused.width, 3);
+    EXPECT_EQ(reused.rgb.size(), std::size_t(3 * 1 * 3));
+    EXPECT_THROW(sideBySide(left, right, left), ParameterError);
 }
 
 } // namespace
