@@ -121,7 +121,8 @@ json runMesh(StudyRun& run, Progress* progress)
         // Reads the mesh and the level set beside the render (which reads them too); the run
         // keeps both until its write-behind is joined.
         const TriMesh* m = &*run.state.mesh;
-        behind->addReportPart([m, sdf, r, params, besideCut](json& report) mutable {
+        behind->addReportPart([&run, m, sdf, r, params, besideCut](json& report) mutable {
+            run.waitForFirstPair();  // two cores: the checks would slow the first pair down
             checkLumenSurface(*m, *sdf, r);
             report = meshReportJson(r, params, besideCut);
             report["checked_behind"] = true;

@@ -470,6 +470,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     } catch (...) {
         failure = std::current_exception();
     }
+    run.openFirstPairGate();  // no first pair in this run (or it is out): behind work waits no more
     for (auto& [name, done] : behind) {
         try {
             done.get();
