@@ -90,6 +90,17 @@ void DeferredWrites::finish()
     mFiles.clear();
 }
 
+void DeferredWrites::addReportPart(std::function<void(nlohmann::json&)> complete)
+{
+    mReportParts.push_back(std::move(complete));
+}
+
+void DeferredWrites::completeReport(nlohmann::json& report)
+{
+    for (const auto& part : mReportParts) part(report);
+    mReportParts.clear();
+}
+
 std::string writtenFile(const std::string& path)
 {
     if (tDeferred) {

@@ -8,6 +8,9 @@
 ///        is recorded before its files are renamed and on disk.
 #pragma once
 
+#include <nlohmann/json.hpp>
+
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -48,8 +51,17 @@ public:
     /// @throw std::filesystem::filesystem_error when a rename fails.
     void finish();
 
+    /// Leaves part of the stage's report to be made behind: `complete` runs in
+    /// completeReport(), beside the next stages and before the cache record is written (so a
+    /// record always holds the whole report), and fills in what the body left out. It may only
+    /// read what the next stages read (they run meanwhile).
+    void addReportPart(std::function<void(nlohmann::json&)> complete);
+    /// Runs the parts added, in order, on `report`.
+    void completeReport(nlohmann::json& report);
+
 private:
     std::vector<std::pair<std::string, std::string>> mFiles;  ///< (temporary, final name)
+    std::vector<std::function<void(nlohmann::json&)>> mReportParts;
 };
 
 /// The file holding `path`'s newest content: the temporary of a write deferred on this thread,

@@ -19,12 +19,12 @@ private:
 
 } // namespace
 
-SpeculativeMesh::SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params)
+SpeculativeMesh::SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params, bool deferFinalChecks)
 {
     openvdb::FloatGrid::Ptr copy = sdf.deepCopy();
-    mResult = std::async(std::launch::async, [this, copy, params] {
+    mResult = std::async(std::launch::async, [this, copy, params, deferFinalChecks] {
         CancelFlag progress(mCancel);
-        return makeLumenSurface(*copy, params, &mReport, &progress);
+        return makeLumenSurface(*copy, params, &mReport, &progress, true, deferFinalChecks);
     });
 }
 

@@ -20,8 +20,9 @@ namespace flyover {
 
 class SpeculativeMesh {
 public:
-    /// Starts meshing a deep copy of `sdf` with `params` on its own thread.
-    SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params);
+    /// Starts meshing a deep copy of `sdf` with `params` on its own thread; the final checks
+    /// are left to the taker (makeLumenSurface's deferFinalChecks) when `deferFinalChecks`.
+    SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params, bool deferFinalChecks = false);
     /// Cancels a mesh still running (at its next progress report) and waits for it.
     ~SpeculativeMesh();
     SpeculativeMesh(const SpeculativeMesh&) = delete;

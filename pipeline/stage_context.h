@@ -20,6 +20,7 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <future>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -82,12 +83,21 @@ public:
     /// the first step that asks (the others wait, or help build it: no TBB deadlock).
     const RenderInputs& renderInputs();
 
+    /// Work that should not compete with the first pair (the mesh checks made behind) waits
+    /// here until the frames step has announced it, or the stage graph has ended (frames not
+    /// run, reused or failed): runPipeline opens the gate then, before it joins the write-behind.
+    void waitForFirstPair() { mFirstPairGate.wait(); }
+    void openFirstPairGate() { std::call_once(mGateOnce, [this] { mFirstPair.set_value(); }); }
+
     const RunOptions& opt;
     std::filesystem::path dir;
     StudyState state;
     std::chrono::steady_clock::time_point start;  ///< when runPipeline started
 
 private:
+    std::once_flag mGateOnce;
+    std::promise<void> mFirstPair;
+    std::shared_future<void> mFirstPairGate = mFirstPair.get_future().share();
     std::mutex mLoadMutex;
     tbb::collaborative_once_flag mRenderOnce;
     std::unique_ptr<RenderInputs> mRender;

@@ -1,6 +1,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/deferred_writes.h"
 #include "pipeline/speculative_mesh.h"
 #include "surface/lumen_surface.h"
 
@@ -28,20 +29,9 @@ json componentJson(const MeshComponent& c)
                 {"inward_volume_sign", c.hasInwardVolumeSign()}};
 }
 
-} // namespace
-
-json runMesh(StudyRun& run, Progress* progress)
+/// The mesh stage's report; `besideCut`: the mesh was made beside the segment stage's contact cut.
+json meshReportJson(const LumenSurfaceReport& r, const MeshParams& params, bool besideCut)
 {
-    auto sdf = run.sdf();
-    const MeshParams& params = run.opt.params.mesh;
-    LumenSurfaceReport r;
-    // The segment stage's mesh of this very lumen, made beside its contact cut, when it made one.
-    std::shared_ptr<SpeculativeMesh> speculative = std::move(run.state.speculativeMesh);
-    if (speculative) reportProgress(progress, 0.0, "waiting for the mesh made beside the contact cut");
-    TriMesh mesh = speculative ? speculative->take(r) : makeLumenSurface(*sdf, params, &r, progress);
-    writeMesh(run.path("surface.ply"), mesh);
-    run.state.mesh = std::move(mesh);
-
     const MeshCheck& c = r.check;
     json components = json::array();
     for (std::size_t i = 0; i < std::min(c.componentList.size(), MAX_LISTED_COMPONENTS); ++i)
@@ -49,7 +39,7 @@ json runMesh(StudyRun& run, Progress* progress)
     const MeshStats& e = r.extraction;
     return json{
         // Meshed beside the segment stage's contact cut (which removed nothing), or here.
-        {"made_beside_contact_cut", bool(speculative)},
+        {"made_beside_contact_cut", besideCut},
         // The final surface (surface.ply).
         {"vertices", c.vertices},
         {"edges", c.edges},
@@ -103,7 +93,42 @@ json runMesh(StudyRun& run, Progress* progress)
           {"max_error_mm", r.decimationMaxErrorMm},
           {"hausdorff_mm", r.decimationHausdorffMm},
           {"seconds", r.decimateSeconds}}},
-        {"check_seconds", r.checkSeconds}};
+        {"check_seconds", r.checkSeconds},
+        // The checks of the final mesh were made behind the next stages (the first pair).
+        {"checked_behind", r.finalChecksPending}};
+}
+
+} // namespace
+
+json runMesh(StudyRun& run, Progress* progress)
+{
+    auto sdf = run.sdf();
+    const MeshParams& params = run.opt.params.mesh;
+    LumenSurfaceReport r;
+    // The checks of the final mesh are left to be made behind the next stages (before the
+    // stage's record is written) when its artifacts are written behind.
+    DeferredWrites* behind = DeferredWrites::active();
+    // The segment stage's mesh of this very lumen, made beside its contact cut, when it made one.
+    std::shared_ptr<SpeculativeMesh> speculative = std::move(run.state.speculativeMesh);
+    if (speculative) reportProgress(progress, 0.0, "waiting for the mesh made beside the contact cut");
+    TriMesh mesh = speculative ? speculative->take(r)
+                               : makeLumenSurface(*sdf, params, &r, progress, true, behind != nullptr);
+    writeMesh(run.path("surface.ply"), mesh);
+    run.state.mesh = std::move(mesh);
+    const bool besideCut = bool(speculative);
+    if (r.finalChecksPending && !behind) checkLumenSurface(*run.state.mesh, *sdf, r);
+    if (r.finalChecksPending) {
+        // Reads the mesh and the level set beside the render (which reads them too); the run
+        // keeps both until its write-behind is joined.
+        const TriMesh* m = &*run.state.mesh;
+        behind->addReportPart([&run, m, sdf, r, params, besideCut](json& report) mutable {
+            run.waitForFirstPair();  // two cores: the checks would slow the first pair down
+            checkLumenSurface(*m, *sdf, r);
+            report = meshReportJson(r, params, besideCut);
+            report["checked_behind"] = true;
+        });
+    }
+    return meshReportJson(r, params, besideCut);
 }
 
 } // namespace flyover

@@ -381,6 +381,7 @@ json runFrames(StudyRun& run, Progress* progress)
     const double firstPairSinceRunStart = secondsSince(run.start);
     if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
     crashPoint("frames:first-pair");
+    run.openFirstPairGate();
 
     const auto tRest = Clock::now();
     std::atomic<std::size_t> done{1};

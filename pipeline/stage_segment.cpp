@@ -109,8 +109,9 @@ json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
     // with --threads 1: that thread would be a second one).
     std::shared_ptr<SpeculativeMesh> speculative;
     const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
+    // Its final checks are left to the mesh stage, which makes them behind the first pair.
     if (threads && run.state.meshWanted && seg.sdf && SpeculativeMesh::applicable(*seg.sdf))
-        speculative = std::make_shared<SpeculativeMesh>(*seg.sdf, run.opt.params.mesh);
+        speculative = std::make_shared<SpeculativeMesh>(*seg.sdf, run.opt.params.mesh, true);
     json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
     if (speculative && contacts.value("cut", -1) == 0) run.state.speculativeMesh = std::move(speculative);
     speculative.reset();  // a cut: cancelled, the mesh stage meshes the cut lumen

@@ -411,8 +411,17 @@ nlohmann::json runPipeline(const RunOptions& options)
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        auto finish = [&store, &stamps, &recordFinished, deferred, record2, entry, name = spec.name] {
+        auto finish = [&store, &stamps, &recordFinished, &mutex, &entries, deferred, record2, entry,
+                       name = spec.name]() mutable {
             crashPoint(("writebehind:" + name + ":before-finish").c_str());
+            // What the body left to be made behind (the mesh checks), before anything is recorded.
+            deferred->completeReport(record2["report"]);
+            entry["report"] = record2["report"];
+            {
+                std::lock_guard<std::mutex> g(mutex);
+                entries[name]["report"] = record2["report"];
+            }
+            crashPoint(("writebehind:" + name + ":report-completed").c_str());
             deferred->finish();
             store.commit(record2);
             // The file objects' digests were computed from their content above: stamp them.
@@ -461,6 +470,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     } catch (...) {
         failure = std::current_exception();
     }
+    run.openFirstPairGate();  // no first pair in this run (or it is out): behind work waits no more
     for (auto& [name, done] : behind) {
         try {
             done.get();

@@ -110,8 +110,32 @@ void validateMeshParams(const MeshParams& p)
             "decimateMaxNormalDeviationDeg", p.decimateMaxNormalDeviationDeg, "a value in (0, 180]");
 }
 
+namespace {
+
+/// The measures of the smoothed mesh, `current` being its check.
+void measureSmoothed(const TriMesh& mesh, const MeshCheck& current, LumenSurfaceReport& rep)
+{
+    rep.smoothedVolumeMm3 = current.enclosedVolumeMm3;
+    rep.smoothedRoughnessDeg = meanDihedralAngleDeg(mesh);
+    if (rep.rawVolumeMm3 != 0.0)
+        rep.smoothingVolumeChange = (rep.smoothedVolumeMm3 - rep.rawVolumeMm3) / rep.rawVolumeMm3;
+}
+
+} // namespace
+
+void checkLumenSurface(const TriMesh& mesh, const openvdb::FloatGrid& sdf, LumenSurfaceReport& rep)
+{
+    if (!rep.finalChecksPending) return;
+    const auto t0 = std::chrono::steady_clock::now();
+    rep.check = checkMesh(mesh);
+    if (rep.smoothed) measureSmoothed(mesh, rep.check, rep);
+    rep.orientation = checkFaceOrientation(mesh, sdf);
+    rep.checkSeconds += secondsSince(t0);
+    rep.finalChecksPending = false;
+}
+
 TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, LumenSurfaceReport* report,
-                         Progress* progress, bool measureDecimationError)
+                         Progress* progress, bool measureDecimationError, bool deferFinalChecks)
 {
     validateMeshParams(params);
     using Clock = std::chrono::steady_clock;
@@ -133,9 +157,20 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
     rep.rawRoughnessDeg = meanDihedralAngleDeg(mesh);
     rep.checkSeconds += secondsSince(t0);
 
+    int64_t target = 0;
+    if (params.decimateTargetFaces > 0) target = params.decimateTargetFaces;
+    if (params.decimateFraction < 1.0) {
+        const auto byFraction = int64_t(std::llround(params.decimateFraction * double(mesh.n_faces())));
+        target = target > 0 ? std::min(target, byFraction) : std::max<int64_t>(byFraction, 1);
+    }
+    rep.decimationMaxErrorMm = params.decimateMaxErrorVoxels * voxelMm;
+    const bool decimating = target > 0 || rep.decimationMaxErrorMm > 0.0;
+    const bool later = deferFinalChecks && !decimating;
+
     rep.smoothedVolumeMm3 = rep.rawVolumeMm3;
     rep.smoothedRoughnessDeg = rep.rawRoughnessDeg;
     if (params.smoothMethod == "taubin" && params.smoothIterations > 0) {
+        rep.smoothed = true;
         t0 = Clock::now();
         TaubinParams taubin;
         taubin.iterations = params.smoothIterations;
@@ -146,24 +181,16 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
         smoothMeshTaubin(mesh, taubin, &rep.smoothing, ptr(smoothProgress));
         rep.smoothingRestoredVertices = restoreNonInwardFaces(mesh, extracted, sdf);
         rep.smoothSeconds = secondsSince(t0);
-        t0 = Clock::now();
-        current = checkMesh(mesh);
-        rep.smoothedVolumeMm3 = current.enclosedVolumeMm3;
-        rep.smoothedRoughnessDeg = meanDihedralAngleDeg(mesh);
-        if (rep.rawVolumeMm3 != 0.0)
-            rep.smoothingVolumeChange = (rep.smoothedVolumeMm3 - rep.rawVolumeMm3) / rep.rawVolumeMm3;
-        rep.checkSeconds += secondsSince(t0);
+        if (!later) {
+            t0 = Clock::now();
+            current = checkMesh(mesh);
+            measureSmoothed(mesh, current, rep);
+            rep.checkSeconds += secondsSince(t0);
+        }
     }
 
-    int64_t target = 0;
-    if (params.decimateTargetFaces > 0) target = params.decimateTargetFaces;
-    if (params.decimateFraction < 1.0) {
-        const auto byFraction = int64_t(std::llround(params.decimateFraction * double(mesh.n_faces())));
-        target = target > 0 ? std::min(target, byFraction) : std::max<int64_t>(byFraction, 1);
-    }
-    rep.decimationMaxErrorMm = params.decimateMaxErrorVoxels * voxelMm;
     rep.decimation.facesBefore = rep.decimation.facesAfter = int64_t(mesh.n_faces());
-    if (target > 0 || rep.decimationMaxErrorMm > 0.0) {
+    if (decimating) {
         t0 = Clock::now();
         std::optional<TriMesh> before;
         if (measureDecimationError) before = mesh;
@@ -187,11 +214,16 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
         }
     }
 
-    t0 = Clock::now();
-    reportProgress(progress, 0.85, "mesh checks");
-    rep.check = rep.decimation.collapses > 0 ? checkMesh(mesh) : std::move(current);
-    rep.orientation = checkFaceOrientation(mesh, sdf);
-    rep.checkSeconds += secondsSince(t0);
+    if (later) {
+        // checkLumenSurface() measures the final mesh (here: the smoothed one) later.
+        rep.finalChecksPending = true;
+    } else {
+        t0 = Clock::now();
+        reportProgress(progress, 0.85, "mesh checks");
+        rep.check = rep.decimation.collapses > 0 ? checkMesh(mesh) : std::move(current);
+        rep.orientation = checkFaceOrientation(mesh, sdf);
+        rep.checkSeconds += secondsSince(t0);
+    }
     reportProgress(progress, 1.0, "mesh done");
     if (report) *report = rep;
     return mesh;

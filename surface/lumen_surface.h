@@ -68,6 +68,12 @@ struct LumenSurfaceReport {
 
     double extractSeconds = 0, smoothSeconds = 0, decimateSeconds = 0, checkSeconds = 0;
 
+    /// Whether smoothing ran (the smoothed measures are then those of the mesh after it).
+    bool smoothed = false;
+    /// The checks of the final mesh (check, orientation, the smoothed measures) are still to
+    /// be made by checkLumenSurface(): makeLumenSurface() was asked to leave them.
+    bool finalChecksPending = false;
+
     /// Every face inward, no outward component, manifold (no refused face, no edge of more
     /// than two faces, no pinched vertex), consistently wound, no degenerate face.
     bool isSound() const
@@ -82,11 +88,23 @@ struct LumenSurfaceReport {
 /// @param sdf  lumen level set (world mm, negative inside)
 /// @param measureDecimationError  compute decimationHausdorffMm (costs about as much as the
 ///        decimation itself)
+/// @param deferFinalChecks  leave the checks of the final mesh (report->check, orientation,
+///        smoothedVolumeMm3, smoothedRoughnessDeg, smoothingVolumeChange) to a later call of
+///        checkLumenSurface(), so that the mesh can be used first (the pipeline renders the
+///        first pair meanwhile, issue 15); report->finalChecksPending says whether they were
+///        left. Ignored when decimation is asked for (the smoothed measures are then taken
+///        before it). The mesh is the same either way.
 /// @throw ParameterError for invalid params (names the field), InputError when the level set
 ///        has no zero crossing
 TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params,
                          LumenSurfaceReport* report = nullptr, Progress* progress = nullptr,
-                         bool measureDecimationError = true);
+                         bool measureDecimationError = true, bool deferFinalChecks = false);
+
+/// The checks makeLumenSurface() left (report.finalChecksPending) on the mesh it returned and
+/// the level set it meshed; fills `report` as makeLumenSurface() would have, and adds their
+/// time to checkSeconds. Reads `mesh` and `sdf` only: safe beside other readers. Does nothing
+/// when no check is pending.
+void checkLumenSurface(const TriMesh& mesh, const openvdb::FloatGrid& sdf, LumenSurfaceReport& report);
 
 /// The smoothing guard: every face of `mesh` that does not point into the lumen (e.g. a
 /// sliver a smoother tilted past the surface's tangent plane) gets its corners back at their

@@ -3,7 +3,9 @@
 // when it cuts (issue 15).
 
 #include "data/phantom.h"
+#include "pipeline/artifact_io.h"
 #include "pipeline/phantom_io.h"
+#include "surface/lumen_surface.h"
 #include "study_fixture.h"
 
 #include <gtest/gtest.h>
@@ -36,6 +38,24 @@ void expectSameMeshEitherWay(RunOptions one, RunOptions two, bool besideExpected
     EXPECT_TRUE(meshA["computed"].get<bool>());
     EXPECT_EQ(meshA["report"]["made_beside_contact_cut"].get<bool>(), besideExpected)
         << "contacts cut: " << segA["report"]["contacts"]["cut"];
+    // The final checks are made behind the next stages; the manifest and the cache record
+    // hold them all the same (a re-run takes the report from the record).
+    EXPECT_TRUE(meshA["report"]["checked_behind"].get<bool>());
+    EXPECT_GT(meshA["report"]["faces"].get<int64_t>(), 0) << "the report left without its checks";
+    {
+        // The figures of the checks made at once on the study's lumen level set.
+        const auto sdf = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(one.studyDir + "/lumen.vdb", "lumen_sdf"));
+        LumenSurfaceReport now;
+        makeLumenSurface(*sdf, one.params.mesh, &now);
+        EXPECT_EQ(meshA["report"]["faces"].get<int64_t>(), now.check.faces);
+        EXPECT_EQ(meshA["report"]["genus"].get<int64_t>(), now.check.genus);
+        EXPECT_EQ(meshA["report"]["outward_faces"].get<int64_t>(), now.orientation.outward);
+        EXPECT_EQ(meshA["report"]["non_manifold_vertices"].get<int64_t>(), now.check.nonManifoldVertices);
+        EXPECT_EQ(meshA["report"]["sound"].get<bool>(), now.isSound());
+    }
+    const nlohmann::json again = stageEntry(runPipeline(one), "mesh");
+    EXPECT_FALSE(again["computed"].get<bool>());
+    EXPECT_EQ(again["report"], meshA["report"]) << "the cache record's report is not the manifest's";
 
     two.untilStage = "segment";
     runPipeline(two);
@@ -48,6 +68,11 @@ void expectSameMeshEitherWay(RunOptions one, RunOptions two, bool besideExpected
     EXPECT_EQ(meshB["outputs"], meshA["outputs"]) << "surface.ply differs between the mesh made beside the "
                                                      "contact cut and the mesh stage's own";
     EXPECT_EQ(meshB["report"]["faces"], meshA["report"]["faces"]);
+    for (const char* field : {"genus", "components", "boundary_loops", "outward_faces", "sound"})
+        EXPECT_EQ(meshB["report"][field], meshA["report"][field]) << field;
+    // A parallel sum: equal to the last bits only.
+    const double areaA = meshA["report"]["area_mm2"].get<double>();
+    EXPECT_NEAR(meshB["report"]["area_mm2"].get<double>(), areaA, 1e-9 * areaA);
     EXPECT_EQ(meshB["key"], meshA["key"]);
 }
 

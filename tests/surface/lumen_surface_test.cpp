@@ -267,6 +267,75 @@ TEST(LumenSurface, DecimationToHalfKeepsEverythingElse)
     expectSound(quarter);
 }
 
+namespace {
+
+/// The counts of a report that the final checks fill in.
+std::string finalCheckCounts(const LumenSurfaceReport& r)
+{
+    std::ostringstream out;
+    const MeshCheck& c = r.check;
+    out << "vertices " << c.vertices << " edges " << c.edges << " faces " << c.faces << " components "
+        << c.components << " closed " << c.closedComponents << " genus " << c.genus << " loops "
+        << c.boundaryLoops << " boundary edges " << c.boundaryEdges << " non-manifold " << c.nonManifoldVertices
+        << " degenerate " << c.degenerateFaces << " misoriented " << c.misorientedComponents << " listed "
+        << c.componentList.size() << " inward " << r.orientation.inward << " outward " << r.orientation.outward
+        << " no gradient " << r.orientation.noGradient << " sound " << r.isSound();
+    return out.str();
+}
+
+/// Its measures, which parallel sums give to the last bits only.
+void expectSameMeasures(const LumenSurfaceReport& a, const LumenSurfaceReport& b)
+{
+    auto near = [](double x, double y, const char* what) {
+        EXPECT_NEAR(x, y, 1e-9 * std::max(1.0, std::abs(y))) << what;
+    };
+    near(a.check.areaMm2, b.check.areaMm2, "area");
+    near(a.check.enclosedVolumeMm3, b.check.enclosedVolumeMm3, "enclosed volume");
+    near(a.smoothedVolumeMm3, b.smoothedVolumeMm3, "smoothed volume");
+    near(a.smoothedRoughnessDeg, b.smoothedRoughnessDeg, "smoothed roughness");
+    near(a.smoothingVolumeChange, b.smoothingVolumeChange, "volume change");
+}
+
+} // namespace
+
+TEST(LumenSurface, FinalChecksMadeLaterGiveTheSameReport)
+{
+    // The pipeline leaves the final checks until after the first pair (issue 15): the mesh
+    // and every checked figure must be those of the checks made at once.
+    const double bigR = 12.0, r = 4.0, voxel = 0.4;
+    auto grid = test::sampleSdf(
+        [&](const openvdb::Vec3d& p) { return std::hypot(std::hypot(p.x(), p.y()) - bigR, p.z()) - r; },
+        openvdb::Vec3d(-bigR - r - 1, -bigR - r - 1, -r - 1), openvdb::Vec3d(bigR + r + 1, bigR + r + 1, r + 1), voxel);
+    for (const bool smooth : {true, false}) {
+        MeshParams params;
+        if (!smooth) params.smoothMethod = "none";
+        LumenSurfaceReport now, later;
+        const TriMesh a = makeLumenSurface(*grid, params, &now);
+        const TriMesh b = makeLumenSurface(*grid, params, &later, nullptr, true, /*deferFinalChecks=*/true);
+        SCOPED_TRACE(smooth ? "taubin" : "no smoothing");
+        EXPECT_FALSE(now.finalChecksPending);
+        ASSERT_TRUE(later.finalChecksPending) << "the final checks were made at once although asked to wait";
+        EXPECT_EQ(later.check.faces, 0) << "checked although asked to wait";
+        ASSERT_EQ(a.n_vertices(), b.n_vertices());
+        ASSERT_EQ(a.n_faces(), b.n_faces());
+        for (const auto v : a.vertices()) ASSERT_EQ(a.point(v), b.point(v)) << "vertex " << v.idx();
+        checkLumenSurface(b, *grid, later);
+        EXPECT_FALSE(later.finalChecksPending);
+        EXPECT_EQ(finalCheckCounts(later), finalCheckCounts(now));
+        expectSameMeasures(later, now);
+        EXPECT_GT(later.check.faces, 0);
+        expectSound(later);
+    }
+
+    // With decimation the smoothed measures come before it: the checks are made at once.
+    MeshParams half;
+    half.decimateFraction = 0.5;
+    LumenSurfaceReport rep;
+    makeLumenSurface(*grid, half, &rep, nullptr, false, /*deferFinalChecks=*/true);
+    EXPECT_FALSE(rep.finalChecksPending);
+    expectSound(rep);
+}
+
 TEST(LumenSurface, GuardRestoresFacesTurnedAwayFromTheLumen)
 {
     // Smoothing tilts no face of the analytic shapes past the tangent plane (the phantom has a
