@@ -39,7 +39,8 @@ using detail::Neighbours;
 
 /// A mask voxel centre counts as inside (outside) where the resampled indicator is at least
 /// 1 - CONSTRAINT_TOLERANCE (at most CONSTRAINT_TOLERANCE); on the mask's own lattice the
-/// indicator is exactly 0 or 1 at every centre, so every centre is constrained.
+/// indicator is exactly 0 or 1 at every centre, so every centre is constrained; resampled,
+/// the output voxel nearest to each mask centre is constrained to that centre's side.
 constexpr float CONSTRAINT_TOLERANCE = 0.25f;
 /// How far from a constrained voxel centre (in output voxels) the smoothed surface must stay.
 constexpr float CONSTRAINT_MARGIN_VOXELS = 0.05f;
@@ -195,7 +196,16 @@ FloatTree::Ptr indicatorOnGrid(const BoolTree& label, const ImageGeometry& g,
                     for (int dx = 0; dx < 2; ++dx)
                         if (isLabel(base.offsetBy(dx, dy, dz)))
                             value += (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * (dz ? fz : 1 - fz);
-            if (value > 1e-6) leaf.setValueOn(pos, static_cast<float>(std::min(value, 1.0)));
+            value = std::min(value, 1.0);
+            // The output voxel nearest to a mask centre takes that centre's side (constrained),
+            // so that a part or a wall one mask voxel thick is neither lost nor opened between
+            // the samples: a trilinear sample between slices is often free (0.25-0.75) there.
+            const Coord m(int(std::lround(u.x)), int(std::lround(u.y)), int(std::lround(u.z)));
+            const Vec3d mw = g.worldFromIndex({double(m.x()), double(m.y()), double(m.z())});
+            if (Coord::round(xf.worldToIndex(toVdb(mw))) == c)
+                value = isLabel(m) ? std::max(value, 1.0 - CONSTRAINT_TOLERANCE)
+                                   : std::min(value, double(CONSTRAINT_TOLERANCE));
+            if (value > 1e-6) leaf.setValueOn(pos, static_cast<float>(value));
         }
     });
     detail::pruneInactive(*out);
