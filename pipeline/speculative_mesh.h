@@ -1,15 +1,17 @@
 /// @file speculative_mesh.h
-/// @brief Internal to pipeline/ (issue 15): the lumen surface meshed beside the contact cut.
-///        The segment stage's contact search (volume/contacts.h) runs mostly on one thread;
-///        the mesh does not need its answer unless it cuts. So the segment stage starts
-///        makeLumenSurface() on a deep copy of the lumen level set before the cut, on a thread
-///        of its own, and hands it to the mesh stage only when the cut removed no voxel (the
-///        level set's values and topology are then those the mesh stage would mesh: contacts
-///        only add metadata). When something was cut, the copy's mesh is cancelled and the
-///        mesh stage meshes the cut level set as before. The result is the same either way.
+/// @brief Internal to pipeline/ (issue 15): the lumen surface and the centerline made beside
+///        the contact cut. The segment stage's contact search (volume/contacts.h) runs mostly
+///        on one thread; the mesh and the centerline do not need its answer unless it cuts. So
+///        the segment stage makes one deep copy of the lumen level set before the cut and
+///        starts makeLumenSurface() and extractCenterline() on it, each on a thread of its own,
+///        and hands them to the mesh and centerline stages only when the cut removed no voxel
+///        (the level set's values and topology are then those those stages would read: contacts
+///        only add metadata). When something was cut, both are cancelled and the stages work
+///        on the cut level set as before. The results are the same either way.
 #pragma once
 
 #include "surface/lumen_surface.h"
+#include "volume/centerline.h"
 
 #include <openvdb/openvdb.h>
 
@@ -23,6 +25,8 @@ public:
     /// Starts meshing a deep copy of `sdf` with `params` on its own thread; the final checks
     /// are left to the taker (makeLumenSurface's deferFinalChecks) when `deferFinalChecks`.
     SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params, bool deferFinalChecks = false);
+    /// The same on `copy`, a level set nobody changes (shared with a SpeculativeCenterline).
+    SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks);
     /// Cancels a mesh still running (at its next progress report) and waits for it.
     ~SpeculativeMesh();
     SpeculativeMesh(const SpeculativeMesh&) = delete;
@@ -40,6 +44,32 @@ private:
     std::atomic<bool> mCancel{false};
     std::future<TriMesh> mResult;
     LumenSurfaceReport mReport;
+};
+
+/// The parameters the centerline stage traces `sdf` with: `given`, with the rectal tube's tip
+/// (recorded by segment in the level set's metadata) as the rectum hint unless `given` has one.
+/// `fromTube`: whether the hint is the tube's tip.
+CenterlineParams centerlineParamsFor(const openvdb::FloatGrid& sdf, const CenterlineParams& given, bool& fromTube);
+
+class SpeculativeCenterline {
+public:
+    /// Starts extractCenterline() on `copy` (a level set nobody changes) with the parameters
+    /// centerlineParamsFor(*copy, params) on its own thread.
+    SpeculativeCenterline(openvdb::FloatGrid::ConstPtr copy, const CenterlineParams& params);
+    /// Cancels a centerline still being traced (at its next progress report) and waits for it.
+    ~SpeculativeCenterline();
+    SpeculativeCenterline(const SpeculativeCenterline&) = delete;
+    SpeculativeCenterline& operator=(const SpeculativeCenterline&) = delete;
+
+    /// Waits for the centerline and returns it, its report in `report` and whether its rectum
+    /// hint was the rectal tube's tip in `fromTube`; rethrows what tracing threw. Call once.
+    Centerline take(CenterlineReport& report, bool& fromTube);
+
+private:
+    std::atomic<bool> mCancel{false};
+    std::future<Centerline> mResult;
+    CenterlineReport mReport;
+    bool mFromTube = false;
 };
 
 } // namespace flyover

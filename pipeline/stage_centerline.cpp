@@ -1,6 +1,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
+#include "pipeline/speculative_mesh.h"
 #include "volume/centerline.h"
 #include "volume/segment.h"
 
@@ -16,16 +17,15 @@ namespace flyover {
 json runCenterline(StudyRun& run, Progress* progress)
 {
     auto sdf = run.sdf();
-    // The rectal tube's tip (found by segment) is the rectum hint unless --rectum-mm gave one.
-    CenterlineParams params = run.opt.params.centerline;
+    // The segment stage's centerline of this very lumen, traced beside its contact cut, when it
+    // traced one; else traced here. The rectal tube's tip (found by segment) is the rectum hint
+    // unless --rectum-mm gave one.
+    std::shared_ptr<SpeculativeCenterline> speculative = std::move(run.state.speculativeCenterline);
     bool fromTube = false;
-    if (!params.rectumMm)
-        if (const auto tip = sdf->getMetadata<openvdb::Vec3DMetadata>(RECTAL_TUBE_TIP_META)) {
-            params.rectumMm = Vec3d{tip->value()[0], tip->value()[1], tip->value()[2]};
-            fromTube = true;
-        }
+    const CenterlineParams params = centerlineParamsFor(*sdf, run.opt.params.centerline, fromTube);
     CenterlineReport cr;
-    Centerline c = extractCenterline(*sdf, params, progress, &cr);
+    if (speculative) reportProgress(progress, 0.0, "waiting for the centerline traced beside the contact cut");
+    Centerline c = speculative ? speculative->take(cr, fromTube) : extractCenterline(*sdf, params, progress, &cr);
     writeJson(run.path("centerline.json"), centerlineToJson(c));
     run.state.centerline = std::move(c);
     const Centerline& cl = *run.state.centerline;
@@ -51,7 +51,8 @@ json runCenterline(StudyRun& run, Progress* progress)
     for (const CenterlineBridgeInfo& b : cr.bridges)
         bridges.push_back(json{{"gap_mm", b.gapMm}, {"length_mm", b.lengthMm}});
     const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
-    return json{{"points", pts.size()},
+    return json{{"traced_beside_contact_cut", bool(speculative)},
+                {"points", pts.size()},
                 {"length_mm", cl.lengthMm()},
                 {"world_frame", "LPS"},
                 {"rectum_mm", pts.empty() ? json() : vec3Json(pts.front().positionMm)},

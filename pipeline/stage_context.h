@@ -30,6 +30,7 @@ namespace flyover {
 
 class RayScene;
 class SpeculativeMesh;
+class SpeculativeCenterline;
 struct PartAnalysis;
 struct PartSurface;
 
@@ -64,8 +65,13 @@ struct StudyState {
     /// Whether this run computes the mesh stage (set by runPipeline): the segment stage then
     /// meshes its lumen beside the contact cut (speculative_mesh.h).
     bool meshWanted = false;
+    /// The same for the centerline stage: the segment stage traces its lumen's centerline
+    /// beside the contact cut.
+    bool centerlineWanted = false;
     /// The segment stage's mesh of the lumen it handed on, when the contact cut changed nothing.
     std::shared_ptr<SpeculativeMesh> speculativeMesh;
+    /// ... and its centerline of that lumen.
+    std::shared_ptr<SpeculativeCenterline> speculativeCenterline;
 };
 
 class StudyRun {

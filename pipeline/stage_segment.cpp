@@ -105,16 +105,28 @@ void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
 {
-    // The mesh of the lumen beside the contact cut, kept when the cut changes nothing (not
-    // with --threads 1: that thread would be a second one).
-    std::shared_ptr<SpeculativeMesh> speculative;
+    // The mesh and the centerline of the lumen beside the contact cut, kept when the cut
+    // changes nothing (not with --threads 1: those threads would be more).
+    std::shared_ptr<SpeculativeMesh> mesh;
+    std::shared_ptr<SpeculativeCenterline> centerline;
     const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
-    // Its final checks are left to the mesh stage, which makes them behind the first pair.
-    if (threads && run.state.meshWanted && seg.sdf && SpeculativeMesh::applicable(*seg.sdf))
-        speculative = std::make_shared<SpeculativeMesh>(*seg.sdf, run.opt.params.mesh, true);
+    if (threads && (run.state.meshWanted || run.state.centerlineWanted) && seg.sdf &&
+        SpeculativeMesh::applicable(*seg.sdf)) {
+        // One copy, read by both (neither changes it).
+        const openvdb::FloatGrid::ConstPtr copy = seg.sdf->deepCopy();
+        // The centerline first: the first pair waits for it, the mesh's checks wait for the pair.
+        if (run.state.centerlineWanted)
+            centerline = std::make_shared<SpeculativeCenterline>(copy, run.opt.params.centerline);
+        // Its final checks are left to the mesh stage, which makes them behind the first pair.
+        if (run.state.meshWanted) mesh = std::make_shared<SpeculativeMesh>(copy, run.opt.params.mesh, true);
+    }
     json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
-    if (speculative && contacts.value("cut", -1) == 0) run.state.speculativeMesh = std::move(speculative);
-    speculative.reset();  // a cut: cancelled, the mesh stage meshes the cut lumen
+    if (contacts.value("cut", -1) == 0) {
+        run.state.speculativeMesh = std::move(mesh);
+        run.state.speculativeCenterline = std::move(centerline);
+    }
+    mesh.reset();  // a cut: cancelled, the mesh and centerline stages work on the cut lumen
+    centerline.reset();
     writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
     run.state.sdf = seg.sdf;
     reportPieces(run, seg);
@@ -130,6 +142,9 @@ json runSegment(StudyRun& run, Progress* progress)
     if (!run.state.hu)
         run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
     LumenSegmentation seg = segmentLumen(*run.state.hu, run.opt.params.segment, progress);
+    // No later stage reads the HU grid: its 200+ MB go before the contact cut, the mesh and the
+    // centerline allocate theirs (ct.vdb is already written; a later run reads it from there).
+    run.state.hu.reset();
     json report = writeSegmentation(run, seg);
     report["source"] = "ct";
     return report;
@@ -147,6 +162,7 @@ json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* pr
         seg = segmentFromMask(*source, params, run.state.hu.get(), progress, &summary);
         checkPlausibleColon(seg, params, maskPath);
     }
+    run.state.hu.reset();  // as in runSegment: no later stage reads it
     if (run.opt.log && summary.voxelsOutsideReference > 0)
         run.opt.log->message("segment: warning: " + std::to_string(summary.voxelsOutsideReference) +
                              " mask voxels lie outside the CT's extent");

@@ -285,6 +285,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     store.removeStaleTemporaries();
     StudyRun run(options);
     run.state.meshWanted = wanted.count("mesh") > 0;
+    run.state.centerlineWanted = wanted.count("centerline") > 0;
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries

@@ -1,6 +1,6 @@
-// The mesh made beside the segment stage's contact cut (pipeline/speculative_mesh.h) is the
-// mesh of the lumen the segment stage hands on: kept when the cut removes nothing, dropped
-// when it cuts (issue 15).
+// The mesh and the centerline made beside the segment stage's contact cut
+// (pipeline/speculative_mesh.h) are those of the lumen the segment stage hands on: kept when
+// the cut removes nothing, dropped when it cuts (issue 15).
 
 #include "data/phantom.h"
 #include "pipeline/artifact_io.h"
@@ -76,7 +76,55 @@ void expectSameMeshEitherWay(RunOptions one, RunOptions two, bool besideExpected
     EXPECT_EQ(meshB["key"], meshA["key"]);
 }
 
+/// The centerline of one run through the centerline stage, and of the centerline stage run in
+/// a second call from the lumen.vdb of a first that stopped after segment (nothing traced
+/// beside the cut there): the same centerline.json, the same report but for where it was traced.
+void expectSameCenterlineEitherWay(RunOptions one, RunOptions two, bool besideExpected, int cutExpected)
+{
+    one.untilStage = "centerline";
+    const nlohmann::json a = runPipeline(one);
+    const nlohmann::json segA = stageEntry(a, "segment"), clA = stageEntry(a, "centerline");
+    EXPECT_EQ(segA["report"]["contacts"]["cut"].get<int>(), cutExpected);
+    EXPECT_TRUE(clA["computed"].get<bool>());
+    EXPECT_EQ(clA["report"]["traced_beside_contact_cut"].get<bool>(), besideExpected)
+        << "contacts cut: " << segA["report"]["contacts"]["cut"];
+
+    two.untilStage = "segment";
+    runPipeline(two);
+    two.untilStage = "centerline";
+    const nlohmann::json clB = stageEntry(runPipeline(two), "centerline");
+    EXPECT_TRUE(clB["computed"].get<bool>());
+    EXPECT_FALSE(clB["report"]["traced_beside_contact_cut"].get<bool>());
+    EXPECT_EQ(clB["outputs"], clA["outputs"]) << "centerline.json differs between the centerline traced beside "
+                                                 "the contact cut and the centerline stage's own";
+    nlohmann::json reportA = clA["report"], reportB = clB["report"];
+    reportA.erase("traced_beside_contact_cut");
+    reportB.erase("traced_beside_contact_cut");
+    EXPECT_EQ(reportB, reportA) << "the centerline reports differ";
+    EXPECT_EQ(clB["key"], clA["key"]);
+}
+
 } // namespace
+
+TEST_F(StudyTest, CenterlineBesideAContactCutThatRemovesNothingIsKept)
+{
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
+    expectSameCenterlineEitherWay(options("cl-beside-one"), options("cl-beside-two"), true, 0);
+}
+
+TEST_F(StudyTest, CenterlineBesideAContactCutThatCutsIsDropped)
+{
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
+    PhantomParams pp;
+    pp.size = PhantomSize::Small;
+    pp.seed = 1;
+    pp.touching = 2;
+    const std::string ct = (sRoot / "cl-touching.nii.gz").string();
+    writePhantom(makePhantom(pp), pp, ct, (sRoot / "cl-touching.json").string(), "");
+    RunOptions one = options("cl-cut-one"), two = options("cl-cut-two");
+    one.ctPath = two.ctPath = ct;
+    expectSameCenterlineEitherWay(one, two, false, 2);
+}
 
 TEST_F(StudyTest, MeshBesideAContactCutThatRemovesNothingIsKept)
 {
