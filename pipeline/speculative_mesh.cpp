@@ -83,4 +83,20 @@ Centerline SpeculativeCenterline::take(CenterlineReport& report, bool& fromTube)
     return c;
 }
 
+SpeculativeSegmentation::SpeculativeSegmentation(openvdb::FloatGrid::ConstPtr hu, const SegmentParams& params)
+{
+    mResult = std::async(std::launch::async, [this, hu, params] {
+        CancelFlag progress(mCancel);
+        return segmentLumen(*hu, params, &progress);
+    });
+}
+
+SpeculativeSegmentation::~SpeculativeSegmentation()
+{
+    mCancel = true;
+    if (mResult.valid()) mResult.wait();
+}
+
+LumenSegmentation SpeculativeSegmentation::take() { return mResult.get(); }
+
 } // namespace flyover

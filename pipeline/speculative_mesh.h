@@ -12,6 +12,7 @@
 
 #include "surface/lumen_surface.h"
 #include "volume/centerline.h"
+#include "volume/segment.h"
 
 #include <openvdb/openvdb.h>
 
@@ -70,6 +71,27 @@ private:
     std::future<Centerline> mResult;
     CenterlineReport mReport;
     bool mFromTube = false;
+};
+
+/// The CT path's segmentLumen() begun beside the ingest stage's writing and hashing of ct.vdb
+/// (a single thread's work, the other core idle): the segment stage takes it when it computes
+/// (its key, which needs ct.vdb's digest, is then known); when it is reused from the cache
+/// instead, this is cancelled. The segmentation is the same either way (the same HU grid).
+class SpeculativeSegmentation {
+public:
+    /// Starts segmentLumen(*hu, params) on its own thread; nobody changes `hu` meanwhile.
+    SpeculativeSegmentation(openvdb::FloatGrid::ConstPtr hu, const SegmentParams& params);
+    /// Cancels a segmentation still running (at its next progress report) and waits for it.
+    ~SpeculativeSegmentation();
+    SpeculativeSegmentation(const SpeculativeSegmentation&) = delete;
+    SpeculativeSegmentation& operator=(const SpeculativeSegmentation&) = delete;
+
+    /// Waits for the segmentation and returns it; rethrows what it threw. Call once.
+    LumenSegmentation take();
+
+private:
+    std::atomic<bool> mCancel{false};
+    std::future<LumenSegmentation> mResult;
 };
 
 } // namespace flyover

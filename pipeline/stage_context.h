@@ -19,6 +19,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <future>
 #include <mutex>
@@ -31,6 +32,7 @@ namespace flyover {
 class RayScene;
 class SpeculativeMesh;
 class SpeculativeCenterline;
+class SpeculativeSegmentation;
 struct PartAnalysis;
 struct PartSurface;
 
@@ -68,6 +70,11 @@ struct StudyState {
     /// The same for the centerline stage: the segment stage traces its lumen's centerline
     /// beside the contact cut.
     bool centerlineWanted = false;
+    /// Whether this run computes the segment stage from the CT: the ingest stage then begins
+    /// segmentLumen beside its writing of ct.vdb (speculative_mesh.h).
+    bool segmentWanted = false;
+    /// That segmentation, for the segment stage (dropped when the stage is reused instead).
+    std::shared_ptr<SpeculativeSegmentation> speculativeSegmentation;
     /// The segment stage's mesh of the lumen it handed on, when the contact cut changed nothing.
     std::shared_ptr<SpeculativeMesh> speculativeMesh;
     /// ... and its centerline of that lumen.
@@ -113,8 +120,10 @@ inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v
 
 /// Reads run.opt.ctPath into an isotropic grid named `gridName`, writes it to ct.vdb and returns
 /// the ingest report (geometry, reader, warnings): the ingest of both `run` and `inspect`.
+/// `beforeWrite`, when given, is called with the grid before ct.vdb is written.
 nlohmann::json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOptions& options,
-                             const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid);
+                             const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid,
+                             const std::function<void(const openvdb::FloatGrid::Ptr&)>& beforeWrite = {});
 
 // Stage bodies: each writes its artifacts (atomically) and returns its report.
 nlohmann::json runIngest(StudyRun& run, Progress* progress);

@@ -3,10 +3,12 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/grid_write.h"
 #include "pipeline/deferred_writes.h"
+#include "pipeline/speculative_mesh.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
 
 #include <sys/resource.h>
+#include <tbb/global_control.h>
 
 #include <filesystem>
 
@@ -36,7 +38,8 @@ int64_t peakRssBytes()
 } // namespace
 
 json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOptions& options,
-                   const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid)
+                   const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid,
+                   const std::function<void(const openvdb::FloatGrid::Ptr&)>& beforeWrite)
 {
     IngestReport rep;
     {
@@ -46,6 +49,7 @@ json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOpt
         grid = ingestImage(*source, params, &rep, progress);
     }  // the source (and any temporary copy it made) is released before writing
     grid->setName(gridName);
+    if (beforeWrite) beforeWrite(grid);
     // CT noise barely compresses (Blosc: -15% of the file for ~1 s of CPU on the critical path).
     writeGrids(run.path("ct.vdb"), {grid}, VdbValues::Raw);
     return json{{"world_frame", WORLD_FRAME},
@@ -74,7 +78,15 @@ json runIngest(StudyRun& run, Progress* progress)
     options.dicomSeriesUid = params.dicomSeries;
     options.allowGaps = params.allowGaps;
     openvdb::FloatGrid::Ptr grid;
-    json report = ingestToCtVdb(run, params, options, "ct_hu", progress, grid);
+    // Writing and hashing ct.vdb is one thread's work: the segmentation begins beside it (the
+    // segment stage takes it, speculative_mesh.h), not with --threads 1.
+    const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
+    auto beginSegment = [&run](const openvdb::FloatGrid::Ptr& hu) {
+        run.state.speculativeSegmentation = std::make_shared<SpeculativeSegmentation>(hu, run.opt.params.segment);
+    };
+    json report = ingestToCtVdb(run, params, options, "ct_hu", progress, grid,
+                                threads && run.state.segmentWanted ? beginSegment
+                                                                   : std::function<void(const openvdb::FloatGrid::Ptr&)>());
     run.state.hu = grid;
     return report;
 }

@@ -141,12 +141,18 @@ json runSegment(StudyRun& run, Progress* progress)
 {
     if (!run.state.hu)
         run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
-    LumenSegmentation seg = segmentLumen(*run.state.hu, run.opt.params.segment, progress);
+    // Begun beside the ingest stage's writing of ct.vdb when ingest ran in this run.
+    std::shared_ptr<SpeculativeSegmentation> speculative = std::move(run.state.speculativeSegmentation);
+    const bool besideCtWrite = bool(speculative);
+    if (speculative) reportProgress(progress, 0.0, "waiting for the segmentation begun beside ct.vdb's write");
+    LumenSegmentation seg = speculative ? speculative->take() : segmentLumen(*run.state.hu, run.opt.params.segment, progress);
+    speculative.reset();
     // No later stage reads the HU grid: its 200+ MB go before the contact cut, the mesh and the
     // centerline allocate theirs (ct.vdb is already written; a later run reads it from there).
     run.state.hu.reset();
     json report = writeSegmentation(run, seg);
     report["source"] = "ct";
+    report["segmented_beside_ct_write"] = besideCtWrite;
     return report;
 }
 

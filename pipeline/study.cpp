@@ -286,6 +286,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     StudyRun run(options);
     run.state.meshWanted = wanted.count("mesh") > 0;
     run.state.centerlineWanted = wanted.count("centerline") > 0;
+    run.state.segmentWanted = kind == StudyKind::Colon && hasCt && !hasMask && wanted.count("segment") > 0;
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries
@@ -381,6 +382,7 @@ nlohmann::json runPipeline(const RunOptions& options)
                     usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
                 }
                 recordFinished(spec.name, entry);
+                if (spec.name == "segment") run.state.speculativeSegmentation.reset();  // not needed: cancelled
                 if (log) log->stageFinished(spec.name, false, secs, "");
                 return;
             }

@@ -265,7 +265,7 @@ void releaseVector(std::vector<T>& v)
 } // namespace
 
 TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, MeshStats* stats,
-                       Progress* progress)
+                       Progress* progress, bool surfaceStats)
 {
     if (!std::isfinite(params.isoValueMm)) {
         std::ostringstream msg;
@@ -374,7 +374,6 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
         MeshStats s;
         s.vertices = int64_t(mesh.n_vertices());
         s.faces = int64_t(mesh.n_faces());
-        s.components = countComponents(mesh);
         for (const auto e : mesh.edges())
             if (e.is_boundary()) ++s.boundaryEdges;
         s.droppedFaces = dropped;
@@ -382,11 +381,14 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
         s.removedDegenerateFaces = repaired.removedFaces;
         s.nonManifoldEdges = nonManifoldEdges;
         s.orientationConflicts = orientationConflicts;
-        s.areaMm2 = surfaceAreaMm2(mesh);
-        s.enclosedVolumeMm3 = enclosedVolumeInward(mesh);
-        const FaceOrientation orientation = countMeshOrientation(mesh, sdf);
-        s.degenerateFaces = orientation.degenerate;
-        s.inwardFraction = orientation.inwardFraction();
+        if (surfaceStats) {
+            s.components = countComponents(mesh);
+            s.areaMm2 = surfaceAreaMm2(mesh);
+            s.enclosedVolumeMm3 = enclosedVolumeInward(mesh);
+            const FaceOrientation orientation = countMeshOrientation(mesh, sdf);
+            s.degenerateFaces = orientation.degenerate;
+            s.inwardFraction = orientation.inwardFraction();
+        }
         *stats = s;
     }
     reportProgress(progress, 1.0, "mesh done");

@@ -71,9 +71,14 @@ struct FaceOrientation {
 };
 
 /// @param sdf  signed distance grid (world mm), negative inside the lumen
+/// @param surfaceStats  false: `stats` gets the counts only (vertices, faces, boundary edges,
+///        dropped faces, degenerate repairs, non-manifold edges, orientation conflicts) and
+///        leaves components, area, enclosed volume, degenerate faces and inward fraction 0:
+///        those cost a pass over every face and the level set (the mesh stage's report does not
+///        show them; its checks measure the final mesh)
 /// @throw InputError when the level set has no zero crossing
 TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params,
-                       MeshStats* stats = nullptr, Progress* progress = nullptr);
+                       MeshStats* stats = nullptr, Progress* progress = nullptr, bool surfaceStats = true);
 
 /// Classifies every face of `mesh` by whether its normal agrees with -grad(sdf) at its
 /// centroid (central differences over one voxel, trilinear samples in world space).

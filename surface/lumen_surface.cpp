@@ -145,7 +145,9 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
 
     auto t0 = Clock::now();
     auto extractProgress = slice(progress, 0.0, 0.3);
-    TriMesh mesh = extractSurface(sdf, params, &rep.extraction, ptr(extractProgress));
+    // With the final checks deferred (the pipeline's mesh stage, on the first pair's path), the
+    // extraction's surface-wide measures no report shows are left out: the counts only.
+    TriMesh mesh = extractSurface(sdf, params, &rep.extraction, ptr(extractProgress), !deferFinalChecks);
     rep.extractSeconds = secondsSince(t0);
 
     t0 = Clock::now();

@@ -93,7 +93,9 @@ struct LumenSurfaceReport {
 ///        checkLumenSurface(), so that the mesh can be used first (the pipeline renders the
 ///        first pair meanwhile, issue 15); report->finalChecksPending says whether they were
 ///        left. Ignored when decimation is asked for (the smoothed measures are then taken
-///        before it). The mesh is the same either way.
+///        before it). The mesh is the same either way. It also leaves out the extraction's
+///        surface-wide stats (report->extraction keeps its counts only: extractSurface's
+///        surfaceStats), which no report of the pipeline shows.
 /// @throw ParameterError for invalid params (names the field), InputError when the level set
 ///        has no zero crossing
 TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params,

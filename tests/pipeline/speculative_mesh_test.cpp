@@ -106,6 +106,40 @@ void expectSameCenterlineEitherWay(RunOptions one, RunOptions two, bool besideEx
 
 } // namespace
 
+TEST_F(StudyTest, SegmentationBegunBesideCtWriteIsTheSegmentStagesOwn)
+{
+    // One run through segment (segmentLumen begun beside ct.vdb's write), and one that stops
+    // after ingest and segments in a second call (from ct.vdb): the same lumen.vdb and report.
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
+    RunOptions one = options("seg-beside-one"), two = options("seg-beside-two");
+    one.untilStage = "segment";
+    const nlohmann::json segA = stageEntry(runPipeline(one), "segment");
+    EXPECT_TRUE(segA["computed"].get<bool>());
+    EXPECT_TRUE(segA["report"]["segmented_beside_ct_write"].get<bool>());
+    two.untilStage = "ingest";
+    runPipeline(two);
+    two.untilStage = "segment";
+    const nlohmann::json segB = stageEntry(runPipeline(two), "segment");
+    EXPECT_TRUE(segB["computed"].get<bool>());
+    EXPECT_FALSE(segB["report"]["segmented_beside_ct_write"].get<bool>());
+    EXPECT_EQ(segB["outputs"], segA["outputs"]) << "lumen.vdb differs between the segmentation begun beside "
+                                                   "ct.vdb's write and the segment stage's own";
+    EXPECT_EQ(segB["key"], segA["key"]);
+    nlohmann::json reportA = segA["report"], reportB = segB["report"];
+    reportA.erase("segmented_beside_ct_write");
+    reportB.erase("segmented_beside_ct_write");
+    EXPECT_EQ(reportB, reportA) << "the segment reports differ";
+
+    // Ingest recomputed (its record gone) to the same ct.vdb: the segment stage is reused, and
+    // the segmentation begun beside the write is dropped (the run ends, nothing recomputed).
+    for (const auto& e : fs::directory_iterator(fs::path(one.studyDir) / ".flyover" / "records"))
+        if (e.path().filename().string().rfind("ingest-", 0) == 0) fs::remove(e.path());
+    const nlohmann::json again = runPipeline(one);
+    EXPECT_TRUE(stageEntry(again, "ingest")["computed"].get<bool>());
+    EXPECT_FALSE(stageEntry(again, "segment")["computed"].get<bool>()) << "the same ct.vdb: segment is reused";
+    EXPECT_EQ(stageEntry(again, "segment")["outputs"], segA["outputs"]);
+}
+
 TEST_F(StudyTest, CenterlineBesideAContactCutThatRemovesNothingIsKept)
 {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
