@@ -298,5 +298,34 @@ TEST(ExtractSurface, HonoursCancellation)
     EXPECT_THROW(extractSurface(*sphere, MeshParams{}, nullptr, &cancel), Cancelled);
 }
 
+TEST(ExtractSurface, CountsOnlyStatsKeepTheCountsAndTheMesh)
+{
+    // surfaceStats = false (the pipeline's mesh stage, issue 15): the same mesh and counts,
+    // without the surface-wide measures.
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(8.f, openvdb::Vec3f(0.4f, 0.2f, -0.3f),
+                                                                         0.5f, 3.f);
+    MeshStats full, counts;
+    const TriMesh a = extractSurface(*grid, MeshParams{}, &full);
+    const TriMesh b = extractSurface(*grid, MeshParams{}, &counts, nullptr, false);
+    ASSERT_EQ(a.n_vertices(), b.n_vertices());
+    ASSERT_EQ(a.n_faces(), b.n_faces());
+    for (const auto v : a.vertices())
+        ASSERT_EQ(a.point(v), b.point(v)) << "vertex " << v.idx() << " differs";
+    EXPECT_EQ(counts.vertices, full.vertices);
+    EXPECT_EQ(counts.faces, full.faces);
+    EXPECT_EQ(counts.boundaryEdges, full.boundaryEdges);
+    EXPECT_EQ(counts.droppedFaces, full.droppedFaces);
+    EXPECT_EQ(counts.degenerateRepairs, full.degenerateRepairs);
+    EXPECT_EQ(counts.removedDegenerateFaces, full.removedDegenerateFaces);
+    EXPECT_EQ(counts.nonManifoldEdges, full.nonManifoldEdges);
+    EXPECT_EQ(counts.orientationConflicts, full.orientationConflicts);
+    EXPECT_GT(full.areaMm2, 0.0);
+    EXPECT_EQ(full.components, 1);
+    EXPECT_EQ(counts.components, 0) << "expected the surface-wide measures left out";
+    EXPECT_EQ(counts.areaMm2, 0.0);
+    EXPECT_EQ(counts.enclosedVolumeMm3, 0.0);
+    EXPECT_EQ(counts.inwardFraction, 0.0);
+}
+
 } // namespace
 } // namespace flyover
