@@ -37,15 +37,8 @@ constexpr double MAX_FOLLOW_MM = 200.0;
 constexpr double LOWEST_END_REACH_MM = 60.0;
 /// Directions around the axis sampled for the ring and for the body surface.
 constexpr int RING_DIRECTIONS = 12;
-/// The ring must show in at least this many of them ...
+/// The ring must show in at least this many of them.
 constexpr int RING_MIN_HITS = 9;
-/// ... or in at least this many with no gap wider than RING_MAX_GAP directions in a row: a
-/// wall about a voxel thick (2 mm at 2.5 mm voxels) leaves gaps in a mask's ring, and a tube
-/// axis a voxel off centre sees the ring beyond reach on one side (7-10 of 12 along the
-/// small phantom's tube, 0 past its tip). A wall beside the point (the rectum's) leaves a gap
-/// of half the directions and never passes.
-constexpr int RING_MIN_HITS_ALL_ROUND = 7;
-constexpr int RING_MAX_GAP = 3;
 /// The tube is followed into the rectum along directions up to this far (degrees) from the
 /// piece's last direction, in this many tilts and azimuths.
 constexpr double FOLLOW_CONE_DEG = 90.0;
@@ -352,25 +345,16 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     };
     auto ringAround = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
         int hits = 0;
-        bool hit[RING_DIRECTIONS] = {};
         for (int j = 0; j < RING_DIRECTIONS; ++j) {
             const double t = 2.0 * PI * j / RING_DIRECTIONS;
             const Vec3d e = u * std::cos(t) + v * std::sin(t);
             for (double r = radius + 0.5 * h; r <= radius + 3.0; r += 0.5 * h)
                 if (wallAt(p + e * r)) {
                     ++hits;
-                    hit[j] = true;
                     break;
                 }
         }
-        if (hits >= RING_MIN_HITS) return true;
-        if (hits < RING_MIN_HITS_ALL_ROUND) return false;
-        int gap = 0, widest = 0;  // misses in a row, round the circle
-        for (int j = 0; j < 2 * RING_DIRECTIONS; ++j) {
-            gap = hit[j % RING_DIRECTIONS] ? 0 : gap + 1;
-            widest = std::max(widest, gap);
-        }
-        return widest <= RING_MAX_GAP;
+        return hits >= RING_MIN_HITS;
     };
     const Vec3d start = tube.axis.front();
     // The last point of the straight run from `from` along `d` (misses of up to two steps
