@@ -7,7 +7,9 @@
 #
 #   bench/real_colons.sh                      (from the repository root, after a build)
 #   SIZE=small SEEDS="1" VARIANTS="touching redundant" MODES=ct bench/real_colons.sh
+#   SIZE=small SEEDS="4 5" VARIANTS="touching4+redundant tube+touching2" bench/real_colons.sh
 #   FLYOVER=build/pipeline/flyover LIMIT=900 KEEP=1 GCA=0 bench/real_colons.sh
+#   UNTIL=centerline SIZE=small SEEDS="4 5 6 7 8" bench/real_colons.sh   (path and contacts only)
 #
 # Everything happens in a fresh folder under ${TMPDIR:-/tmp} (removed at the end unless KEEP
 # is set); no user study is touched. Each phantom + run is limited to LIMIT seconds (default
@@ -20,6 +22,11 @@
 #   len ratio     path length / truth length (gca: / reference arc from the anus to the point
 #                 of the reference nearest the path's end, as tests/volume/contacts_real_test)
 #   start         distance (mm) from the path's first point to the truth's rectum end
+#   along         the same, signed along the truth's direction at its start (the unit vector
+#                 from its first point to its point 10 mm along): > 0 the path starts beyond
+#                 the truth's start (rectum left out), < 0 short of it (towards the anus: the
+#                 truth starts at the centre of the rectum's rounded end, the lumen goes on
+#                 below it by about the rectum's radius)
 #   contacts      truth contacts with a cut contact within 15 mm / truth contacts, then "+N"
 #                 cuts that match no truth contact (gca: cuts only)
 #   fly / +rev    fly-over coverage fraction of the wall, and fly-over plus review (%)
@@ -36,8 +43,20 @@ VARIANTS=${VARIANTS:-touching redundant tube spacing all}
 MODES=${MODES:-ct mask}
 LIMIT=${LIMIT:-1200}
 GCA=${GCA:-1}
-GCA_DIR=${GCA_DIR:-$ROOT/../shared/data/real/gca-colon-00020}
+# The shared data: shared/data in the nearest parent of the checkout that has one (a worktree
+# /work/wt/x finds /work/shared/data as /work/main does).
+shared_data() {
+  local d=$ROOT
+  while [ "$d" != / ]; do
+    d=$(dirname "$d")
+    [ -d "$d/shared/data" ] && { echo "$d/shared/data"; return; }
+  done
+  echo "$ROOT/../shared/data"
+}
+GCA_DIR=${GCA_DIR:-$(shared_data)/real/gca-colon-00020}
 RENDER=${RENDER:-}
+export UNTIL=${UNTIL:-coverage}
+case "$UNTIL" in coverage|centerline) ;; *) echo "real_colons: UNTIL=$UNTIL: coverage or centerline" >&2; exit 1 ;; esac
 [ -x "$FLYOVER" ] || { echo "real_colons: $FLYOVER: no flyover program (build first, or set FLYOVER)" >&2; exit 1; }
 command -v python3 >/dev/null || { echo "real_colons: python3 is needed for the metrics" >&2; exit 1; }
 
@@ -46,21 +65,28 @@ WORK=$(mktemp -d "${TMPDIR:-/tmp}/flyover-real-colons.XXXXXX")
 sets=()
 for a in $RENDER; do sets+=(--set "$a"); done
 
+# A variant is one of touching, redundant, tube, spacing, all, touchingN (N contacts), or
+# several joined by "+" (e.g. touching4+redundant+tube).
 flags_of() {
-  case "$1" in
-    touching) echo "--touching 2" ;;
-    redundant) echo "--redundant" ;;
-    tube) echo "--rectal-tube" ;;
-    spacing) echo "--spacing 0.8,0.8,1.25" ;;
-    all) echo "--touching 2 --redundant --rectal-tube --spacing 0.8,0.8,1.25" ;;
-    *) echo "real_colons: unknown variant $1" >&2; return 1 ;;
-  esac
+  local part out=""
+  for part in ${1//+/ }; do
+    case "$part" in
+      touching) out+=" --touching 2" ;;
+      touching[0-9]*) out+=" --touching ${part#touching}" ;;
+      redundant) out+=" --redundant" ;;
+      tube) out+=" --rectal-tube" ;;
+      spacing) out+=" --spacing 0.8,0.8,1.25" ;;
+      all) out+=" --touching 2 --redundant --rectal-tube --spacing 0.8,0.8,1.25" ;;
+      *) echo "real_colons: unknown variant $part in $1" >&2; return 1 ;;
+    esac
+  done
+  echo "$out"
 }
 
 # metrics KIND LABEL STUDY TRUTH SECONDS: one table row on stdout.
 metrics() {
   python3 - "$@" <<'PY'
-import json, math, struct, sys
+import json, math, os, struct, sys
 kind, label, study, truth_path, seconds = sys.argv[1:6]
 
 def row(cells):
@@ -73,9 +99,9 @@ def load(p):
 try:
     cl = load(study + "/centerline.json")
     man = load(study + "/manifest.json")
-    cov = load(study + "/coverage/coverage.json")
+    cov = load(study + "/coverage/coverage.json") if os.environ.get("UNTIL", "coverage") == "coverage" else None
 except Exception as e:  # the run failed or timed out: say so
-    row([label, "run failed: " + str(e).split(":")[0]] + [""] * 9)
+    row([label, "run failed: " + str(e).split(":")[0]] + [""] * 10)
     sys.exit(0)
 pts = cl["position_mm"]
 reports = {s["stage"]: s.get("report", {}) for s in man["stages"]}
@@ -123,6 +149,14 @@ if kind == "gca":
 else:
     tlen = length(truth)
 start = math.dist(pts[0], truth[0])
+# Signed start: along the truth's direction at its start (first point -> its point 10 mm on).
+k, walked = 1, 0.0
+while k < len(truth) - 1 and walked + math.dist(truth[k], truth[k - 1]) < 10.0:
+    walked += math.dist(truth[k], truth[k - 1])
+    k += 1
+axis = [truth[k][i] - truth[0][i] for i in range(3)]
+norm = math.sqrt(sum(a * a for a in axis)) or 1.0
+along = sum((pts[0][i] - truth[0][i]) * axis[i] for i in range(3)) / norm
 
 seg = reports.get("segment", {})
 cuts = [c for c in seg.get("contacts", {}).get("contacts", []) if c.get("cut")]
@@ -134,6 +168,10 @@ else:
     extra = sum(1 for c in cuts if not any(math.dist(t["position_mm"], c["position_mm"]) <= 15.0 for t in tcs))
     contacts = "%d/%d +%d" % (found, len(tcs), extra)
 
+if cov is None:  # UNTIL=centerline: no coverage, no polyps
+    row([label, "%.2f / %.2f" % (mean, p95), "%.3f" % (plen / tlen), "%.1f" % start, "%+.1f" % along, contacts]
+        + ["-"] * 5 + [seconds])
+    sys.exit(0)
 fly = cov["flyover"]["both_cameras"]["fraction"]
 wr = cov.get("flyover_with_review") or {}
 rev = wr.get("fraction")
@@ -157,7 +195,7 @@ if kind != "gca":
             seen += 1
     polyps = "%d/%d" % (seen, len(tj.get("polyps", [])))
 
-row([label, "%.2f / %.2f" % (mean, p95), "%.3f" % (plen / tlen), "%.1f" % start, contacts,
+row([label, "%.2f / %.2f" % (mean, p95), "%.3f" % (plen / tlen), "%.1f" % start, "%+.1f" % along, contacts,
      "%.2f" % (100 * fly), "-" if rev is None else "%.2f" % (100 * rev), str(views),
      str(unreached), polyps, seconds])
 PY
@@ -166,8 +204,8 @@ PY
 echo "real_colons: $FLYOVER, size $SIZE, seeds $SEEDS, variants $VARIANTS, modes $MODES, limit ${LIMIT}s"
 echo "machine: $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg); work folder $WORK"
 echo
-echo "| variant | err mean / p95 (mm) | len ratio | start (mm) | contacts | fly (%) | +rev (%) | views | unreached | polyps | s |"
-echo "|---|---|---|---|---|---|---|---|---|---|---|"
+echo "| variant | err mean / p95 (mm) | len ratio | start (mm) | along (mm) | contacts | fly (%) | +rev (%) | views | unreached | polyps | s |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 for v in $VARIANTS; do
   vflags=$(flags_of "$v") || exit 2
   for mode in $MODES; do
@@ -179,12 +217,12 @@ for v in $VARIANTS; do
       # shellcheck disable=SC2086
       if ! timeout "$LIMIT" "$FLYOVER" -q phantom "$dir/p.nii.gz" --truth "$dir/truth.json" --truth-mask "$dir/mask.nii.gz" \
            --size "$SIZE" --seed "$seed" $vflags > "$dir/log" 2>&1; then
-        echo "| $label | phantom failed: $(tail -n 1 "$dir/log") |||||||||| |"
+        echo "| $label | phantom failed: $(tail -n 1 "$dir/log") ||||||||||| |"
         continue
       fi
       left=$((LIMIT - ($(date +%s) - t0)))
       if [ "$mode" = ct ]; then input=("$dir/p.nii.gz"); else input=(--mask "$dir/mask.nii.gz"); fi
-      timeout "$((left > 1 ? left : 1))" "$FLYOVER" -q run "${input[@]}" --study "$dir/study" --until coverage "${sets[@]}" \
+      timeout "$((left > 1 ? left : 1))" "$FLYOVER" -q run "${input[@]}" --study "$dir/study" --until "$UNTIL" "${sets[@]}" \
         >> "$dir/log" 2>&1 || echo "  ($label: run exit $?: $(tail -n 1 "$dir/log"))" >&2
       metrics phantom "$label" "$dir/study" "$dir/truth.json" "$(($(date +%s) - t0))"
       [ -n "${KEEP:-}" ] || rm -rf "$dir"
@@ -196,10 +234,10 @@ if [ "$GCA" != 0 ]; then
     dir=$WORK/gca
     mkdir -p "$dir"
     t0=$(date +%s)
-    timeout "$LIMIT" "$FLYOVER" -q run --mask "$GCA_DIR/large_intestine.nii.gz" --study "$dir/study" --until coverage \
+    timeout "$LIMIT" "$FLYOVER" -q run --mask "$GCA_DIR/large_intestine.nii.gz" --study "$dir/study" --until "$UNTIL" \
       "${sets[@]}" > "$dir/log" 2>&1 || echo "  (gca: run exit $?: $(tail -n 1 "$dir/log"))" >&2
     metrics gca "gca-colon-00020 mask" "$dir/study" "$GCA_DIR/reference_path.json" "$(($(date +%s) - t0))"
   else
-    echo "| gca-colon-00020 | no data at $GCA_DIR |||||||||| |"
+    echo "| gca-colon-00020 | no data at $GCA_DIR ||||||||||| |"
   fi
 fi

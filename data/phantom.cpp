@@ -336,9 +336,15 @@ private:
                     const TubeDistance d = rectalTubeDistance(tube, Vec3d{x, y, z});
                     const double wallSd = std::max(d.axisMm - tube.outerRadiusMm, d.beyondTipMm);
                     if (wallSd < h) {
+                        // Fractions of the voxel: the solid rod (wall + lumen) and its lumen;
+                        // the wall is the difference. At the open tip both are partial
+                        // alike and the lumen's cross-section there holds no wall (painting
+                        // the rod's wall and then the air over it left a quarter of the wall
+                        // there: a cap of -700 HU that closed the open tip to the air).
                         const double airSd = std::max(d.axisMm - tube.innerRadiusMm, d.beyondTipMm);
-                        paint(hu, tube.wallHu, wallSd, invH);
-                        paint(hu, AIR_HU, airSd, invH);
+                        const double rod = std::clamp(0.5 - wallSd * invH, 0.0, 1.0);
+                        const double air = std::min(rod, std::clamp(0.5 - airSd * invH, 0.0, 1.0));
+                        hu = hu * (1.0 - rod) + tube.wallHu * (rod - air) + AIR_HU * air;
                         if (wallSd < 0) {
                             const bool tubeAir = airSd < 0 && skinSd < 0;
                             inLumen = tubeAir ? 1 : 0;

@@ -360,6 +360,46 @@ TEST(PhantomRectalTube, JoinsTheRectumToOutsideAirAndStartsBelowTheColon)
     }
 }
 
+// The tube's tip is open: its air meets the rectum's air there at the segmentation's air
+// threshold (-800 HU), whatever the voxel grid. Painting the rod's wall and then its air over
+// it left a quarter of the wall in the voxels within half a slice of the tip plane (-700 HU
+// over the whole lumen: a cap), which closed the tip on grids with a slice centre near it
+// (the medium size's 1.5 mm slices: the tube's air became a separate 5 mL piece, the tube was
+// never found and the path ran 14 mm beside it the whole length of the rectum).
+TEST(PhantomRectalTube, OpenTipJoinsTheTubesAirToTheRectumsAirAtTheAirThreshold)
+{
+    PhantomParams p{PhantomSize::Small, 1, NOISE_HU};
+    p.rectalTube = true;
+    p.spacingMm = {2.5, 2.5, 1.5};  // the medium size's slices: a slice centre 0.16 mm below the tip
+    const Phantom phantom = makePhantom(p);
+    SCOPED_TRACE(describe(p));
+    const PhantomRectalTube& tube = phantom.truth.rectalTube;
+    const auto& g = phantom.ct.geometry;
+    const Vec3d tip = tube.tipMm();
+    const Vec3d dir = normalize(tip - tube.axisMm[tube.axisMm.size() - 2]);
+    const Index below = nearestVoxel(g, tip - dir * 6.0), above = nearestVoxel(g, tip + dir * 6.0);
+    const auto air = [&](const Index& v) { return phantom.ct.at(v[0], v[1], v[2]) < -800; };
+    // Within the rod's reach of the tip (the tube's own air and the rectum's around its end).
+    const auto nearTip = [&](const Index& v) {
+        const Vec3d w = g.worldFromIndex({double(v[0]), double(v[1]), double(v[2])});
+        return air(v) && distance(w, tip) < 12.0;
+    };
+    ASSERT_TRUE(air(below)) << "no air voxel on the tube's axis 6 mm below its tip: "
+                            << phantom.ct.at(below[0], below[1], below[2]) << " HU";
+    double worst = -1000;
+    for (int64_t k = 0; k < g.size[2]; ++k)
+        for (int64_t j = 0; j < g.size[1]; ++j)
+            for (int64_t i = 0; i < g.size[0]; ++i) {
+                const Vec3d w = g.worldFromIndex({double(i), double(j), double(k)});
+                const ph::TubeDistance d = ph::rectalTubeDistance(tube, w);
+                if (d.axisMm < tube.innerRadiusMm - 1.5 && std::abs(d.beyondTipMm) < 0.75)
+                    worst = std::max(worst, double(phantom.ct.at(i, j, k)));
+            }
+    EXPECT_LT(worst, -800.0) << "HU of the tube's lumen at its open tip plane (the highest seen)";
+    EXPECT_TRUE(faceConnected(g, below, above, nearTip))
+        << "the tube's air is not joined to the rectum's air through its open tip (air below -800 HU)";
+}
+
 TEST(PhantomSpacing, AnisotropicVoxelsKeepTheWorldGeometry)
 {
     PhantomParams iso{PhantomSize::Small, 1, NOISE_HU};

@@ -1,6 +1,7 @@
 // The real colon in shared/ (EdinGCA_3D_00020: one piece, loops lying against each other):
 // segment from the mask, cut the contacts, one path from the anus end to the cecum, compared
 // with the published reference path. Skipped when the data is absent.
+#include "shared_data.h"
 #include "volume/centerline.h"
 #include "volume/contacts.h"
 #include "volume/image_io.h"
@@ -26,10 +27,11 @@ namespace {
 
 TEST(RealColonContacts, GcaPathRunsAnusToCecumWithoutShortcut)
 {
-    const std::string dir = std::string(FLYOVER_SHARED_DATA_DIR) + "/real/gca-colon-00020";
+    const std::string shared = test::sharedDataDir();
+    const std::string dir = shared + "/real/gca-colon-00020";
     const std::string maskPath = dir + "/large_intestine.nii.gz";
-    if (!fs::exists(maskPath) || !fs::exists(dir + "/reference_path.json"))
-        GTEST_SKIP() << "no real colon at " << dir;
+    if (shared.empty() || !fs::exists(maskPath) || !fs::exists(dir + "/reference_path.json"))
+        GTEST_SKIP() << test::sharedDataLookedFor("real/gca-colon-00020/{large_intestine.nii.gz,reference_path.json}");
     std::ifstream refFile(dir + "/reference_path.json");
     const nlohmann::json ref = nlohmann::json::parse(refFile);
     std::vector<Vec3d> refPts;

@@ -2,6 +2,7 @@
 // model behind them, shared by image_io_test.cpp and ingest_test.cpp.
 #pragma once
 
+#include "shared_data.h"
 #include "volume/image.h"
 
 #include <cmath>
@@ -11,10 +12,13 @@ namespace flyover::test {
 
 inline std::string fixture(const std::string& name) { return std::string(FLYOVER_SOURCE_DIR) + "/data/fixtures/" + name; }
 
-/// The real CT of /work/shared (20 DICOM slices, full NIfTI), when this checkout has it.
+/// The real CT of the shared data (20 DICOM slices, full NIfTI), when this machine has it
+/// (a path that does not exist when it has not).
 inline std::string sharedReal(const std::string& name)
 {
-    return std::string(FLYOVER_SHARED_DATA_DIR) + "/real/totalsegmentator-example/" + name;
+    const std::string dir = sharedDataDir();
+    return (dir.empty() ? "(no shared/data above " + std::string(FLYOVER_SOURCE_DIR) + ")" : dir) +
+           "/real/totalsegmentator-example/" + name;
 }
 
 // The test volume every good fixture holds (scripts/fixtures/make_fixtures.cpp).
