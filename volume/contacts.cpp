@@ -222,6 +222,17 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         std::vector<std::vector<Slot>> buckets(static_cast<std::size_t>(bins));
         for (Slot s = 0; s < n; ++s)
             if (region[s] >= 0) buckets[binOf(s)].push_back(s);
+        // During the flood the holes (non-lumen slots) hold HOLE, so that a neighbour is
+        // tested by one read of `region` instead of its depth and then its region.
+        constexpr std::int32_t HOLE = -2;
+        auto markHoles = [&](std::int32_t from, std::int32_t to) {
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                              [&](const tbb::blocked_range<std::size_t>& r) {
+                for (std::size_t s = r.begin(); s != r.end(); ++s)
+                    if (region[s] == from && !index.isLumen(static_cast<Slot>(s))) region[s] = to;
+            });
+        };
+        markHoles(-1, HOLE);
         std::size_t done = 0;
         for (int b = bins - 1; b >= 0; --b) {
             std::vector<Slot>& bucket = buckets[b];
@@ -229,8 +240,8 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                 if ((++done & 0xfffff) == 0) checkCancelled(progress);
                 const Slot u = bucket[i];
                 const std::int32_t r = region[u];
-                index.forEachNeighbour(u, [&](Slot t, int) {
-                    if (region[t] < 0) {
+                index.forEachNeighbourSlot(u, [&](Slot t, int) {
+                    if (region[t] == -1) {
                         region[t] = r;
                         buckets[std::min(b, binOf(t))].push_back(t);
                     }
@@ -238,6 +249,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
             }
             std::vector<Slot>().swap(bucket);
         }
+        markHoles(HOLE, -1);
         // Pieces without any core voxel (too thin everywhere): one region each.
         std::vector<Slot> queue;
         for (Slot s = 0; s < n; ++s) {

@@ -63,6 +63,17 @@ struct LumenIndex {
     template<int STRIDE = 1, typename Fn>
     void forEachNeighbour(Slot s, Fn&& fn) const
     {
+        forEachNeighbourSlot<STRIDE>(s, [&](Slot t, int k) {
+            if (depthMm[t] >= 0.0f) fn(t, k);
+        });
+    }
+
+    /// Calls fn(neighbourSlot, stepIndex) for each 26-neighbour of `s` that has a slot, lumen
+    /// voxel or hole, in forEachNeighbour's order: for callers whose own per-slot data marks
+    /// the holes (one array read instead of two).
+    template<int STRIDE = 1, typename Fn>
+    void forEachNeighbourSlot(Slot s, Fn&& fn) const
+    {
         const std::size_t block = s / LEAF_VOXELS;
         const int off = static_cast<int>(s % LEAF_VOXELS);
         const int x = off >> (2 * LEAF_LOG2), y = (off >> LEAF_LOG2) & (LEAF_DIM - 1),
@@ -76,7 +87,7 @@ struct LumenIndex {
                 const Slot t = static_cast<Slot>(
                     static_cast<int>(s) +
                     STRIDE * (st.dx * LEAF_DIM * LEAF_DIM + st.dy * LEAF_DIM + st.dz));
-                if (depthMm[t] >= 0.0f) fn(t, k);
+                fn(t, k);
             }
             return;
         }
@@ -92,7 +103,7 @@ struct LumenIndex {
                            static_cast<Slot>(((nx & (LEAF_DIM - 1)) << (2 * LEAF_LOG2)) |
                                              ((ny & (LEAF_DIM - 1)) << LEAF_LOG2) |
                                              (nz & (LEAF_DIM - 1)));
-            if (depthMm[t] >= 0.0f) fn(t, k);
+            fn(t, k);
         }
     }
 };
