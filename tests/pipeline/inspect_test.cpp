@@ -131,6 +131,22 @@ TEST_F(InspectTest, VoidsCsvJsonCacheAndVisibility)
     const json manifest = readJson(study + "/manifest.json");
     EXPECT_EQ(manifest.at("pipeline"), "inspect");
     if (haveFfmpeg()) EXPECT_GT(fs::file_size(study + "/turntable/turntable.mp4"), 1000u);
+    // The turntable is a real H.264 video with one frame per pose (ffprobe decodes it).
+    if (haveFfmpeg() && std::system("command -v ffprobe >/dev/null 2>&1") == 0) {
+        const std::string probe = path("probe.txt");
+        ASSERT_EQ(std::system(("ffprobe -v error -count_frames -select_streams v:0 -show_entries "
+                               "stream=codec_name,nb_read_frames -of default=nw=1 " +
+                               study + "/turntable/turntable.mp4 > " + probe)
+                                  .c_str()),
+                  0);
+        std::ifstream in(probe);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        const std::size_t poses = readJson(study + "/turntable/poses.json").at("frames").size();
+        EXPECT_GT(poses, 0u);
+        EXPECT_NE(text.find("codec_name=h264"), std::string::npos) << "ffprobe: " << text;
+        EXPECT_NE(text.find("nb_read_frames=" + std::to_string(poses) + "\n"), std::string::npos)
+            << "expected " << poses << " decoded frames (poses.json); ffprobe: " << text;
+    }
 
     // An unchanged re-run recomputes nothing.
     const auto again = test::runFlyover("inspect " + path("part.nrrd") + " --study " + study + " " + QUICK + video() +
