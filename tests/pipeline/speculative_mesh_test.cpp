@@ -19,6 +19,19 @@ using namespace flyover::test;
 
 namespace {
 
+/// The small phantom (seed 1) with two touching loops, written as ROOT/NAME.nii.gz with its
+/// truth beside it: the segment stage cuts both contacts.
+std::string writeTouchingPhantom(const fs::path& root, const std::string& name)
+{
+    PhantomParams pp;
+    pp.size = PhantomSize::Small;
+    pp.seed = 1;
+    pp.touching = 2;
+    const std::string ct = (root / (name + ".nii.gz")).string();
+    writePhantom(makePhantom(pp), pp, ct, (root / (name + ".json")).string(), "");
+    return ct;
+}
+
 nlohmann::json stageEntry(const nlohmann::json& manifest, const std::string& stage)
 {
     for (const auto& e : manifest["stages"])
@@ -149,12 +162,7 @@ TEST_F(StudyTest, CenterlineBesideAContactCutThatRemovesNothingIsKept)
 TEST_F(StudyTest, CenterlineBesideAContactCutThatCutsIsDropped)
 {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
-    PhantomParams pp;
-    pp.size = PhantomSize::Small;
-    pp.seed = 1;
-    pp.touching = 2;
-    const std::string ct = (sRoot / "cl-touching.nii.gz").string();
-    writePhantom(makePhantom(pp), pp, ct, (sRoot / "cl-touching.json").string(), "");
+    const std::string ct = writeTouchingPhantom(sRoot, "cl-touching");
     RunOptions one = options("cl-cut-one"), two = options("cl-cut-two");
     one.ctPath = two.ctPath = ct;
     expectSameCenterlineEitherWay(one, two, false, 2);
@@ -170,12 +178,7 @@ TEST_F(StudyTest, MeshBesideAContactCutThatRemovesNothingIsKept)
 TEST_F(StudyTest, MeshBesideAContactCutThatCutsIsDropped)
 {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
-    PhantomParams pp;
-    pp.size = PhantomSize::Small;
-    pp.seed = 1;
-    pp.touching = 2;
-    const std::string ct = (sRoot / "touching.nii.gz").string();
-    writePhantom(makePhantom(pp), pp, ct, (sRoot / "touching.json").string(), "");
+    const std::string ct = writeTouchingPhantom(sRoot, "touching");
     RunOptions one = options("cut-one"), two = options("cut-two");
     one.ctPath = two.ctPath = ct;
     expectSameMeshEitherWay(one, two, false, 2);
