@@ -37,6 +37,9 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -45,6 +48,16 @@ using nlohmann::json;
 namespace flyover {
 
 namespace {
+
+/// Hands the pages of freed small blocks back to the system. The CT grid is millions of 2 KB
+/// leaves; once freed, glibc keeps their pages, and the mesh (large vectors, mapped apart)
+/// cannot reuse them, so the process would hold both.
+void releaseFreedMemory()
+{
+#if defined(__GLIBC__)
+    malloc_trim(0);
+#endif
+}
 
 const char* const CT_GRID = "ct_grey";
 const char* const CSV_HEADER = "id,kind,volume_mm3,equivalent_diameter_mm,max_extent_mm,sphericity,"
@@ -323,6 +336,7 @@ json runPartSurfaces(StudyRun& run, Progress* progress)
     // No later stage reads the grey values: the CT grid (4 B a voxel, the largest thing held)
     // is freed before the mesh is made.
     run.state.hu.reset();
+    releaseFreedMemory();
     auto surface = std::make_shared<PartSurface>(
         meshPartField(std::move(field), *analysis, run.opt.inspect.surfaces, progress));
     writeMesh(run.path("part_surface.ply"), surface->mesh);
