@@ -12,14 +12,58 @@
 
 #include "surface/lumen_surface.h"
 #include "volume/centerline.h"
+#include "volume/progress.h"
 #include "volume/segment.h"
 
 #include <openvdb/openvdb.h>
 
 #include <atomic>
 #include <future>
+#include <string>
 
 namespace flyover {
+
+/// Work of type T on a thread of its own, given a Progress whose cancelled() turns true when
+/// the owner drops it: the destructor cancels (the work stops at its next progress report) and
+/// waits. Declare it as the owner's last member, so that it waits before the owner's other
+/// members (which the work may write) are destroyed.
+template <typename T>
+class CancellableWork {
+public:
+    template <typename Fn>
+    explicit CancellableWork(Fn work)
+        : mResult(std::async(std::launch::async, [this, work] {
+              Flag progress(mCancel);
+              return work(&progress);
+          }))
+    {
+    }
+    ~CancellableWork()
+    {
+        mCancel = true;
+        if (mResult.valid()) mResult.wait();
+    }
+    CancellableWork(const CancellableWork&) = delete;
+    CancellableWork& operator=(const CancellableWork&) = delete;
+
+    /// Waits for the work and returns its result; rethrows what it threw. Call once.
+    T get() { return mResult.get(); }
+
+private:
+    /// No progress shown; cancelled once the owner is dropped.
+    class Flag : public Progress {
+    public:
+        explicit Flag(const std::atomic<bool>& flag) : mFlag(flag) {}
+        void update(double, const std::string&) override {}
+        bool cancelled() const override { return mFlag.load(std::memory_order_relaxed); }
+
+    private:
+        const std::atomic<bool>& mFlag;
+    };
+
+    std::atomic<bool> mCancel{false};
+    std::future<T> mResult;
+};
 
 class SpeculativeMesh {
 public:
@@ -28,8 +72,6 @@ public:
     SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params, bool deferFinalChecks = false);
     /// The same on `copy`, a level set nobody changes (shared with a SpeculativeCenterline).
     SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks);
-    /// Cancels a mesh still running (at its next progress report) and waits for it.
-    ~SpeculativeMesh();
     SpeculativeMesh(const SpeculativeMesh&) = delete;
     SpeculativeMesh& operator=(const SpeculativeMesh&) = delete;
 
@@ -42,9 +84,8 @@ public:
     TriMesh take(LumenSurfaceReport& report);
 
 private:
-    std::atomic<bool> mCancel{false};
-    std::future<TriMesh> mResult;
     LumenSurfaceReport mReport;
+    CancellableWork<TriMesh> mWork;  ///< last: cancelled and waited for before mReport goes
 };
 
 /// The parameters the centerline stage traces `sdf` with: `given`, with the rectal tube's tip
@@ -57,8 +98,6 @@ public:
     /// Starts extractCenterline() on `copy` (a level set nobody changes) with the parameters
     /// centerlineParamsFor(*copy, params) on its own thread.
     SpeculativeCenterline(openvdb::FloatGrid::ConstPtr copy, const CenterlineParams& params);
-    /// Cancels a centerline still being traced (at its next progress report) and waits for it.
-    ~SpeculativeCenterline();
     SpeculativeCenterline(const SpeculativeCenterline&) = delete;
     SpeculativeCenterline& operator=(const SpeculativeCenterline&) = delete;
 
@@ -67,10 +106,9 @@ public:
     Centerline take(CenterlineReport& report, bool& fromTube);
 
 private:
-    std::atomic<bool> mCancel{false};
-    std::future<Centerline> mResult;
     CenterlineReport mReport;
     bool mFromTube = false;
+    CancellableWork<Centerline> mWork;  ///< last: cancelled and waited for before mReport goes
 };
 
 /// The CT path's segmentLumen() begun beside the ingest stage's writing and hashing of ct.vdb
@@ -81,8 +119,6 @@ class SpeculativeSegmentation {
 public:
     /// Starts segmentLumen(*hu, params) on its own thread; nobody changes `hu` meanwhile.
     SpeculativeSegmentation(openvdb::FloatGrid::ConstPtr hu, const SegmentParams& params);
-    /// Cancels a segmentation still running (at its next progress report) and waits for it.
-    ~SpeculativeSegmentation();
     SpeculativeSegmentation(const SpeculativeSegmentation&) = delete;
     SpeculativeSegmentation& operator=(const SpeculativeSegmentation&) = delete;
 
@@ -90,8 +126,7 @@ public:
     LumenSegmentation take();
 
 private:
-    std::atomic<bool> mCancel{false};
-    std::future<LumenSegmentation> mResult;
+    CancellableWork<LumenSegmentation> mWork;
 };
 
 } // namespace flyover
