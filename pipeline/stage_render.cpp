@@ -41,6 +41,7 @@
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <memory>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -535,30 +536,36 @@ json runVideo(StudyRun& run, Progress* progress)
         std::size_t reused = 0;
         writeAtomically(videoDir.path("flyover.mp4"), [&](const std::string& tmp) {
             FfmpegVideo video(ffmpeg, tmp, videoDir.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
-            PairBuffers b;  // one set for every frame: no allocation per frame
+            // Two frames in turn: frame k is rendered (or read back) while frame k - 1 is
+            // converted and written to ffmpeg on another thread, so that no core waits on the
+            // pipe. One set of buffers per slot: no allocation per rendered frame.
+            PairBuffers b[2];
+            std::future<void> writing;  // the previous frame's write; declared after its buffers
             for (std::size_t k = 0; k < vIdx.size(); ++k) {
                 const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
                 const std::string* file = framePairFile(vIdx[k]);
+                RgbImage& pair = b[k % 2].pair;
                 if (file) {
-                    const RgbImage pair = readPng(*file);
+                    pair = readPng(*file);
                     if (pair.width != pairWidth || pair.height != rp.heightPx)
                         throw std::runtime_error(*file + ": a fly-over pair of " + std::to_string(pair.width) + " x " +
                                                  std::to_string(pair.height) + " px where the video needs " +
                                                  std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
                     ++reused;
-                    video.write(pair);
                 } else {
-                    renderView(*in.scene, cams[0], s.ro, b.left);
-                    renderView(*in.scene, cams[1], s.ro, b.right);
-                    sideBySide(b.left, b.right, b.pair);
-                    video.write(b.pair);
+                    renderView(*in.scene, cams[0], s.ro, b[k % 2].left);
+                    renderView(*in.scene, cams[1], s.ro, b[k % 2].right);
+                    sideBySide(b[k % 2].left, b[k % 2].right, pair);
                 }
+                if (writing.valid()) writing.get();  // frame k - 1 is in the pipe; rethrows its failure
+                writing = std::async(std::launch::async, [&video, &pair] { video.write(pair); });
                 vPoses.push_back(json{{"frame", k},
                                       {"centerline_index", vIdx[k]},
                                       {"arc_mm", double(vIdx[k]) * s.clStep},
                                       {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}});
                 if (k % 32 == 0) reportProgress(progress, double(k + 1) / double(vIdx.size()), "video frames");
             }
+            if (writing.valid()) writing.get();
             video.finish();
         });
         fs::remove(videoDir.path(".ffmpeg.log"));
