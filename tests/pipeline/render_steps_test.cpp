@@ -49,27 +49,36 @@ double psnr(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b)
 // was half of its CPU time): Rec. 601 limited range, chroma from the mean of each 2 x 2 block.
 TEST(RgbToYuv420, Rec601LimitedRangeWithBlockMeanChroma)
 {
-    // 4 x 2 pixels: a white/black block on the left, a red/green/blue/grey block on the right.
-    const std::vector<uint8_t> rgb = {255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 0,    // row 0
-                                      0,   0,   0,   255, 255, 255, 0, 0, 255, 128, 128, 128};  // row 1
+    // 4 x 2 pixels: a white/black block on the left, a reddish block on the right.
+    const std::vector<uint8_t> rgb = {255, 255, 255, 0, 0, 0, 255, 0,   0,   255, 128, 0,    // row 0
+                                      0,   0,   0,   255, 255, 255, 0, 0, 255, 200, 100, 50};  // row 1
     std::vector<uint8_t> yuv;
     rgbToYuv420(rgb.data(), 4, 2, yuv);
-    ASSERT_EQ(yuv.size(), 8u + 2u + 2u);
-    // Luma: white 235, black 16; red 16 + 65.481 = 81.5 -> 81 or 82; green 16 + 128.553 ->
-    // 144.6 -> 145; blue 16 + 24.966 -> 41; grey 128 -> 16 + 219 * 128 / 255 = 125.9 -> 126.
-    const std::vector<int> luma = {235, 16, 81, 145, 16, 235, 41, 126};
-    for (std::size_t i = 0; i < luma.size(); ++i)
-        EXPECT_NEAR(int(yuv[i]), luma[i], i == 2 ? 1 : 0) << "luma of pixel " << i;
-    // Chroma of the white/black block (mean grey): neutral.
-    EXPECT_EQ(int(yuv[8]), 128) << "Cb of a grey block";
-    EXPECT_EQ(int(yuv[10]), 128) << "Cr of a grey block";
-    // The right block's mean is (95.75, 95.75, 127.75): Cb = 128 + 112 * 32 / 255 * (1 - ...)
-    // computed in double here.
-    const double r = (255 + 0 + 0 + 128) / 4.0, g = (0 + 255 + 0 + 128) / 4.0, b = (0 + 0 + 255 + 128) / 4.0;
-    const double cb = 128 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255.0;
-    const double cr = 128 + (112.0 * r - 93.786 * g - 18.214 * b) / 255.0;
-    EXPECT_NEAR(int(yuv[9]), cb, 0.51) << "Cb of the colour block";
-    EXPECT_NEAR(int(yuv[11]), cr, 0.51) << "Cr of the colour block";
+    ASSERT_EQ(yuv.size(), 8u + 2u + 2u) << "4 x 2 luma bytes, then 2 x 1 Cb and 2 x 1 Cr";
+    EXPECT_EQ(int(yuv[0]), 235) << "white";
+    EXPECT_EQ(int(yuv[1]), 16) << "black";
+    // Every value against the Rec. 601 formula in double, rounded to nearest (the fixed point
+    // may round the other way only within 0.01 of a half).
+    auto expectRounded = [](int got, double exact, const std::string& what) {
+        EXPECT_LE(std::fabs(got - exact), 0.51) << what << ": got " << got << ", exact " << exact;
+    };
+    for (int i = 0; i < 8; ++i) {
+        const double r = rgb[std::size_t(3 * i)], g = rgb[std::size_t(3 * i + 1)], b = rgb[std::size_t(3 * i + 2)];
+        expectRounded(yuv[std::size_t(i)], 16 + (65.481 * r + 128.553 * g + 24.966 * b) / 255.0,
+                      "luma of pixel " + std::to_string(i));
+    }
+    for (int block = 0; block < 2; ++block) {
+        double r = 0, g = 0, b = 0;  // the block's mean
+        for (const int row : {0, 1})
+            for (const int col : {0, 1}) {
+                const std::size_t p = std::size_t(3 * (row * 4 + 2 * block + col));
+                r += rgb[p] / 4.0, g += rgb[p + 1] / 4.0, b += rgb[p + 2] / 4.0;
+            }
+        expectRounded(yuv[std::size_t(8 + block)], 128 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255.0,
+                      "Cb of block " + std::to_string(block));
+        expectRounded(yuv[std::size_t(10 + block)], 128 + (112.0 * r - 93.786 * g - 18.214 * b) / 255.0,
+                      "Cr of block " + std::to_string(block));
+    }
     EXPECT_THROW(rgbToYuv420(rgb.data(), 3, 2, yuv), std::invalid_argument) << "odd width";
 }
 
