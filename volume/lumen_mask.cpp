@@ -184,6 +184,18 @@ FloatTree::Ptr indicatorOnGrid(const BoolTree& label, const ImageGeometry& g,
                          !any && i <= std::min<int64_t>(nx - 1, int64_t(std::floor(hi.x)) + 2); ++i)
                         any = isLabel(Coord(int(i), int(j), int(k)));
             if (!any) return;
+            // Likewise a leaf whose box (the same, out-of-image indices included) holds only label
+            // voxels: every sample's weights sum to 1 (to within 1e-15, which rounds to 1.0f), and
+            // the constraint keeps 1; so every voxel is 1.
+            bool all = true;
+            for (int64_t k = int64_t(std::floor(lo.z)) - 1; all && k <= int64_t(std::floor(hi.z)) + 2; ++k)
+                for (int64_t j = int64_t(std::floor(lo.y)) - 1; all && j <= int64_t(std::floor(hi.y)) + 2; ++j)
+                    for (int64_t i = int64_t(std::floor(lo.x)) - 1; all && i <= int64_t(std::floor(hi.x)) + 2; ++i)
+                        all = isLabel(Coord(int(i), int(j), int(k)));
+            if (all) {
+                leaf.fill(1.0f, true);
+                return;
+            }
         }
         for (openvdb::Index pos = 0; pos < FloatLeaf::SIZE; ++pos) {
             const Coord c = leaf.offsetToGlobalCoord(pos);
