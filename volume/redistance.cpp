@@ -80,18 +80,6 @@ struct LeafGraph {
     }
 };
 
-/// The value of the voxel next to `pos` (offset in `leaf`) along `axis` on the given side, read
-/// from the leaf or its neighbour (`nb`: that neighbour's values, or nullptr: `outside`).
-inline float across(const float* leaf, const float* nb, int pos, int local, int axis, bool positive, float outside)
-{
-    if (positive) {
-        if (local < DIM - 1) return leaf[pos + STRIDE[axis]];
-        return nb ? nb[pos - (DIM - 1) * STRIDE[axis]] : outside;
-    }
-    if (local > 0) return leaf[pos - STRIDE[axis]];
-    return nb ? nb[pos + (DIM - 1) * STRIDE[axis]] : outside;
-}
-
 /// Godunov's update of one voxel from the absolute values of its neighbours (a: -/+ x, -/+ y,
 /// -/+ z), written as OpenVDB's FastSweeping::SweepingKernel::sweep() writes it, operation for
 /// operation, so that the float results agree to the last bit.
@@ -332,31 +320,51 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLe
             float* dst = graph.leaves[n]->buffer().data();
             LeafMask& mask = sweepMask[n];
             mask.setOff();
+            // The input leaf with a layer of its face neighbours' values around (padded 10^3;
+            // a missing neighbour: the tile or background value there), so that each voxel's
+            // six neighbours lie at fixed offsets.
+            constexpr int P = DIM + 2;
+            constexpr int PS[3] = {P * P, P, 1};
+            float pad[P * P * P];
+            auto at = [](int x, int y, int z) { return (x + 1) * P * P + (y + 1) * P + (z + 1); };
+            for (int x = 0; x < DIM; ++x)
+                for (int y = 0; y < DIM; ++y) std::memcpy(&pad[at(x, y, 0)], &src[(x << 6) | (y << 3)], DIM * sizeof(float));
+            for (int axis = 0; axis < 3; ++axis)
+                for (int side = 0; side < 2; ++side) {
+                    const float* other = nb[std::size_t(slot(axis, side == 1))];
+                    for (int a = 0; a < DIM; ++a)
+                        for (int b = 0; b < DIM; ++b) {
+                            int local[3];
+                            local[axis] = side ? DIM : -1;
+                            local[(axis + 1) % 3] = a;
+                            local[(axis + 2) % 3] = b;
+                            float value;
+                            if (other) {
+                                int from[3] = {local[0], local[1], local[2]};
+                                from[axis] = side ? 0 : DIM - 1;
+                                value = other[(from[0] << 6) | (from[1] << 3) | from[2]];
+                            } else {
+                                value = inAcc.getValue(in.origin().offsetBy(local[0], local[1], local[2]));  // a tile or the background
+                            }
+                            pad[at(local[0], local[1], local[2])] = value;
+                        }
+                }
+            const LeafMask& active = in.getValueMask();
             for (int pos = 0; pos < int(FloatLeaf::SIZE); ++pos) {
                 const float value = src[pos];
                 const bool isAbove = value > 0.0f;
-                if (!in.isValueOn(openvdb::Index(pos))) {
+                if (!active.isOn(openvdb::Index(pos))) {
                     dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
                     continue;
                 }
-                const Coord local = FloatLeaf::offsetToLocalCoord(openvdb::Index(pos));
-                float nbValue[6];
-                for (int axis = 0; axis < 3; ++axis)
-                    for (int side = 0; side < 2; ++side) {
-                        const float* other = nb[std::size_t(slot(axis, side == 1))];
-                        const bool border = side ? local[axis] == DIM - 1 : local[axis] == 0;
-                        if (border && !other) {
-                            Coord ijk = in.origin() + local;
-                            ijk[axis] += side ? 1 : -1;
-                            nbValue[2 * axis + side] = inAcc.getValue(ijk);  // a tile or the background
-                        } else {
-                            nbValue[2 * axis + side] = across(src, other, pos, local[axis], axis, side == 1, 0.0f);
-                        }
-                    }
+                const int i = at(pos >> 6, (pos >> 3) & 7, pos & 7);
+                // Slots 2 axis (negative side) and 2 axis + 1 (positive side).
+                const float nbValue[6] = {pad[i - PS[0]], pad[i + PS[0]], pad[i - PS[1]],
+                                          pad[i + PS[1]], pad[i - PS[2]], pad[i + PS[2]]};
                 const bool less = value < 0.0f;
                 bool crossing[6];
                 bool any = false;
-                for (int i = 0; i < 6; ++i) any |= crossing[i] = less != (nbValue[i] < 0.0f);
+                for (int k = 0; k < 6; ++k) any |= crossing[k] = less != (nbValue[k] < 0.0f);
                 if (!any) {
                     dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
                     mask.setOn(openvdb::Index(pos));
