@@ -272,17 +272,28 @@ public:
     /// only, ~1e-9 voxels, far below what separates them from the target at any step).
     double solve(double targetVoxels, double lo, double hi, int iterations)
     {
-        std::vector<std::pair<float, float>> band = mBand;
+        // Each voxel keeps its terms at both ends of the bracket and at its midpoint, so that
+        // a step evaluates one term per voxel (the new end's term is the midpoint's).
+        struct Voxel {
+            float phi, ind;
+            double atLo, atHi, atMid;
+        };
+        std::vector<Voxel> band(mBand.size());
+        for (std::size_t n = 0; n < mBand.size(); ++n) {
+            const auto& [phi, ind] = mBand[n];
+            band[n] = {phi, ind, term(phi, ind, lo), term(phi, ind, hi), 0.0};
+        }
         double fixed = mFixed;
         for (int i = 0; i < iterations; ++i) {
             const double mid = 0.5 * (lo + hi);
             double s = fixed;
-            for (const auto& [phi, ind] : band) s += term(phi, ind, mid);
-            (s < targetVoxels ? lo : hi) = mid;
+            for (Voxel& e : band) s += e.atMid = term(e.phi, e.ind, mid);
+            const bool raiseLo = s < targetVoxels;
+            (raiseLo ? lo : hi) = mid;
             std::size_t kept = 0;
-            for (const auto& e : band) {
-                const double a = term(e.first, e.second, lo), b = term(e.first, e.second, hi);
-                if (a == b) fixed += a;
+            for (Voxel e : band) {
+                (raiseLo ? e.atLo : e.atHi) = e.atMid;
+                if (e.atLo == e.atHi) fixed += e.atLo;
                 else band[kept++] = e;
             }
             band.resize(kept);
