@@ -184,6 +184,18 @@ FloatTree::Ptr indicatorOnGrid(const BoolTree& label, const ImageGeometry& g,
                          !any && i <= std::min<int64_t>(nx - 1, int64_t(std::floor(hi.x)) + 2); ++i)
                         any = isLabel(Coord(int(i), int(j), int(k)));
             if (!any) return;
+            // Likewise a leaf whose box (the same, out-of-image indices included) holds only label
+            // voxels: every sample's weights sum to 1 (to within 1e-15, which rounds to 1.0f), and
+            // the constraint keeps 1; so every voxel is 1.
+            bool all = true;
+            for (int64_t k = int64_t(std::floor(lo.z)) - 1; all && k <= int64_t(std::floor(hi.z)) + 2; ++k)
+                for (int64_t j = int64_t(std::floor(lo.y)) - 1; all && j <= int64_t(std::floor(hi.y)) + 2; ++j)
+                    for (int64_t i = int64_t(std::floor(lo.x)) - 1; all && i <= int64_t(std::floor(hi.x)) + 2; ++i)
+                        all = isLabel(Coord(int(i), int(j), int(k)));
+            if (all) {
+                leaf.fill(1.0f, true);
+                return;
+            }
         }
         for (openvdb::Index pos = 0; pos < FloatLeaf::SIZE; ++pos) {
             const Coord c = leaf.offsetToGlobalCoord(pos);
@@ -260,17 +272,28 @@ public:
     /// only, ~1e-9 voxels, far below what separates them from the target at any step).
     double solve(double targetVoxels, double lo, double hi, int iterations)
     {
-        std::vector<std::pair<float, float>> band = mBand;
+        // Each voxel keeps its terms at both ends of the bracket and at its midpoint, so that
+        // a step evaluates one term per voxel (the new end's term is the midpoint's).
+        struct Voxel {
+            float phi, ind;
+            double atLo, atHi, atMid;
+        };
+        std::vector<Voxel> band(mBand.size());
+        for (std::size_t n = 0; n < mBand.size(); ++n) {
+            const auto& [phi, ind] = mBand[n];
+            band[n] = {phi, ind, term(phi, ind, lo), term(phi, ind, hi), 0.0};
+        }
         double fixed = mFixed;
         for (int i = 0; i < iterations; ++i) {
             const double mid = 0.5 * (lo + hi);
             double s = fixed;
-            for (const auto& [phi, ind] : band) s += term(phi, ind, mid);
-            (s < targetVoxels ? lo : hi) = mid;
+            for (Voxel& e : band) s += e.atMid = term(e.phi, e.ind, mid);
+            const bool raiseLo = s < targetVoxels;
+            (raiseLo ? lo : hi) = mid;
             std::size_t kept = 0;
-            for (const auto& e : band) {
-                const double a = term(e.first, e.second, lo), b = term(e.first, e.second, hi);
-                if (a == b) fixed += a;
+            for (Voxel e : band) {
+                (raiseLo ? e.atLo : e.atHi) = e.atMid;
+                if (e.atLo == e.atHi) fixed += e.atLo;
                 else band[kept++] = e;
             }
             band.resize(kept);

@@ -32,6 +32,10 @@
 #include <unordered_map>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace flyover::detail {
 
 namespace {
@@ -76,18 +80,6 @@ struct LeafGraph {
     }
 };
 
-/// The value of the voxel next to `pos` (offset in `leaf`) along `axis` on the given side, read
-/// from the leaf or its neighbour (`nb`: that neighbour's values, or nullptr: `outside`).
-inline float across(const float* leaf, const float* nb, int pos, int local, int axis, bool positive, float outside)
-{
-    if (positive) {
-        if (local < DIM - 1) return leaf[pos + STRIDE[axis]];
-        return nb ? nb[pos - (DIM - 1) * STRIDE[axis]] : outside;
-    }
-    if (local > 0) return leaf[pos - STRIDE[axis]];
-    return nb ? nb[pos + (DIM - 1) * STRIDE[axis]] : outside;
-}
-
 /// Godunov's update of one voxel from the absolute values of its neighbours (a: -/+ x, -/+ y,
 /// -/+ z), written as OpenVDB's FastSweeping::SweepingKernel::sweep() writes it, operation for
 /// operation, so that the float results agree to the last bit.
@@ -128,6 +120,56 @@ inline bool godunov(float& value, const float (&nb)[6], float h, float sqrt2h)
     }
     return false;
 }
+
+#if defined(__SSE2__)
+/// godunov() on four voxels at once (lanes; `at`: their offsets in `buf`, which must not be
+/// neighbours of each other), without branches: the 1D, 2D and 3D updates are all computed with
+/// the same float operations in the same order as godunov() (so the same bits; a square root
+/// of a negative number gives NaN, which no comparison below accepts, as godunov() would not
+/// take that branch) and the one godunov() takes is selected. Returns whether a lane changed.
+inline bool godunov4(float* buf, const int (&at)[4], const int (&step)[3], float h, float sqrt2h)
+{
+    const __m128 absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    auto load = [&](int off) { return _mm_set_ps(buf[at[3] + off], buf[at[2] + off], buf[at[1] + off], buf[at[0] + off]); };
+    auto absLoad = [&](int off) { return _mm_and_ps(load(off), absMask); };
+    auto select = [](__m128 c, __m128 a, __m128 b) { return _mm_or_ps(_mm_and_ps(c, a), _mm_andnot_ps(c, b)); };
+    __m128 d1 = _mm_min_ps(absLoad(-step[0]), absLoad(step[0]));
+    __m128 d2 = _mm_min_ps(absLoad(-step[1]), absLoad(step[1]));
+    const __m128 d3in = _mm_min_ps(absLoad(-step[2]), absLoad(step[2]));
+    // Sorted, as godunov()'s swaps sort them (equal values are interchangeable).
+    const __m128 lo = _mm_min_ps(d1, d2), hi = _mm_max_ps(d1, d2);
+    const __m128 d3 = _mm_max_ps(hi, d3in), mid = _mm_min_ps(hi, d3in);
+    d1 = _mm_min_ps(lo, mid);
+    d2 = _mm_max_ps(lo, mid);
+    const __m128 hv = _mm_set1_ps(h);
+    const __m128 valid = _mm_cmplt_ps(d1, _mm_set1_ps(1000.0f));
+    const __m128 u1 = _mm_add_ps(d1, hv);
+    const __m128 c1 = _mm_cmple_ps(u1, d2);
+    const __m128 diff = _mm_sub_ps(d1, d2);
+    const __m128 D2 = _mm_sub_ps(_mm_mul_ps(_mm_mul_ps(_mm_set1_ps(2.0f), hv), hv), _mm_mul_ps(diff, diff));
+    const __m128 u2 = _mm_mul_ps(_mm_set1_ps(0.5f), _mm_add_ps(_mm_add_ps(d1, d2), _mm_sqrt_ps(D2)));
+    const __m128 c2 = _mm_and_ps(_mm_cmple_ps(d2, _mm_add_ps(_mm_set1_ps(sqrt2h), d1)),
+                                 _mm_and_ps(_mm_cmpgt_ps(u2, d2), _mm_cmple_ps(u2, d3)));
+    const __m128 d123 = _mm_add_ps(_mm_add_ps(d1, d2), d3);
+    const __m128 squares = _mm_add_ps(_mm_add_ps(_mm_mul_ps(d1, d1), _mm_mul_ps(d2, d2)), _mm_mul_ps(d3, d3));
+    const __m128 D3 = _mm_sub_ps(_mm_mul_ps(d123, d123),
+                                 _mm_mul_ps(_mm_set1_ps(3.0f), _mm_sub_ps(squares, _mm_mul_ps(hv, hv))));
+    const __m128 u3 = _mm_mul_ps(_mm_set1_ps(float(1.0 / 3.0)), _mm_add_ps(d123, _mm_sqrt_ps(D3)));
+    const __m128 c3 = _mm_cmpge_ps(D3, _mm_setzero_ps());
+    const __m128 update = select(c1, u1, select(c2, u2, u3));
+    const __m128 value = load(0);
+    const __m128 absV = _mm_and_ps(value, absMask);
+    const __m128 ok = _mm_and_ps(_mm_and_ps(valid, _mm_or_ps(c1, _mm_or_ps(c2, c3))), _mm_cmplt_ps(update, absV));
+    if (_mm_movemask_ps(ok) == 0) return false;
+    // sign * update: +update where value >= 0, else -update (exact negation).
+    const __m128 negated = _mm_xor_ps(update, _mm_set1_ps(-0.0f));
+    const __m128 signedUpdate = select(_mm_cmpge_ps(value, _mm_setzero_ps()), update, negated);
+    alignas(16) float out[4];
+    _mm_store_ps(out, select(ok, signedUpdate, value));
+    for (int l = 0; l < 4; ++l) buf[at[l]] = out[l];  // a repeated lane writes the same value
+    return true;
+}
+#endif
 
 /// One sweep of one leaf in direction `dir` (bit a set: negative along axis a). The leaf's
 /// values and its face neighbours' adjacent layers are copied into a padded 10^3 block first,
@@ -174,8 +216,35 @@ bool sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& 
             }
     }
     const bool neg[3] = {(dir & 1) != 0, (dir & 2) != 0, (dir & 4) != 0};
-    float n[6];
     bool changed = false;
+#if defined(__SSE2__)
+    // Within a slice of x, the voxels are visited by anti-diagonals yi + zi = d (yi, zi: steps
+    // along the sweep): a voxel's upwind neighbours in y and z lie on diagonal d - 1, its
+    // downwind ones on d + 1, none on d. So the order keeps every voxel after its upwind and
+    // before its downwind neighbours (the same values as row by row), and the voxels of one
+    // diagonal, which do not read each other, are updated four at a time.
+    for (int xi = 0; xi < DIM; ++xi) {
+        const int x = neg[0] ? DIM - 1 - xi : xi;
+        const LeafMask::Word word = sweep.getWord<LeafMask::Word>(x);  // bits y << 3 | z
+        if (!word) continue;
+        for (int d = 0; d < 2 * DIM - 1; ++d) {
+            int voxels[DIM];
+            int count = 0;
+            for (int yi = std::max(0, d - (DIM - 1)); yi <= std::min(DIM - 1, d); ++yi) {
+                const int zi = d - yi;
+                const int y = neg[1] ? DIM - 1 - yi : yi;
+                const int z = neg[2] ? DIM - 1 - zi : zi;
+                if ((word >> (y * DIM + z)) & 1u) voxels[count++] = padded(x, y, z);
+            }
+            for (int g = 0; g < count; g += 4) {
+                const int at[4] = {voxels[g], voxels[std::min(g + 1, count - 1)], voxels[std::min(g + 2, count - 1)],
+                                   voxels[std::min(g + 3, count - 1)]};
+                changed |= godunov4(buf, at, PS, h, sqrt2h);
+            }
+        }
+    }
+#else
+    float n[6];
     for (int xi = 0; xi < DIM; ++xi) {
         const int x = neg[0] ? DIM - 1 - xi : xi;
         const LeafMask::Word word = sweep.getWord<LeafMask::Word>(x);  // bits y << 3 | z
@@ -198,6 +267,7 @@ bool sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& 
             }
         }
     }
+#endif
     if (!changed) return false;
     for (int x = 0; x < DIM; ++x)
         for (int y = 0; y < DIM; ++y) std::memcpy(&v[(x << 6) | (y << 3)], &buf[padded(x, y, 0)], DIM * sizeof(float));
@@ -250,31 +320,51 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLe
             float* dst = graph.leaves[n]->buffer().data();
             LeafMask& mask = sweepMask[n];
             mask.setOff();
+            // The input leaf with a layer of its face neighbours' values around (padded 10^3;
+            // a missing neighbour: the tile or background value there), so that each voxel's
+            // six neighbours lie at fixed offsets.
+            constexpr int P = DIM + 2;
+            constexpr int PS[3] = {P * P, P, 1};
+            float pad[P * P * P];
+            auto at = [](int x, int y, int z) { return (x + 1) * P * P + (y + 1) * P + (z + 1); };
+            for (int x = 0; x < DIM; ++x)
+                for (int y = 0; y < DIM; ++y) std::memcpy(&pad[at(x, y, 0)], &src[(x << 6) | (y << 3)], DIM * sizeof(float));
+            for (int axis = 0; axis < 3; ++axis)
+                for (int side = 0; side < 2; ++side) {
+                    const float* other = nb[std::size_t(slot(axis, side == 1))];
+                    for (int a = 0; a < DIM; ++a)
+                        for (int b = 0; b < DIM; ++b) {
+                            int local[3];
+                            local[axis] = side ? DIM : -1;
+                            local[(axis + 1) % 3] = a;
+                            local[(axis + 2) % 3] = b;
+                            float value;
+                            if (other) {
+                                int from[3] = {local[0], local[1], local[2]};
+                                from[axis] = side ? 0 : DIM - 1;
+                                value = other[(from[0] << 6) | (from[1] << 3) | from[2]];
+                            } else {
+                                value = inAcc.getValue(in.origin().offsetBy(local[0], local[1], local[2]));  // a tile or the background
+                            }
+                            pad[at(local[0], local[1], local[2])] = value;
+                        }
+                }
+            const LeafMask& active = in.getValueMask();
             for (int pos = 0; pos < int(FloatLeaf::SIZE); ++pos) {
                 const float value = src[pos];
                 const bool isAbove = value > 0.0f;
-                if (!in.isValueOn(openvdb::Index(pos))) {
+                if (!active.isOn(openvdb::Index(pos))) {
                     dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
                     continue;
                 }
-                const Coord local = FloatLeaf::offsetToLocalCoord(openvdb::Index(pos));
-                float nbValue[6];
-                for (int axis = 0; axis < 3; ++axis)
-                    for (int side = 0; side < 2; ++side) {
-                        const float* other = nb[std::size_t(slot(axis, side == 1))];
-                        const bool border = side ? local[axis] == DIM - 1 : local[axis] == 0;
-                        if (border && !other) {
-                            Coord ijk = in.origin() + local;
-                            ijk[axis] += side ? 1 : -1;
-                            nbValue[2 * axis + side] = inAcc.getValue(ijk);  // a tile or the background
-                        } else {
-                            nbValue[2 * axis + side] = across(src, other, pos, local[axis], axis, side == 1, 0.0f);
-                        }
-                    }
+                const int i = at(pos >> 6, (pos >> 3) & 7, pos & 7);
+                // Slots 2 axis (negative side) and 2 axis + 1 (positive side).
+                const float nbValue[6] = {pad[i - PS[0]], pad[i + PS[0]], pad[i - PS[1]],
+                                          pad[i + PS[1]], pad[i - PS[2]], pad[i + PS[2]]};
                 const bool less = value < 0.0f;
                 bool crossing[6];
                 bool any = false;
-                for (int i = 0; i < 6; ++i) any |= crossing[i] = less != (nbValue[i] < 0.0f);
+                for (int k = 0; k < 6; ++k) any |= crossing[k] = less != (nbValue[k] < 0.0f);
                 if (!any) {
                     dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
                     mask.setOn(openvdb::Index(pos));
