@@ -35,7 +35,49 @@ namespace {
 
 using Tri = std::array<uint32_t, 3>;
 
-using Sampler = openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
+/// GridSampler<FloatGrid::ConstAccessor, BoxSampler>::wsSample, the same arithmetic (the
+/// transform's worldToIndex, BoxSampler's floor and fraction, its trilinearInterpolation), but
+/// the eight corners are read from their leaf when they share one (7^3 / 8^3 of the samples)
+/// instead of by eight tree look-ups: the same values, bit for bit.
+class Sampler {
+public:
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+
+    Sampler(const openvdb::FloatGrid::ConstAccessor& accessor, const openvdb::math::Transform& transform)
+        : mAccessor(&accessor), mTransform(&transform)
+    {
+    }
+
+    float wsSample(const openvdb::Vec3d& world) const
+    {
+        const openvdb::Vec3d index = mTransform->worldToIndex(world);
+        const openvdb::Vec3i floor = openvdb::tools::local_util::floorVec3(index);
+        const openvdb::Vec3R uvw = index - floor;
+        const openvdb::Coord ijk(floor);
+        float data[2][2][2];
+        const LeafT* leaf = nullptr;
+        if ((ijk.x() & 7) != 7 && (ijk.y() & 7) != 7 && (ijk.z() & 7) != 7) leaf = mAccessor->probeConstLeaf(ijk);
+        if (leaf) {
+            // Offsets within a leaf: x * 64 + y * 8 + z (LeafNode::coordToOffset).
+            const openvdb::Index o = LeafT::coordToOffset(ijk);
+            data[0][0][0] = leaf->getValue(o);
+            data[0][0][1] = leaf->getValue(o + 1);
+            data[0][1][0] = leaf->getValue(o + 8);
+            data[0][1][1] = leaf->getValue(o + 9);
+            data[1][0][0] = leaf->getValue(o + 64);
+            data[1][0][1] = leaf->getValue(o + 65);
+            data[1][1][0] = leaf->getValue(o + 72);
+            data[1][1][1] = leaf->getValue(o + 73);
+        } else {
+            openvdb::tools::BoxSampler::probeValues(data, *mAccessor, ijk);
+        }
+        return openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
+    }
+
+private:
+    const openvdb::FloatGrid::ConstAccessor* mAccessor;
+    const openvdb::math::Transform* mTransform;
+};
 
 enum class Side { Inward, Outward, Degenerate, NoGradient };
 
@@ -424,6 +466,11 @@ bool LumenSideTest::isInward(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b,
     const std::array<openvdb::Vec3d, 3> p{openvdb::Vec3d(a[0], a[1], a[2]), openvdb::Vec3d(b[0], b[1], b[2]),
                                           openvdb::Vec3d(c[0], c[1], c[2])};
     return classifyTriangle(mImpl->sampler, mImpl->h, p) == Side::Inward;
+}
+
+float LumenSideTest::valueAt(const OpenMesh::Vec3d& world) const
+{
+    return mImpl->sampler.wsSample(openvdb::Vec3d(world[0], world[1], world[2]));
 }
 
 double inwardFaceFraction(const TriMesh& mesh, const openvdb::FloatGrid& sdf)

@@ -99,6 +99,11 @@ public:
     /// centroid; false for an outward, degenerate or gradient-free triangle.
     bool isInward(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c) const;
 
+    /// The level set at a world point (mm) as the test reads it: trilinear, exactly the value
+    /// of OpenVDB's GridSampler<ConstAccessor, BoxSampler>::wsSample (corners read from their
+    /// leaf when they share one).
+    float valueAt(const OpenMesh::Vec3d& world) const;
+
 private:
     struct Impl;
     std::unique_ptr<Impl> mImpl;

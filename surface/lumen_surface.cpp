@@ -7,6 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -128,6 +129,21 @@ void checkLumenSurface(const TriMesh& mesh, const openvdb::FloatGrid& sdf, Lumen
     if (!rep.finalChecksPending) return;
     const auto t0 = std::chrono::steady_clock::now();
     rep.check = checkMesh(mesh);
+    // The raw (extracted) mesh's measures: its positions were kept when smoothing moved them,
+    // else it is the mesh itself.
+    if (rep.extractedPoints) {
+        const MeshMeasures raw = measureMesh(mesh, *rep.extractedPoints);
+        rep.rawAreaMm2 = raw.areaMm2;
+        rep.rawVolumeMm3 = raw.enclosedVolumeMm3;
+        rep.rawRoughnessDeg = meanDihedralAngleDeg(mesh, *rep.extractedPoints);
+        rep.extractedPoints.reset();
+    } else {
+        rep.rawAreaMm2 = rep.check.areaMm2;
+        rep.rawVolumeMm3 = rep.check.enclosedVolumeMm3;
+        rep.rawRoughnessDeg = meanDihedralAngleDeg(mesh);
+    }
+    rep.smoothedVolumeMm3 = rep.rawVolumeMm3;
+    rep.smoothedRoughnessDeg = rep.rawRoughnessDeg;
     if (rep.smoothed) measureSmoothed(mesh, rep.check, rep);
     rep.orientation = checkFaceOrientation(mesh, sdf);
     rep.checkSeconds += secondsSince(t0);
@@ -150,15 +166,6 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
     TriMesh mesh = extractSurface(sdf, params, &rep.extraction, ptr(extractProgress), !deferFinalChecks);
     rep.extractSeconds = secondsSince(t0);
 
-    t0 = Clock::now();
-    reportProgress(progress, 0.3, "raw mesh measures");
-    // The check of the mesh as it stands; reused as the final check when nothing changes it.
-    MeshCheck current = checkMesh(mesh);
-    rep.rawAreaMm2 = current.areaMm2;
-    rep.rawVolumeMm3 = current.enclosedVolumeMm3;
-    rep.rawRoughnessDeg = meanDihedralAngleDeg(mesh);
-    rep.checkSeconds += secondsSince(t0);
-
     int64_t target = 0;
     if (params.decimateTargetFaces > 0) target = params.decimateTargetFaces;
     if (params.decimateFraction < 1.0) {
@@ -169,6 +176,20 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
     const bool decimating = target > 0 || rep.decimationMaxErrorMm > 0.0;
     const bool later = deferFinalChecks && !decimating;
 
+    // The check of the mesh as it stands; reused as the final check when nothing changes it.
+    // Deferred, the raw measures are taken later by checkLumenSurface() (from the extracted
+    // positions, kept in the report, when smoothing moves the vertices).
+    MeshCheck current;
+    if (!later) {
+        t0 = Clock::now();
+        reportProgress(progress, 0.3, "raw mesh measures");
+        current = checkMesh(mesh);
+        rep.rawAreaMm2 = current.areaMm2;
+        rep.rawVolumeMm3 = current.enclosedVolumeMm3;
+        rep.rawRoughnessDeg = meanDihedralAngleDeg(mesh);
+        rep.checkSeconds += secondsSince(t0);
+    }
+
     rep.smoothedVolumeMm3 = rep.rawVolumeMm3;
     rep.smoothedRoughnessDeg = rep.rawRoughnessDeg;
     if (params.smoothMethod == "taubin" && params.smoothIterations > 0) {
@@ -178,10 +199,11 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
         taubin.iterations = params.smoothIterations;
         taubin.passBand = params.smoothPassBand;
         auto smoothProgress = slice(progress, 0.35, 0.5);
-        std::vector<TriMesh::Point> extracted(mesh.n_vertices());
-        for (const auto v : mesh.vertices()) extracted[std::size_t(v.idx())] = mesh.point(v);
+        auto extracted = std::make_shared<std::vector<TriMesh::Point>>(mesh.n_vertices());
+        for (const auto v : mesh.vertices()) (*extracted)[std::size_t(v.idx())] = mesh.point(v);
         smoothMeshTaubin(mesh, taubin, &rep.smoothing, ptr(smoothProgress));
-        rep.smoothingRestoredVertices = restoreNonInwardFaces(mesh, extracted, sdf);
+        rep.smoothingRestoredVertices = restoreNonInwardFaces(mesh, *extracted, sdf);
+        if (later) rep.extractedPoints = std::move(extracted);
         rep.smoothSeconds = secondsSince(t0);
         if (!later) {
             t0 = Clock::now();

@@ -38,6 +38,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace flyover {
@@ -73,6 +74,10 @@ struct LumenSurfaceReport {
     /// The checks of the final mesh (check, orientation, the smoothed measures) are still to
     /// be made by checkLumenSurface(): makeLumenSurface() was asked to leave them.
     bool finalChecksPending = false;
+    /// While the final checks are pending after smoothing: the extracted vertex positions
+    /// (indexed by vertex), for the raw measures (rawAreaMm2, rawVolumeMm3, rawRoughnessDeg),
+    /// which are then pending too. Released by checkLumenSurface().
+    std::shared_ptr<const std::vector<TriMesh::Point>> extractedPoints;
 
     /// Every face inward, no outward component, manifold (no refused face, no edge of more
     /// than two faces, no pinched vertex), consistently wound, no degenerate face.
@@ -92,8 +97,10 @@ struct LumenSurfaceReport {
 ///        smoothedVolumeMm3, smoothedRoughnessDeg, smoothingVolumeChange) to a later call of
 ///        checkLumenSurface(), so that the mesh can be used first (the pipeline renders the
 ///        first pair meanwhile, issue 15); report->finalChecksPending says whether they were
-///        left. Ignored when decimation is asked for (the smoothed measures are then taken
-///        before it). The mesh is the same either way. It also leaves out the extraction's
+///        left. The raw mesh's measures (rawAreaMm2, rawVolumeMm3, rawRoughnessDeg) are left
+///        too (the extracted positions are kept in report->extractedPoints meanwhile). Ignored
+///        when decimation is asked for (the smoothed measures are then taken before it). The
+///        mesh is the same either way. It also leaves out the extraction's
 ///        surface-wide stats (report->extraction keeps its counts only: extractSurface's
 ///        surfaceStats), which no report of the pipeline shows.
 /// @throw ParameterError for invalid params (names the field), InputError when the level set

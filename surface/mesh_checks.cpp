@@ -96,6 +96,14 @@ double tripleProduct(const Triangle& t, const Vec3d& ref)
     return OpenMesh::dot(t[0] - ref, OpenMesh::cross(t[1] - ref, t[2] - ref));
 }
 
+bool isDegenerate(const Triangle& t)
+{
+    const double twiceArea = OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
+    const double longest2 =
+        std::max({(t[1] - t[0]).sqrnorm(), (t[2] - t[1]).sqrnorm(), (t[0] - t[2]).sqrnorm()});
+    return isDegenerateTriangle(twiceArea, longest2);
+}
+
 } // namespace
 
 bool isDegenerateFace(const TriMesh& mesh, TriMesh::FaceHandle face)
@@ -103,13 +111,14 @@ bool isDegenerateFace(const TriMesh& mesh, TriMesh::FaceHandle face)
     Triangle t;
     int k = 0;
     for (const auto v : mesh.fv_range(face)) t[std::size_t(k++)] = pointOf(mesh, v);
-    const double twiceArea = OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
-    const double longest2 =
-        std::max({(t[1] - t[0]).sqrnorm(), (t[2] - t[1]).sqrnorm(), (t[0] - t[2]).sqrnorm()});
-    return isDegenerateTriangle(twiceArea, longest2);
+    return isDegenerate(t);
 }
 
-double meanDihedralAngleDeg(const TriMesh& mesh)
+namespace {
+
+/// meanDihedralAngleDeg with the vertex positions `pointAt(v)` (a Vec3d) instead of the mesh's.
+template<typename PointAt>
+double meanDihedralAngleDegAt(const TriMesh& mesh, const PointAt& pointAt)
 {
     struct Sum {
         double angle = 0;
@@ -118,9 +127,9 @@ double meanDihedralAngleDeg(const TriMesh& mesh)
     auto unitNormal = [&](TriMesh::FaceHandle f, Vec3d& n) {
         Triangle t;
         int k = 0;
-        for (const auto v : mesh.fv_range(f)) t[std::size_t(k++)] = pointOf(mesh, v);
+        for (const auto v : mesh.fv_range(f)) t[std::size_t(k++)] = pointAt(v);
         n = OpenMesh::cross(t[1] - t[0], t[2] - t[0]);
-        if (isDegenerateFace(mesh, f)) return false;
+        if (isDegenerate(t)) return false;
         n /= n.norm();
         return true;
     };
@@ -148,7 +157,26 @@ double meanDihedralAngleDeg(const TriMesh& mesh)
     return s.count > 0 ? s.angle / double(s.count) * 180.0 / PI : 0.0;
 }
 
-MeshCheck checkMesh(const TriMesh& mesh)
+} // namespace
+
+double meanDihedralAngleDeg(const TriMesh& mesh)
+{
+    return meanDihedralAngleDegAt(mesh, [&](TriMesh::VertexHandle v) { return pointOf(mesh, v); });
+}
+
+double meanDihedralAngleDeg(const TriMesh& mesh, const std::vector<TriMesh::Point>& points)
+{
+    return meanDihedralAngleDegAt(mesh, [&](TriMesh::VertexHandle v) {
+        return OpenMesh::vector_cast<Vec3d>(points[std::size_t(v.idx())]);
+    });
+}
+
+namespace {
+
+/// checkMesh with the vertex positions `pointAt(v)` (a Vec3d) instead of the mesh's; without
+/// `nesting` every component's nestingDepth stays 0 (the area and volume do not depend on it).
+template<typename PointAt>
+MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
 {
     MeshCheck check;
     check.vertices = int64_t(mesh.n_vertices());
@@ -196,9 +224,9 @@ MeshCheck checkMesh(const TriMesh& mesh)
             continue;
         }
         ComponentWork& w = work[std::size_t(faceComponent[std::size_t(f.idx())])];
-        if (w.info.vertices == 0) w.probe = pointOf(mesh, v);
+        if (w.info.vertices == 0) w.probe = pointAt(v);
         ++w.info.vertices;
-        w.box.add(pointOf(mesh, v));
+        w.box.add(pointAt(v));
     }
     for (const auto e : mesh.edges()) {
         TriMesh::FaceHandle f = mesh.face_handle(e.h0());
@@ -229,11 +257,11 @@ MeshCheck checkMesh(const TriMesh& mesh)
                 loop.push_back(g);
             }
             Vec3d centroid(0.0);
-            for (const auto g : loop) centroid += pointOf(mesh, mesh.from_vertex_handle(g));
+            for (const auto g : loop) centroid += pointAt(mesh.from_vertex_handle(g));
             centroid /= double(loop.size());
             for (const auto g : loop)
-                w.caps.push_back({pointOf(mesh, mesh.from_vertex_handle(g)),
-                                  pointOf(mesh, mesh.to_vertex_handle(g)), centroid});
+                w.caps.push_back({pointAt(mesh.from_vertex_handle(g)),
+                                  pointAt(mesh.to_vertex_handle(g)), centroid});
             ++w.info.boundaryLoops;
         }
     }
@@ -255,10 +283,10 @@ MeshCheck checkMesh(const TriMesh& mesh)
                 for (std::size_t i = r.begin(); i != r.end(); ++i) {
                     Triangle t;
                     int k = 0;
-                    for (const auto v : mesh.fv_range(faces[i])) t[std::size_t(k++)] = pointOf(mesh, v);
+                    for (const auto v : mesh.fv_range(faces[i])) t[std::size_t(k++)] = pointAt(v);
                     acc.area += 0.5 * OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
                     acc.volume6 += tripleProduct(t, ref);
-                    if (isDegenerateFace(mesh, faces[i])) ++acc.degenerate;
+                    if (isDegenerate(t)) ++acc.degenerate;
                 }
                 return acc;
             },
@@ -284,7 +312,7 @@ MeshCheck checkMesh(const TriMesh& mesh)
     // many (a part's outer surface around its voids) counts ray crossings instead
     // (ray_winding.h: the same integer, O(faces) once plus a few faces per probe), and any
     // probe whose rays are all too close to call gets the solid-angle sum.
-    for (std::size_t d = 0; d < work.size(); ++d) {
+    for (std::size_t d = 0; nesting && d < work.size(); ++d) {
         std::vector<std::size_t> inside;
         for (std::size_t c = 0; c < work.size(); ++c)
             if (c != d && work[d].box.contains(work[c].box)) inside.push_back(c);
@@ -332,6 +360,21 @@ MeshCheck checkMesh(const TriMesh& mesh)
         check.componentList.push_back(info);
     }
     return check;
+}
+
+} // namespace
+
+MeshCheck checkMesh(const TriMesh& mesh)
+{
+    return checkMeshAt(mesh, [&](TriMesh::VertexHandle v) { return pointOf(mesh, v); }, true);
+}
+
+MeshMeasures measureMesh(const TriMesh& mesh, const std::vector<TriMesh::Point>& points)
+{
+    const MeshCheck check = checkMeshAt(
+        mesh, [&](TriMesh::VertexHandle v) { return OpenMesh::vector_cast<Vec3d>(points[std::size_t(v.idx())]); },
+        false);
+    return {check.areaMm2, check.enclosedVolumeMm3};
 }
 
 } // namespace flyover

@@ -72,6 +72,18 @@ struct MeshCheck {
 /// when no crossing is within rounding of an edge; otherwise the solid-angle sum decides).
 MeshCheck checkMesh(const TriMesh& mesh);
 
+/// Area and enclosed volume (capped, summed over components) of a mesh.
+struct MeshMeasures {
+    double areaMm2 = 0;
+    double enclosedVolumeMm3 = 0;
+};
+
+/// The areaMm2 and enclosedVolumeMm3 checkMesh() reports for `mesh` with its vertices at
+/// `points` (indexed by vertex; same connectivity), bit for bit the same arithmetic, without
+/// the nesting test. Lets the measures of a mesh's earlier shape (the extracted surface before
+/// smoothing) be taken later from a copy of its positions only.
+MeshMeasures measureMesh(const TriMesh& mesh, const std::vector<TriMesh::Point>& points);
+
 /// A triangle is degenerate when twice its area is below 1e-6 times its longest edge
 /// squared: its smallest height is under a millionth of its size, below what float
 /// coordinates resolve reliably, so its normal means nothing. NaN-safe (NaN: degenerate).
@@ -86,5 +98,7 @@ bool isDegenerateFace(const TriMesh& mesh, TriMesh::FaceHandle face);
 /// a smooth surface sampled at edge length h with curvature radius r about h / r radians).
 /// Edges next to a degenerate face are left out. @return 0 without interior edges
 double meanDihedralAngleDeg(const TriMesh& mesh);
+/// The same with the vertices at `points` (indexed by vertex) instead of the mesh's.
+double meanDihedralAngleDeg(const TriMesh& mesh, const std::vector<TriMesh::Point>& points);
 
 } // namespace flyover

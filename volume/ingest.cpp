@@ -341,28 +341,35 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
 
         const int bx = (nx + LEAF_DIM - 1) / LEAF_DIM, by = (ny + LEAF_DIM - 1) / LEAF_DIM;
         std::vector<LeafT*> leaves(static_cast<std::size_t>(bx) * by, nullptr);
-        tbb::parallel_for(tbb::blocked_range<int>(0, bx * by), [&](const tbb::blocked_range<int>& r) {
-            for (int blk = r.begin(); blk < r.end(); ++blk) {
-                const int x0 = (blk % bx) * LEAF_DIM, y0 = (blk / bx) * LEAF_DIM;
-                LeafT* leaf = nullptr;
-                float* values = nullptr;
+        // One row of leaves (8 rows of y) per task, read row by row of the slab (sequential
+        // reads; the row's leaves, 2 KB each, stay in cache) rather than leaf by leaf (64
+        // strided streams per leaf). The same values, masks and leaves.
+        tbb::parallel_for(tbb::blocked_range<int>(0, by), [&](const tbb::blocked_range<int>& r) {
+            std::vector<float*> values(static_cast<std::size_t>(bx), nullptr);
+            for (int yb = r.begin(); yb < r.end(); ++yb) {
+                LeafT** rowLeaves = leaves.data() + static_cast<std::size_t>(yb) * bx;
+                std::fill(values.begin(), values.end(), nullptr);
+                const int y0 = yb * LEAF_DIM, y1 = std::min(ny, y0 + LEAF_DIM);
                 for (int z = z0; z < z1; ++z)
-                    for (int y = y0; y < std::min(ny, y0 + LEAF_DIM); ++y) {
+                    for (int y = y0; y < y1; ++y) {
                         const std::size_t row = sliceSize * static_cast<std::size_t>(z - z0) +
                                                 static_cast<std::size_t>(y) * nx;
-                        for (int x = x0; x < std::min(nx, x0 + LEAF_DIM); ++x) {
-                            if (outsideSlab[row + x]) continue;
-                            if (!leaf) {
-                                leaf = new LeafT(openvdb::Coord(x0, y0, z0), background, false);
-                                values = leaf->buffer().data();
+                        const uint8_t* outside = outsideSlab.data() + row;
+                        const float* src = slab.data() + row;
+                        // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
+                        const openvdb::Index yz = static_cast<openvdb::Index>(((y & 7) << 3) | (z & 7));
+                        for (int x = 0; x < nx; ++x) {
+                            if (outside[x]) continue;
+                            const std::size_t xb = static_cast<std::size_t>(x >> 3);
+                            if (!values[xb]) {
+                                rowLeaves[xb] = new LeafT(openvdb::Coord(x & ~7, y0, z0), background, false);
+                                values[xb] = rowLeaves[xb]->buffer().data();
                             }
-                            // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
-                            const openvdb::Index offset = ((x & 7) << 6) | ((y & 7) << 3) | (z & 7);
-                            values[offset] = slab[row + x];
-                            leaf->getValueMask().setOn(offset);
+                            const openvdb::Index offset = (static_cast<openvdb::Index>(x & 7) << 6) | yz;
+                            values[xb][offset] = src[x];
+                            rowLeaves[xb]->getValueMask().setOn(offset);
                         }
                     }
-                leaves[static_cast<std::size_t>(blk)] = leaf;
             }
         });
         for (LeafT* leaf : leaves)

@@ -8,12 +8,14 @@
 #include "surface_test_shapes.h"
 #include "volume/error.h"
 
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 #include <algorithm>
 #include <functional>
 #include <limits>
@@ -176,6 +178,50 @@ TEST(ExtractSurface, OrientationFollowsTheSignNotTheShape)
         ASSERT_GT(n[0] * c[0] + n[1] * c[1] + n[2] * c[2], 0.f) << "face " << f.idx();
     }
     EXPECT_EQ(zeroNormals, 0);
+}
+
+TEST(LumenSideTest, ReadsTheLevelSetExactlyAsOpenVdbsBoxSampler)
+{
+    // The orientation tests read the level set with corners taken from their leaf (issue 15:
+    // the guard after smoothing classifies every face before the first pair); the values must
+    // be GridSampler<ConstAccessor, BoxSampler>'s, bit for bit: at random points, at points on
+    // and around the leaves' faces (x, y or z of the lower corner at 7 mod 8, negative
+    // coordinates) and outside the band (tiles, background).
+    const openvdb::FloatGrid::Ptr sdf = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        6.0f, openvdb::Vec3f(0.3f, -0.2f, 0.1f), 0.37f, 3.0f);
+    sdf->transform().postTranslate(openvdb::Vec3d(-0.05, 0.11, 0.02));
+    const LumenSideTest side(*sdf);
+    const openvdb::FloatGrid::ConstAccessor accessor = sdf->getConstAccessor();
+    const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> reference(
+        accessor, sdf->transform());
+    std::mt19937 random(7);
+    std::uniform_real_distribution<double> within(-8.0, 8.0), fraction(0.0, 1.0);
+    int checked = 0, inLeafCorners = 0;
+    auto check = [&](const openvdb::Vec3d& index) {
+        const openvdb::Vec3d world = sdf->indexToWorld(index);
+        const float expected = reference.wsSample(world);
+        const float got = side.valueAt(OpenMesh::Vec3d(world.x(), world.y(), world.z()));
+        ASSERT_EQ(got, expected) << "at index " << index << ": expected BoxSampler's value";
+        ++checked;
+        const openvdb::Coord c = openvdb::Coord::floor(sdf->worldToIndex(world));
+        if ((c.x() & 7) != 7 && (c.y() & 7) != 7 && (c.z() & 7) != 7 && accessor.probeConstLeaf(c)) ++inLeafCorners;
+    };
+    for (int n = 0; n < 20000; ++n) {
+        const openvdb::Vec3d w(within(random), within(random), within(random));
+        check(sdf->worldToIndex(w));
+    }
+    // Across leaf faces: the lower corner at 6, 7 and 8 mod 8 on each axis, negative included.
+    for (int i = -24; i <= 24; i += 8)
+        for (int d = -1; d <= 1; ++d)
+            for (int n = 0; n < 50; ++n) {
+                const double a = double(i + d) + fraction(random), b = 16.0 * fraction(random) - 8.0,
+                             e = 16.0 * fraction(random) - 8.0;
+                check(openvdb::Vec3d(a, b, e));
+                check(openvdb::Vec3d(b, a, e));
+                check(openvdb::Vec3d(e, b, a));
+            }
+    EXPECT_GT(inLeafCorners, checked / 10) << "few samples read their corners from one leaf";
+    EXPECT_LT(inLeafCorners, checked) << "no sample needed the tree look-ups";
 }
 
 TEST(InwardFaceFraction, FlippedMeshScoresZero)

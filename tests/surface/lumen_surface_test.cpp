@@ -294,6 +294,9 @@ void expectSameMeasures(const LumenSurfaceReport& a, const LumenSurfaceReport& b
     near(a.smoothedVolumeMm3, b.smoothedVolumeMm3, "smoothed volume");
     near(a.smoothedRoughnessDeg, b.smoothedRoughnessDeg, "smoothed roughness");
     near(a.smoothingVolumeChange, b.smoothingVolumeChange, "volume change");
+    near(a.rawAreaMm2, b.rawAreaMm2, "raw area");
+    near(a.rawVolumeMm3, b.rawVolumeMm3, "raw volume");
+    near(a.rawRoughnessDeg, b.rawRoughnessDeg, "raw roughness");
 }
 
 } // namespace
@@ -316,11 +319,17 @@ TEST(LumenSurface, FinalChecksMadeLaterGiveTheSameReport)
         EXPECT_FALSE(now.finalChecksPending);
         ASSERT_TRUE(later.finalChecksPending) << "the final checks were made at once although asked to wait";
         EXPECT_EQ(later.check.faces, 0) << "checked although asked to wait";
+        // The raw mesh's measures wait too (they are not needed to render).
+        EXPECT_EQ(later.rawAreaMm2, 0.0) << "raw mesh measured although asked to wait";
+        EXPECT_EQ(later.rawRoughnessDeg, 0.0) << "raw mesh measured although asked to wait";
+        EXPECT_EQ(bool(later.extractedPoints), smooth) << "extracted positions kept only when smoothing moved them";
         ASSERT_EQ(a.n_vertices(), b.n_vertices());
         ASSERT_EQ(a.n_faces(), b.n_faces());
         for (const auto v : a.vertices()) ASSERT_EQ(a.point(v), b.point(v)) << "vertex " << v.idx();
         checkLumenSurface(b, *grid, later);
         EXPECT_FALSE(later.finalChecksPending);
+        EXPECT_FALSE(later.extractedPoints) << "the extracted positions are kept after the checks";
+        EXPECT_GT(later.rawAreaMm2, 0.0);
         EXPECT_EQ(finalCheckCounts(later), finalCheckCounts(now));
         expectSameMeasures(later, now);
         EXPECT_GT(later.check.faces, 0);

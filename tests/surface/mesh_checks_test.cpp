@@ -202,5 +202,44 @@ TEST(MeshChecks, SphereInsideASphericalShellNestsTwice)
     EXPECT_NEAR(c.enclosedVolumeMm3 / expected, 1.0, 0.01);
 }
 
+TEST(MeshChecks, MeasuresAtOtherPositionsAreThoseOfTheMovedMesh)
+{
+    // measureMesh and meanDihedralAngleDeg with positions given apart (the mesh stage measures
+    // the extracted surface after smoothing moved it, issue 15) must give the figures of a mesh
+    // whose vertices are at those positions, bit for bit: several components (nested spheres,
+    // an open box whose loop is capped).
+    auto grid = test::sampleSdf(
+        [](const openvdb::Vec3d& p) {
+            const double r = p.length();
+            return std::min(r - 3.0, std::max(r - 10.0, 6.0 - r));
+        },
+        openvdb::Vec3d(-12), openvdb::Vec3d(12), 0.5);
+    TriMesh mesh = extractSurface(*grid, MeshParams{});
+    addBox(mesh, {20, 0, 0}, {21, 2, 3}, /*inward=*/true, /*skipTop=*/true);
+    std::vector<TriMesh::Point> moved(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) {
+        const TriMesh::Point& p = mesh.point(v);
+        // A smooth, non-rigid deformation: changes area, volume and angles.
+        moved[std::size_t(v.idx())] = TriMesh::Point(p[0] * 1.1f + 0.05f * std::sin(p[1]), p[1] * 0.9f, p[2] + 0.1f * p[0]);
+    }
+    const MeshMeasures apart = measureMesh(mesh, moved);
+    const double apartRoughness = meanDihedralAngleDeg(mesh, moved);
+    const MeshCheck before = checkMesh(mesh);
+    const double beforeRoughness = meanDihedralAngleDeg(mesh);
+    for (const auto v : mesh.vertices()) mesh.set_point(v, moved[std::size_t(v.idx())]);
+    const MeshCheck after = checkMesh(mesh);
+    ASSERT_EQ(after.components, 4);
+    ASSERT_EQ(after.boundaryLoops, 1);
+    EXPECT_NE(after.areaMm2, before.areaMm2) << "the deformation should change the area";
+    EXPECT_NE(meanDihedralAngleDeg(mesh), beforeRoughness) << "the deformation should change the angles";
+    // Sums of parallel reductions may be joined in another order from run to run: equal to
+    // the last bits of a double.
+    EXPECT_NEAR(apart.areaMm2, after.areaMm2, 1e-12 * after.areaMm2) << "expected the moved mesh's area";
+    EXPECT_NEAR(apart.enclosedVolumeMm3, after.enclosedVolumeMm3, 1e-12 * std::abs(after.enclosedVolumeMm3))
+        << "expected the moved mesh's enclosed volume";
+    EXPECT_NEAR(apartRoughness, meanDihedralAngleDeg(mesh), 1e-12 * apartRoughness)
+        << "expected the moved mesh's roughness";
+}
+
 } // namespace
 } // namespace flyover

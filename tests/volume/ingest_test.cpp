@@ -162,6 +162,21 @@ TEST(Ingest, IsotropicInputIsCopiedWithoutInterpolation)
                 ASSERT_EQ(acc.getValue(c), img.at(i, j, k)) << c;
                 ASSERT_LT(distance(worldOf(*grid, c), img.geometry.worldFromIndex({double(i), double(j), double(k)})), 1e-9);
             }
+    // The leaves are built row by row of the slab: every voxel of the lattice (partial leaves
+    // at the +x, +y, +z ends included) is active exactly inside the body, outside it holds the
+    // background, and there is one leaf per 8^3 block holding body voxels (x: 0-23 -> 3 blocks,
+    // y: 3-16 -> 3, z: 0-11 -> 2).
+    EXPECT_EQ(grid->tree().leafCount(), 3u * 3u * 2u);
+    for (int k = 0; k < 12; ++k)
+        for (int j = 0; j < 20; ++j)
+            for (int i = 0; i < 24; ++i) {
+                const openvdb::Coord c{i, j, k};
+                const bool body = i >= 3 && i < 21 && j >= 3 && j < 17;
+                ASSERT_EQ(acc.isValueOn(c), body) << "voxel " << c << ": expected " << (body ? "active" : "inactive");
+                if (!body) {
+                    ASSERT_EQ(acc.getValue(c), -1000.0f) << "voxel " << c << " outside the body";
+                }
+            }
 }
 
 TEST(Ingest, VoxelSizeParameterSetsTheLattice)
