@@ -63,6 +63,32 @@ struct UnionFind {
     }
 };
 
+/// One bit per slot of a LumenIndex, a block's 512 bits in one 64-byte cache line.
+class TakenBits {
+public:
+    explicit TakenBits(std::size_t blocks) : lines_(blocks) {}
+    bool test(Slot s) const { return (word(s) >> (s & 63)) & 1u; }
+    void set(Slot s) { word(s) |= std::uint64_t(1) << (s & 63); }
+    /// Sets the bit; returns whether it was set before.
+    bool testAndSet(Slot s)
+    {
+        std::uint64_t& w = word(s);
+        const std::uint64_t bit = std::uint64_t(1) << (s & 63);
+        const bool was = (w & bit) != 0;
+        w |= bit;
+        return was;
+    }
+
+private:
+    struct alignas(64) Line {
+        std::uint64_t words[LEAF_VOXELS / 64] = {};
+    };
+    static_assert(sizeof(Line) == 64, "a block's bits are one cache line");
+    std::uint64_t& word(Slot s) { return lines_[s / LEAF_VOXELS].words[(s % LEAF_VOXELS) >> 6]; }
+    const std::uint64_t& word(Slot s) const { return lines_[s / LEAF_VOXELS].words[(s % LEAF_VOXELS) >> 6]; }
+    std::vector<Line> lines_;
+};
+
 /// Two touching regions: the saddle of D across their interface.
 struct Link {
     std::int32_t a = 0, b = 0;        ///< region ids, a < b
@@ -148,16 +174,20 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         return Vec3d{w[0], w[1], w[2]};
     };
 
-    // 1. Cores.
-    std::vector<std::uint8_t> core(n, 0);
+    // 1. Cores, one bit per slot (TakenBits: a block's bits in one cache line).
+    const std::size_t blocks = index.blockOrigin.size();
+    TakenBits core(blocks);
     {
         const std::vector<float> nearby = nearbyMaxDepth(index);
         const float minCore = static_cast<float>(voxelMm);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
                           [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                const float d = index.depthMm[s];
-                core[s] = d >= minCore && d >= 0.5f * nearby[s / LEAF_VOXELS];
+            for (std::size_t blk = r.begin(); blk != r.end(); ++blk) {
+                const float half = 0.5f * nearby[blk];
+                for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s) {
+                    const float d = index.depthMm[s];
+                    if (d >= minCore && d >= half) core.set(s);
+                }
             }
         });
     }
@@ -165,40 +195,47 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
 
     // 2. Chunks: shells of breadth-first steps within each core piece, then connected parts of
     // each shell. A 26-step is up to sqrt(3) voxels long: shells count steps of ~1.2 voxels.
+    // The queues carry the steps, the bits say what was reached: `shell` is the only per-slot
+    // array read, once per core neighbour of a voxel of the same part.
     std::vector<std::int32_t> region(n, -1);
     std::int32_t regionCount = 0;
     {
         std::vector<std::int32_t> shell(n, -1);
         const double shellSteps = std::max(1.0, params.chunkMm / (1.2 * voxelMm));
-        std::vector<Slot> queue;
-        std::vector<std::int32_t> steps(n, -1);
+        auto shellOf = [&](std::int32_t steps) { return static_cast<std::int32_t>(double(steps) / shellSteps); };
+        std::vector<std::pair<Slot, std::int32_t>> stepQueue;
+        TakenBits seen(blocks);
         for (Slot s = 0; s < n; ++s) {
-            if (!core[s] || steps[s] >= 0) continue;
-            queue.assign(1, s);
-            steps[s] = 0;
-            for (std::size_t head = 0; head < queue.size(); ++head) {
+            if (!core.test(s) || seen.test(s)) continue;
+            stepQueue.assign(1, {s, 0});
+            seen.set(s);
+            shell[s] = shellOf(0);
+            for (std::size_t head = 0; head < stepQueue.size(); ++head) {
                 if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-                const Slot u = queue[head];
-                index.forEachNeighbour(u, [&](Slot t, int) {
-                    if (core[t] && steps[t] < 0) {
-                        steps[t] = steps[u] + 1;
-                        queue.push_back(t);
+                const auto [u, steps] = stepQueue[head];
+                index.forEachNeighbourSlot(u, [&](Slot t, int) {
+                    if (core.test(t) && !seen.testAndSet(t)) {
+                        shell[t] = shellOf(steps + 1);
+                        stepQueue.push_back({t, steps + 1});
                     }
                 });
             }
         }
-        for (Slot s = 0; s < n; ++s)
-            if (core[s]) shell[s] = static_cast<std::int32_t>(double(steps[s]) / shellSteps);
+        std::vector<std::pair<Slot, std::int32_t>>().swap(stepQueue);
+        TakenBits labelled(blocks);
+        std::vector<Slot> queue;
         for (Slot s = 0; s < n; ++s) {
-            if (!core[s] || region[s] >= 0) continue;
+            if (!core.test(s) || labelled.test(s)) continue;
             const std::int32_t id = regionCount++;
+            const std::int32_t part = shell[s];  // every voxel of the part is in this shell
             queue.assign(1, s);
+            labelled.set(s);
             region[s] = id;
             for (std::size_t head = 0; head < queue.size(); ++head) {
                 if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-                const Slot u = queue[head];
-                index.forEachNeighbour(u, [&](Slot t, int) {
-                    if (core[t] && region[t] < 0 && shell[t] == shell[u]) {
+                index.forEachNeighbourSlot(queue[head], [&](Slot t, int) {
+                    if (core.test(t) && !labelled.test(t) && shell[t] == part) {
+                        labelled.set(t);
                         region[t] = id;
                         queue.push_back(t);
                     }
@@ -219,37 +256,47 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         auto binOf = [&](Slot s) {
             return std::min(bins - 1, static_cast<int>(double(index.depthMm[s]) / binMm));
         };
-        std::vector<std::vector<Slot>> buckets(static_cast<std::size_t>(bins));
-        for (Slot s = 0; s < n; ++s)
-            if (region[s] >= 0) buckets[binOf(s)].push_back(s);
-        // During the flood the holes (non-lumen slots) hold HOLE, so that a neighbour is
-        // tested by one read of `region` instead of its depth and then its region.
-        constexpr std::int32_t HOLE = -2;
-        auto markHoles = [&](std::int32_t from, std::int32_t to) {
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
-                              [&](const tbb::blocked_range<std::size_t>& r) {
-                for (std::size_t s = r.begin(); s != r.end(); ++s)
-                    if (region[s] == from && !index.isLumen(static_cast<Slot>(s))) region[s] = to;
-            });
+        // A bucket entry carries the region it floods, so that a voxel's own region is not
+        // read back from `region` (a scattered read) when it is taken.
+        struct Entry {
+            Slot s;
+            std::int32_t r;
         };
-        markHoles(-1, HOLE);
+        std::vector<std::vector<Entry>> buckets(static_cast<std::size_t>(bins));
+        for (Slot s = 0; s < n; ++s)
+            if (region[s] >= 0) buckets[binOf(s)].push_back({s, region[s]});
+        // Whether a slot is taken (a hole or already in a region): one bit per slot, a block's
+        // 512 bits in one cache line, so that testing the 26 neighbours of a voxel reads at
+        // most 8 lines (its block's and its neighbour blocks') instead of 26 scattered reads.
+        // A lumen voxel not yet in a region holds its bin in `region` (UNREACHED - bin < 0), so
+        // that taking it reads and writes one scattered value instead of its depth and its
+        // region. The same flood, the same regions.
+        constexpr std::int32_t UNREACHED = -3;
+        TakenBits taken(blocks);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
+                for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s) {
+                    if (region[s] >= 0 || !index.isLumen(s)) taken.set(s);
+                    else region[s] = UNREACHED - binOf(s);
+                }
+        });
         std::size_t done = 0;
         for (int b = bins - 1; b >= 0; --b) {
-            std::vector<Slot>& bucket = buckets[b];
+            std::vector<Entry>& bucket = buckets[b];
             for (std::size_t i = 0; i < bucket.size(); ++i) {  // grows while visited
                 if ((++done & 0xfffff) == 0) checkCancelled(progress);
-                const Slot u = bucket[i];
-                const std::int32_t r = region[u];
-                index.forEachNeighbourSlot(u, [&](Slot t, int) {
-                    if (region[t] == -1) {
-                        region[t] = r;
-                        buckets[std::min(b, binOf(t))].push_back(t);
-                    }
+                const Entry e = bucket[i];
+                index.forEachNeighbourSlot(e.s, [&](Slot t, int) {
+                    if (taken.testAndSet(t)) return;
+                    const int bin = UNREACHED - region[t];
+                    region[t] = e.r;
+                    buckets[std::min(b, bin)].push_back({t, e.r});
                 });
             }
-            std::vector<Slot>().swap(bucket);
+            std::vector<Entry>().swap(bucket);
         }
-        markHoles(HOLE, -1);
+        // Lumen voxels left unreached (in pieces without core voxels) still hold their bin (< 0).
         // Pieces without any core voxel (too thin everywhere): one region each.
         std::vector<Slot> queue;
         for (Slot s = 0; s < n; ++s) {
@@ -278,25 +325,38 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
     }
     reportProgress(progress, 0.5, "contacts: region graph");
 
-    // 4. Links between touching regions.
+    // 4. Links between touching regions; on the way, the boundary voxels (those with a
+    // 26-neighbour in another region: the only ones that can lie on an interface, step 5).
     std::vector<Link> links;
+    std::vector<Slot> boundary;
     {
         using Map = std::unordered_map<std::uint64_t, Link>;
         tbb::enumerable_thread_specific<Map> local;
-        const std::size_t blocks = index.blockOrigin.size();
+        // Per range of blocks, its boundary voxels in slot order; ranges in order at the end.
+        tbb::enumerable_thread_specific<std::vector<std::pair<std::size_t, std::vector<Slot>>>> boundaryParts;
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 16),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             Map& map = local.local();
+            std::vector<Slot> part;
             for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
                 for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s) {
                     if (!index.isLumen(s)) continue;
                     const std::int32_t rs = region[s];
+                    std::int32_t lastRegion = rs;  // the link of the last neighbour in another region
+                    Link* last = nullptr;
+                    bool onBoundary = false;
                     index.forEachNeighbour(s, [&](Slot t, int k) {
                         const std::int32_t rt = region[t];
-                        if (k >= HALF_STEPS || rt == rs) return;
+                        if (rt == rs) return;
+                        onBoundary = true;
+                        if (k >= HALF_STEPS) return;
                         const float saddle = std::min(index.depthMm[s], index.depthMm[t]);
                         const Slot sa = rs < rt ? s : t, sb = rs < rt ? t : s;
-                        Link& l = map[pairKey(rs, rt)];
+                        if (rt != lastRegion) {
+                            last = &map[pairKey(rs, rt)];
+                            lastRegion = rt;
+                        }
+                        Link& l = *last;
                         if (l.sa == NO_SLOT) {
                             l.a = std::min(rs, rt);
                             l.b = std::max(rs, rt);
@@ -307,8 +367,19 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                             l.sb = sb;
                         }
                     });
+                    if (onBoundary) part.push_back(s);
                 }
+            if (!part.empty()) boundaryParts.local().push_back({r.begin(), std::move(part)});
         });
+        std::vector<std::pair<std::size_t, std::vector<Slot>>> parts;
+        for (auto& p : boundaryParts)
+            for (auto& q : p) parts.push_back(std::move(q));
+        std::sort(parts.begin(), parts.end(),
+                  [](const auto& x, const auto& y) { return x.first < y.first; });
+        std::size_t total = 0;
+        for (const auto& p : parts) total += p.second.size();
+        boundary.reserve(total);
+        for (const auto& p : parts) boundary.insert(boundary.end(), p.second.begin(), p.second.end());
         Map all;
         for (const Map& m : local)
             for (const auto& [key, l] : m) {
@@ -392,22 +463,28 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         }
     std::vector<std::vector<Slot>> interfaceOf(narrowLinks.size());
     if (!narrowLinks.empty()) {
+        // Only the voxels of regions with a narrow link can be on an interface.
+        std::vector<std::uint8_t> hasNarrow(static_cast<std::size_t>(regionCount), 0);
+        for (std::size_t i : narrowLinks) hasNarrow[links[i].a] = hasNarrow[links[i].b] = 1;
         using Hits = std::vector<std::pair<int, Slot>>;
         tbb::enumerable_thread_specific<Hits> local;
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boundary.size(), 4096),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             Hits& hits = local.local();
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                if (!index.isLumen(static_cast<Slot>(s))) continue;
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const Slot s = boundary[i];
                 const std::int32_t rs = region[s];
+                if (!hasNarrow[rs]) continue;
                 int last = -1;
-                index.forEachNeighbour(static_cast<Slot>(s), [&](Slot t, int) {
+                std::int32_t lastRegion = rs;  // a neighbour of the same region as the last: no new link
+                index.forEachNeighbour(s, [&](Slot t, int) {
                     const std::int32_t rt = region[t];
-                    if (rt == rs) return;
+                    if (rt == lastRegion) return;
+                    lastRegion = rt;
                     auto it = narrowOf.find(pairKey(rs, rt));
                     if (it == narrowOf.end() || it->second == last) return;
                     last = it->second;
-                    hits.push_back({it->second, static_cast<Slot>(s)});
+                    hits.push_back({it->second, s});
                 });
             }
         });
