@@ -334,20 +334,53 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         tbb::enumerable_thread_specific<Map> local;
         // Per range of blocks, its boundary voxels in slot order; ranges in order at the end.
         tbb::enumerable_thread_specific<std::vector<std::pair<std::size_t, std::vector<Slot>>>> boundaryParts;
+        // A block whose lumen voxels are all in one region (uniform) has no boundary voxel
+        // inside (away from its faces), and none at all when its neighbour blocks are uniform
+        // in the same region: those voxels are skipped (they touch no other region).
+        constexpr std::int32_t MIXED = -1;
+        std::vector<std::int32_t> uniform(blocks, MIXED);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t blk = r.begin(); blk != r.end(); ++blk) {
+                std::int32_t only = MIXED;
+                bool mixed = false;
+                for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS && !mixed; ++s) {
+                    if (!index.isLumen(s)) continue;
+                    if (only == MIXED) only = region[s];
+                    else mixed = region[s] != only;
+                }
+                uniform[blk] = mixed ? MIXED : only;
+            }
+        });
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 16),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             Map& map = local.local();
             std::vector<Slot> part;
-            for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
+            for (std::size_t blk = r.begin(); blk != r.end(); ++blk) {
+                const std::int32_t only = uniform[blk];
+                if (only != MIXED) {
+                    bool alone = true;
+                    for (std::int32_t nb : index.neighbour[blk])
+                        if (nb >= 0 && uniform[static_cast<std::size_t>(nb)] != only) alone = false;
+                    if (alone) continue;
+                }
                 for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s) {
                     if (!index.isLumen(s)) continue;
+                    if (only != MIXED) {
+                        const int off = static_cast<int>(s % LEAF_VOXELS);
+                        const int x = off >> (2 * LEAF_LOG2), y = (off >> LEAF_LOG2) & (LEAF_DIM - 1),
+                                  z = off & (LEAF_DIM - 1);
+                        if (x > 0 && x < LEAF_DIM - 1 && y > 0 && y < LEAF_DIM - 1 && z > 0 && z < LEAF_DIM - 1)
+                            continue;
+                    }
                     const std::int32_t rs = region[s];
                     std::int32_t lastRegion = rs;  // the link of the last neighbour in another region
                     Link* last = nullptr;
                     bool onBoundary = false;
-                    index.forEachNeighbour(s, [&](Slot t, int k) {
+                    // Holes hold region -1: one read of `region` tests a neighbour.
+                    index.forEachNeighbourSlot(s, [&](Slot t, int k) {
                         const std::int32_t rt = region[t];
-                        if (rt == rs) return;
+                        if (rt == rs || rt < 0) return;
                         onBoundary = true;
                         if (k >= HALF_STEPS) return;
                         const float saddle = std::min(index.depthMm[s], index.depthMm[t]);
@@ -369,6 +402,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                     });
                     if (onBoundary) part.push_back(s);
                 }
+            }
             if (!part.empty()) boundaryParts.local().push_back({r.begin(), std::move(part)});
         });
         std::vector<std::pair<std::size_t, std::vector<Slot>>> parts;
@@ -477,9 +511,9 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                 if (!hasNarrow[rs]) continue;
                 int last = -1;
                 std::int32_t lastRegion = rs;  // a neighbour of the same region as the last: no new link
-                index.forEachNeighbour(s, [&](Slot t, int) {
+                index.forEachNeighbourSlot(s, [&](Slot t, int) {
                     const std::int32_t rt = region[t];
-                    if (rt == lastRegion) return;
+                    if (rt == lastRegion || rt < 0) return;  // a hole: -1
                     lastRegion = rt;
                     auto it = narrowOf.find(pairKey(rs, rt));
                     if (it == narrowOf.end() || it->second == last) return;
