@@ -1,5 +1,5 @@
 // Steps 1-3 of the contact search (contact_regions.h). Per-slot flags are bits, a block's 512
-// in one cache line (TakenBits), so that testing a voxel's 26 neighbours reads a few lines
+// in one cache line (SlotBits), so that testing a voxel's 26 neighbours reads a few lines
 // instead of 26 scattered bytes or words; the searches are serial and deterministic.
 #include "volume/contact_regions.h"
 
@@ -8,49 +8,20 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
 namespace flyover::contact_regions {
 
-namespace {
-
 using namespace lumen_index;
-
-/// One bit per slot of a LumenIndex, a block's 512 bits in one 64-byte cache line.
-class TakenBits {
-public:
-    explicit TakenBits(std::size_t blocks) : lines_(blocks) {}
-    bool test(Slot s) const { return (word(s) >> (s & 63)) & 1u; }
-    void set(Slot s) { word(s) |= std::uint64_t(1) << (s & 63); }
-    /// Sets the bit; returns whether it was set before.
-    bool testAndSet(Slot s)
-    {
-        std::uint64_t& w = word(s);
-        const std::uint64_t bit = std::uint64_t(1) << (s & 63);
-        const bool was = (w & bit) != 0;
-        w |= bit;
-        return was;
-    }
-
-private:
-    struct alignas(64) Line {
-        std::uint64_t words[LEAF_VOXELS / 64] = {};
-    };
-    static_assert(sizeof(Line) == 64, "a block's bits are one cache line");
-    std::uint64_t& word(Slot s) { return lines_[s / LEAF_VOXELS].words[(s % LEAF_VOXELS) >> 6]; }
-    const std::uint64_t& word(Slot s) const { return lines_[s / LEAF_VOXELS].words[(s % LEAF_VOXELS) >> 6]; }
-    std::vector<Line> lines_;
-};
-
-} // namespace
 
 Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Progress* progress)
 {
     const std::size_t n = index.slotCount();
     const std::size_t blocks = index.blockOrigin.size();
-    // 1. Cores, one bit per slot (TakenBits: a block's bits in one cache line).
-    TakenBits core(blocks);
+    // 1. Cores, one bit per slot (SlotBits: a block's bits in one cache line).
+    SlotBits core(blocks);
     {
         const std::vector<float> nearby = nearbyMaxDepth(index);
         const float minCore = static_cast<float>(voxelMm);
@@ -78,7 +49,7 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
         const double shellSteps = std::max(1.0, chunkMm / (1.2 * voxelMm));
         auto shellOf = [&](std::int32_t steps) { return static_cast<std::int32_t>(double(steps) / shellSteps); };
         std::vector<std::pair<Slot, std::int32_t>> stepQueue;
-        TakenBits seen(blocks);
+        SlotBits seen(blocks);
         for (Slot s = 0; s < n; ++s) {
             if (!core.test(s) || seen.test(s)) continue;
             stepQueue.assign(1, {s, 0});
@@ -96,7 +67,7 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
             }
         }
         std::vector<std::pair<Slot, std::int32_t>>().swap(stepQueue);
-        TakenBits labelled(blocks);
+        SlotBits labelled(blocks);
         std::vector<Slot> queue;
         for (Slot s = 0; s < n; ++s) {
             if (!core.test(s) || labelled.test(s)) continue;
@@ -146,7 +117,7 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
         // that taking it reads and writes one scattered value instead of its depth and its
         // region. The same flood, the same regions.
         constexpr std::int32_t UNREACHED = -3;
-        TakenBits taken(blocks);
+        SlotBits taken(blocks);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
@@ -188,6 +159,54 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
         }
     }
     return {std::move(region), regionCount};
+}
+
+std::size_t piecesWithout(const LumenIndex& index, const Regions& regions,
+                          const std::vector<std::pair<std::int32_t, std::int32_t>>& touching,
+                          const std::vector<std::uint8_t>& removed, const std::vector<Slot>& removedSlots,
+                          Progress* progress)
+{
+    const std::vector<std::int32_t>& region = regions.region;
+    const std::size_t regionCount = static_cast<std::size_t>(regions.count);
+    std::vector<std::uint8_t> touched(regionCount, 0);
+    for (Slot s : removedSlots) touched[region[s]] = 1;
+    std::vector<Slot> kept;  // the kept voxels of the touched regions, in slot order
+    for (Slot s = 0; s < index.slotCount(); ++s)
+        if (region[s] >= 0 && touched[region[s]] && !removed[s]) kept.push_back(s);
+    // Each touched region's kept voxels, split into their connected parts: nodes from
+    // regionCount on (the touched regions' own ids stay unused).
+    std::unordered_map<Slot, std::int32_t> part;
+    part.reserve(kept.size());
+    UnionFind uf(regionCount);
+    std::vector<Slot> queue;
+    for (Slot s : kept) {
+        if (part.count(s)) continue;
+        const auto node = static_cast<std::int32_t>(uf.parent.size());
+        uf.parent.push_back(node);
+        part.emplace(s, node);
+        queue.assign(1, s);
+        for (std::size_t head = 0; head < queue.size(); ++head) {
+            if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
+            index.forEachNeighbour(queue[head], [&](Slot t, int) {
+                if (removed[t] || region[t] != region[s] || part.count(t)) return;
+                part.emplace(t, node);
+                queue.push_back(t);
+            });
+        }
+    }
+    for (Slot s : kept) {
+        const std::int32_t node = part.at(s);
+        index.forEachNeighbour(s, [&](Slot t, int) {
+            if (removed[t] || region[t] == region[s]) return;
+            uf.unite(node, touched[region[t]] ? part.at(t) : region[t]);
+        });
+    }
+    for (const auto& [a, b] : touching)
+        if (!touched[a] && !touched[b]) uf.unite(a, b);
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < uf.parent.size(); ++i)
+        if ((i >= regionCount || !touched[i]) && uf.find(static_cast<int>(i)) == static_cast<int>(i)) ++count;
+    return count;
 }
 
 } // namespace flyover::contact_regions

@@ -45,23 +45,7 @@ constexpr int HALF_STEPS = 13;
 
 constexpr double PI = 3.14159265358979323846;
 
-struct UnionFind {
-    std::vector<int> parent;
-    explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-    int find(int x)
-    {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    }
-    bool unite(int a, int b)
-    {
-        a = find(a);
-        b = find(b);
-        if (a == b) return false;
-        parent[std::max(a, b)] = std::min(a, b);
-        return true;
-    }
-};
+using contact_regions::UnionFind;
 
 /// Two touching regions: the saddle of D across their interface.
 struct Link {
@@ -100,32 +84,6 @@ void validate(const openvdb::FloatGrid& sdf, const ContactParams& p)
     const openvdb::Vec3d vs = xf.voxelSize();
     if (!(vs[0] > 0) || std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] || std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
         throw InputError("cutContacts: the sdf grid's voxels are not cubic");
-}
-
-/// Labels the 26-connected components of the lumen voxels with keep[s] != 0 (label -1
-/// elsewhere); returns their count.
-std::size_t countPieces(const LumenIndex& index, const std::vector<std::uint8_t>& removed,
-                        Progress* progress)
-{
-    std::vector<std::uint8_t> seen(index.slotCount(), 0);
-    std::vector<Slot> queue;
-    std::size_t count = 0;
-    for (Slot s = 0; s < index.slotCount(); ++s) {
-        if (!index.isLumen(s) || removed[s] || seen[s]) continue;
-        ++count;
-        queue.assign(1, s);
-        seen[s] = 1;
-        for (std::size_t head = 0; head < queue.size(); ++head) {
-            if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-            index.forEachNeighbour(queue[head], [&](Slot t, int) {
-                if (!seen[t] && !removed[t]) {
-                    seen[t] = 1;
-                    queue.push_back(t);
-                }
-            });
-        }
-    }
-    return count;
 }
 
 } // namespace
@@ -545,9 +503,21 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
     // adds one piece, a cycle link's none), else add them one at a time and keep those that do
     // not; write them to the grids with the distances near them corrected.
     if (!cuts.empty()) {
+        // The lumen's pieces without the removed voxels (contact_regions::piecesWithout: only
+        // the regions the cuts pass through are searched voxel by voxel).
+        std::vector<std::pair<std::int32_t, std::int32_t>> touching;
+        touching.reserve(links.size());
+        for (const Link& l : links) touching.push_back({l.a, l.b});
+        auto piecesAfterCuts = [&]() {
+            std::vector<Slot> removedSlots;
+            for (const Cut& c : cuts)
+                for (Slot s : interfaceOf[c.narrow])
+                    if (removed[s]) removedSlots.push_back(s);
+            return contact_regions::piecesWithout(index, flooded, touching, removed, removedSlots, progress);
+        };
         std::size_t treeCuts = 0;
         for (const Cut& c : cuts) treeCuts += c.tree;
-        if (countPieces(index, removed, progress) > report.pieces + treeCuts) {
+        if (piecesAfterCuts() > report.pieces + treeCuts) {
             std::fill(removed.begin(), removed.end(), 0);
             std::size_t allowed = report.pieces;
             for (Cut& c : cuts) {
@@ -557,7 +527,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                         removed[s] = 1;
                         added.push_back(s);
                     }
-                if (countPieces(index, removed, progress) > allowed + (c.tree ? 1 : 0)) {
+                if (piecesAfterCuts() > allowed + (c.tree ? 1 : 0)) {
                     for (Slot s : added) removed[s] = 0;
                     c.info.cut = false;
                     c.info.reason = "a contact whose cut would split the lumen further: kept";

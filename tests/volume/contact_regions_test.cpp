@@ -188,5 +188,77 @@ TEST(ContactRegions, SameAsTheReferenceFloodOnRandomLumens)
     EXPECT_EQ(compared, 24);
 }
 
+/// The 26-connected pieces of the lumen voxels not removed: a search of the whole lumen.
+std::size_t referencePieces(const LumenIndex& index, const std::vector<std::uint8_t>& removed)
+{
+    std::vector<std::uint8_t> seen(index.slotCount(), 0);
+    std::vector<Slot> queue;
+    std::size_t count = 0;
+    for (Slot s = 0; s < index.slotCount(); ++s) {
+        if (!index.isLumen(s) || removed[s] || seen[s]) continue;
+        ++count;
+        queue.assign(1, s);
+        seen[s] = 1;
+        for (std::size_t head = 0; head < queue.size(); ++head)
+            index.forEachNeighbour(queue[head], [&](Slot t, int) {
+                if (!seen[t] && !removed[t]) {
+                    seen[t] = 1;
+                    queue.push_back(t);
+                }
+            });
+    }
+    return count;
+}
+
+TEST(ContactRegions, PiecesWithoutRemovedVoxelsSameAsASearchOfTheWholeLumen)
+{
+    openvdb::initialize();
+    int split = 0, compared = 0;
+    for (unsigned seed = 1; seed <= 4; ++seed) {
+        const double voxelMm = 1.0;
+        const auto grid = randomLumen(seed, voxelMm, seed % 2 == 0);
+        const LumenIndex index = buildIndex(grid->tree());
+        const contact_regions::Regions regions = contact_regions::lumenRegions(index, voxelMm, 6.0);
+        std::vector<std::pair<std::int32_t, std::int32_t>> touching;
+        for (Slot s = 0; s < index.slotCount(); ++s)
+            if (index.isLumen(s))
+                index.forEachNeighbour(s, [&](Slot t, int) {
+                    if (regions.region[t] != regions.region[s]) touching.push_back({regions.region[s], regions.region[t]});
+                });
+        std::vector<Slot> lumen;
+        for (Slot s = 0; s < index.slotCount(); ++s)
+            if (index.isLumen(s)) lumen.push_back(s);
+        std::mt19937 rng(seed);
+        for (int trial = 0; trial < 12; ++trial) {
+            // Remove balls of voxels (radius 0-5) around random lumen voxels, or whole planes
+            // across the lumen (they split it), as cuts do.
+            std::vector<std::uint8_t> removed(index.slotCount(), 0);
+            std::vector<Slot> removedSlots;
+            const int balls = 1 + trial % 4;
+            for (int b = 0; b < balls; ++b) {
+                const openvdb::Coord c = index.coord(lumen[rng() % lumen.size()]);
+                const int r = static_cast<int>(rng() % 6);
+                for (Slot s : lumen) {
+                    const openvdb::Coord d = index.coord(s) - c;
+                    const bool inBall = d.x() * d.x() + d.y() * d.y() + d.z() * d.z() <= r * r;
+                    const bool inPlane = trial >= 8 && d.x() >= 0 && d.x() <= 1;
+                    if ((inBall || inPlane) && !removed[s]) {
+                        removed[s] = 1;
+                        removedSlots.push_back(s);
+                    }
+                }
+            }
+            const std::size_t expected = referencePieces(index, removed);
+            const std::size_t seen = contact_regions::piecesWithout(index, regions, touching, removed, removedSlots);
+            EXPECT_EQ(seen, expected) << "seed " << seed << ", trial " << trial << ", " << removedSlots.size()
+                                      << " voxels removed: pieces expected " << expected << ", seen " << seen;
+            split += expected > 2;  // the slab is a piece of its own
+            ++compared;
+        }
+    }
+    EXPECT_EQ(compared, 48);
+    EXPECT_GT(split, 3) << "expected some removals to split the lumen";
+}
+
 } // namespace
 } // namespace flyover
