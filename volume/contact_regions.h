@@ -39,8 +39,9 @@ private:
         std::uint64_t words[lumen_index::LEAF_VOXELS / 64] = {};
     };
     static_assert(sizeof(Line) == 64, "a block's bits are one cache line");
-    std::uint64_t& word(lumen_index::Slot s) { return lines_[s / lumen_index::LEAF_VOXELS].words[(s % lumen_index::LEAF_VOXELS) >> 6]; }
-    const std::uint64_t& word(lumen_index::Slot s) const { return lines_[s / lumen_index::LEAF_VOXELS].words[(s % lumen_index::LEAF_VOXELS) >> 6]; }
+    static constexpr int BLOCK = lumen_index::LEAF_VOXELS;
+    std::uint64_t& word(lumen_index::Slot s) { return lines_[s / BLOCK].words[(s % BLOCK) >> 6]; }
+    const std::uint64_t& word(lumen_index::Slot s) const { return lines_[s / BLOCK].words[(s % BLOCK) >> 6]; }
     std::vector<Line> lines_;
 };
 

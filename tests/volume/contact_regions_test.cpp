@@ -148,7 +148,8 @@ openvdb::FloatGrid::Ptr randomLumen(unsigned seed, double voxelMm, bool quantize
             for (int k = 0; k < size; ++k) {
                 double d = 1e9;
                 for (const Ball& b : balls)
-                    d = std::min(d, std::sqrt((i - b.x) * (i - b.x) + (j - b.y) * (j - b.y) + (k - b.z) * (k - b.z)) - b.r);
+                    d = std::min(d, std::sqrt((i - b.x) * (i - b.x) + (j - b.y) * (j - b.y) +
+                                              (k - b.z) * (k - b.z)) - b.r);
                 if (i >= 2 && i <= 40 && j >= 50 && j <= 51 && k >= 2 && k <= 30)
                     d = std::min(d, -0.3);  // the slab: two voxels thick, shallower than a voxel
                 if (quantize) d = std::round(d * 4.0) / 4.0;
@@ -223,7 +224,8 @@ TEST(ContactRegions, PiecesWithoutRemovedVoxelsSameAsASearchOfTheWholeLumen)
         for (Slot s = 0; s < index.slotCount(); ++s)
             if (index.isLumen(s))
                 index.forEachNeighbour(s, [&](Slot t, int) {
-                    if (regions.region[t] != regions.region[s]) touching.push_back({regions.region[s], regions.region[t]});
+                    if (regions.region[t] != regions.region[s])
+                        touching.push_back({regions.region[s], regions.region[t]});
                 });
         std::vector<Slot> lumen;
         for (Slot s = 0; s < index.slotCount(); ++s)
