@@ -6,7 +6,7 @@
 //
 //   segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--seed N]
 //                 [--touching N] [--redundant] [--rectal-tube] [--spacing SX,SY,SZ] [--ct FILE]
-//                 [--mask | --centerline] [--mask-file FILE [--contacts]]
+//                 [--mask | --centerline] [--mask-file FILE [--contacts]] [--lumen-file FILE]
 //
 // The phantom options are those of `flyover phantom`; --ct FILE ingests that CT (any format
 // openImage() reads, e.g. one written by `flyover phantom`) instead of generating a phantom.
@@ -16,6 +16,11 @@
 //
 // --mask-file FILE: the mask-only path on that mask file (e.g. a real segmentation) instead of a
 // phantom's; with --contacts, followed by cutContacts (volume/contacts.h), each step timed.
+//
+// --lumen-file FILE: cutContacts alone, each step timed, on a copy of the `lumen_sdf` and
+// `lumen_mask` grids of FILE (a study's lumen.vdb written with
+// `--set segment.cut_contacts=false`), with a digest of the cut grids and the contacts (the
+// same digest from two builds: the same cuts).
 //
 // The phantom is generated and ingested once and saved as a temporary .vdb; each measured
 // pass then runs in a fresh child process (this program with --grid FILE --mode MODE) that
@@ -157,8 +162,74 @@ int maskChild(const std::string& maskPath, int runs, bool contacts)
     return 0;
 }
 
+/// FNV-1a over the active voxels (coordinates and values, in tree order) of a grid.
+template<typename GridT>
+std::uint64_t gridDigest(const GridT& grid, std::uint64_t h = 1469598103934665603ull)
+{
+    auto add = [&h](const void* p, std::size_t bytes) {
+        const auto* c = static_cast<const unsigned char*>(p);
+        for (std::size_t i = 0; i < bytes; ++i) h = (h ^ c[i]) * 1099511628211ull;
+    };
+    for (auto it = grid.cbeginValueOn(); it; ++it) {
+        const openvdb::Coord c = it.getCoord();
+        const auto v = *it;
+        add(&c, sizeof c);
+        add(&v, sizeof v);
+    }
+    return h;
+}
+
+int lumenChild(const std::string& lumenPath, int runs)
+{
+    openvdb::initialize();
+    openvdb::io::File file(lumenPath);
+    file.open();
+    const auto sdf = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("lumen_sdf"));
+    const auto mask = openvdb::gridPtrCast<openvdb::BoolGrid>(file.readGrid("lumen_mask"));
+    file.close();
+    if (!sdf || !mask) throw std::runtime_error(lumenPath + ": lumen_sdf or lumen_mask missing or of another type");
+    const double loadedMb = currentRssMb();
+    std::vector<double> seconds, cpu;
+    std::string what;
+    StepTimes steps;
+    for (int r = 0; r < runs; ++r) {
+        const auto s = sdf->deepCopy();
+        const auto m = mask->deepCopy();
+        const double c0 = cpuSeconds();
+        const auto t0 = std::chrono::steady_clock::now();
+        steps.start();
+        const ContactReport cr = cutContacts(*s, m.get(), ContactParams{}, &steps);
+        steps.update(1.0, "end");
+        seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        cpu.push_back(cpuSeconds() - c0);
+        std::size_t cut = 0;
+        std::ostringstream o;
+        o.precision(17);
+        for (const ContactInfo& c : cr.contacts) {
+            cut += c.cut;
+            o << c.positionMm.x << ',' << c.positionMm.y << ',' << c.positionMm.z << ',' << c.widthMm << ','
+              << c.voxelsRemoved << ',' << c.links << ',' << c.cut << ',' << c.detourMm << ';';
+        }
+        const std::string contacts = o.str();
+        std::uint64_t h = gridDigest(*m, gridDigest(*s));
+        for (char ch : contacts) h = (h ^ static_cast<unsigned char>(ch)) * 1099511628211ull;
+        std::ostringstream w;
+        w << cr.regions << " regions, " << cr.links << " links, " << cr.cycleLinks << " cycle links, "
+          << cr.wideCycles << " wide cycles, " << cut << " of " << cr.contacts.size() << " contact(s) cut, digest "
+          << std::hex << h;
+        what = w.str();
+    }
+    std::sort(seconds.begin(), seconds.end());
+    std::sort(cpu.begin(), cpu.end());
+    steps.print(runs);
+    std::printf("contacts %.3f %.3f %.3f %.3f %.0f %.0f %s\n", seconds[seconds.size() / 2], seconds.front(),
+                seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
+    return 0;
+}
+
 int child(const std::string& gridPath, const std::string& mode, int runs)
 {
+    if (mode == "lumencontacts") return lumenChild(gridPath, runs);
     if (mode == "mask" || mode == "maskcontacts") return maskChild(gridPath, runs, mode == "maskcontacts");
     openvdb::initialize();
     openvdb::io::File file(gridPath);
@@ -242,7 +313,7 @@ int main(int argc, char** argv)
     std::string size = "full", grid, mode;
     int runs = 5;
     bool fluid = false, collapse = false, mask = false, centerline = false, contacts = false;
-    std::string maskFile;
+    std::string maskFile, lumenFile;
     PhantomParams pp;
     std::string ctPath, spacingText;
     for (int i = 1; i < argc; ++i) {
@@ -257,6 +328,7 @@ int main(int argc, char** argv)
         else if (a == "--centerline") centerline = true;
         else if (a == "--mask-file" && i + 1 < argc) maskFile = argv[++i];
         else if (a == "--contacts") contacts = true;
+        else if (a == "--lumen-file" && i + 1 < argc) lumenFile = argv[++i];
         else if (a == "--seed" && i + 1 < argc) pp.seed = std::strtoull(argv[++i], nullptr, 10);
         else if (a == "--touching" && i + 1 < argc) pp.touching = std::atoi(argv[++i]);
         else if (a == "--redundant") pp.redundant = true;
@@ -266,7 +338,7 @@ int main(int argc, char** argv)
         else {
             std::cerr << "usage: segment_bench [--size full|medium|small] [--runs N] [--fluid] [--collapse] [--seed N] "
                          "[--touching N] [--redundant] [--rectal-tube] [--spacing SX,SY,SZ] [--ct FILE] "
-                         "[--mask | --centerline] [--mask-file FILE [--contacts]]\n";
+                         "[--mask | --centerline] [--mask-file FILE [--contacts]] [--lumen-file FILE]\n";
             return 2;
         }
     }
@@ -286,6 +358,13 @@ int main(int argc, char** argv)
     }
     try {
         if (!grid.empty()) return child(grid, mode, runs);
+        if (!lumenFile.empty()) {
+            const std::string self = fs::read_symlink("/proc/self/exe").string();
+            const Measure m = runChild(self, lumenFile, "lumencontacts", runs);
+            std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS peak %.0f MB; %s\n",
+                        "cutContacts", m.median, m.min, m.max, runs, m.cpuMedian, m.peakMb, m.what.c_str());
+            return 0;
+        }
         if (!maskFile.empty()) {
             const std::string self = fs::read_symlink("/proc/self/exe").string();
             const Measure m = runChild(self, maskFile, contacts ? "maskcontacts" : "mask", runs);

@@ -1,8 +1,7 @@
 // Contacts between touching loops (see contacts.h for the criterion). Steps:
-//  1. lumen index (lumen_index.h), cores relative to the nearby depth;
-//  2. core chunks: breadth-first shells of about chunkMm within each core piece, split into
-//     connected parts;
-//  3. regions: priority flood from the chunks in order of decreasing D (bucket queue);
+//  1.-3. (contact_regions.h) lumen index (lumen_index.h), cores relative to the nearby depth;
+//     core chunks: breadth-first shells of about chunkMm within each core piece, split into
+//     connected parts; regions: priority flood from the chunks in order of decreasing D;
 //  4. region graph: per touching pair of regions the saddle (largest min(D, D') over the
 //     26-neighbour pairs across their interface);
 //  5. maximum spanning forest by relative width; a narrow link left out (it closes a cycle) is a
@@ -14,6 +13,7 @@
 // Searches are serial and deterministic; scans over voxels run in parallel.
 #include "volume/contacts.h"
 
+#include "volume/contact_regions.h"
 #include "volume/error.h"
 #include "volume/lumen_index.h"
 
@@ -45,23 +45,7 @@ constexpr int HALF_STEPS = 13;
 
 constexpr double PI = 3.14159265358979323846;
 
-struct UnionFind {
-    std::vector<int> parent;
-    explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-    int find(int x)
-    {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    }
-    bool unite(int a, int b)
-    {
-        a = find(a);
-        b = find(b);
-        if (a == b) return false;
-        parent[std::max(a, b)] = std::min(a, b);
-        return true;
-    }
-};
+using contact_regions::UnionFind;
 
 /// Two touching regions: the saddle of D across their interface.
 struct Link {
@@ -102,32 +86,6 @@ void validate(const openvdb::FloatGrid& sdf, const ContactParams& p)
         throw InputError("cutContacts: the sdf grid's voxels are not cubic");
 }
 
-/// Labels the 26-connected components of the lumen voxels with keep[s] != 0 (label -1
-/// elsewhere); returns their count.
-std::size_t countPieces(const LumenIndex& index, const std::vector<std::uint8_t>& removed,
-                        Progress* progress)
-{
-    std::vector<std::uint8_t> seen(index.slotCount(), 0);
-    std::vector<Slot> queue;
-    std::size_t count = 0;
-    for (Slot s = 0; s < index.slotCount(); ++s) {
-        if (!index.isLumen(s) || removed[s] || seen[s]) continue;
-        ++count;
-        queue.assign(1, s);
-        seen[s] = 1;
-        for (std::size_t head = 0; head < queue.size(); ++head) {
-            if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-            index.forEachNeighbour(queue[head], [&](Slot t, int) {
-                if (!seen[t] && !removed[t]) {
-                    seen[t] = 1;
-                    queue.push_back(t);
-                }
-            });
-        }
-    }
-    return count;
-}
-
 } // namespace
 
 ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
@@ -148,124 +106,11 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         return Vec3d{w[0], w[1], w[2]};
     };
 
-    // 1. Cores.
-    std::vector<std::uint8_t> core(n, 0);
-    {
-        const std::vector<float> nearby = nearbyMaxDepth(index);
-        const float minCore = static_cast<float>(voxelMm);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                const float d = index.depthMm[s];
-                core[s] = d >= minCore && d >= 0.5f * nearby[s / LEAF_VOXELS];
-            }
-        });
-    }
-    reportProgress(progress, 0.15, "contacts: core chunks");
-
-    // 2. Chunks: shells of breadth-first steps within each core piece, then connected parts of
-    // each shell. A 26-step is up to sqrt(3) voxels long: shells count steps of ~1.2 voxels.
-    std::vector<std::int32_t> region(n, -1);
-    std::int32_t regionCount = 0;
-    {
-        std::vector<std::int32_t> shell(n, -1);
-        const double shellSteps = std::max(1.0, params.chunkMm / (1.2 * voxelMm));
-        std::vector<Slot> queue;
-        std::vector<std::int32_t> steps(n, -1);
-        for (Slot s = 0; s < n; ++s) {
-            if (!core[s] || steps[s] >= 0) continue;
-            queue.assign(1, s);
-            steps[s] = 0;
-            for (std::size_t head = 0; head < queue.size(); ++head) {
-                if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-                const Slot u = queue[head];
-                index.forEachNeighbour(u, [&](Slot t, int) {
-                    if (core[t] && steps[t] < 0) {
-                        steps[t] = steps[u] + 1;
-                        queue.push_back(t);
-                    }
-                });
-            }
-        }
-        for (Slot s = 0; s < n; ++s)
-            if (core[s]) shell[s] = static_cast<std::int32_t>(double(steps[s]) / shellSteps);
-        for (Slot s = 0; s < n; ++s) {
-            if (!core[s] || region[s] >= 0) continue;
-            const std::int32_t id = regionCount++;
-            queue.assign(1, s);
-            region[s] = id;
-            for (std::size_t head = 0; head < queue.size(); ++head) {
-                if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-                const Slot u = queue[head];
-                index.forEachNeighbour(u, [&](Slot t, int) {
-                    if (core[t] && region[t] < 0 && shell[t] == shell[u]) {
-                        region[t] = id;
-                        queue.push_back(t);
-                    }
-                });
-            }
-        }
-    }
-    reportProgress(progress, 0.3, "contacts: regions");
-
-    // 3. Regions: priority flood by decreasing D. A voxel takes the region of the voxel that
-    // reaches it first; buckets a quarter voxel wide; a voxel deeper than the current level
-    // (rare: a non-core voxel behind a saddle) is processed at the current level.
-    {
-        float maxDepth = 0.0f;
-        for (std::size_t s = 0; s < n; ++s) maxDepth = std::max(maxDepth, index.depthMm[s]);
-        const double binMm = 0.25 * voxelMm;
-        const int bins = static_cast<int>(maxDepth / binMm) + 1;
-        auto binOf = [&](Slot s) {
-            return std::min(bins - 1, static_cast<int>(double(index.depthMm[s]) / binMm));
-        };
-        std::vector<std::vector<Slot>> buckets(static_cast<std::size_t>(bins));
-        for (Slot s = 0; s < n; ++s)
-            if (region[s] >= 0) buckets[binOf(s)].push_back(s);
-        // During the flood the holes (non-lumen slots) hold HOLE, so that a neighbour is
-        // tested by one read of `region` instead of its depth and then its region.
-        constexpr std::int32_t HOLE = -2;
-        auto markHoles = [&](std::int32_t from, std::int32_t to) {
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
-                              [&](const tbb::blocked_range<std::size_t>& r) {
-                for (std::size_t s = r.begin(); s != r.end(); ++s)
-                    if (region[s] == from && !index.isLumen(static_cast<Slot>(s))) region[s] = to;
-            });
-        };
-        markHoles(-1, HOLE);
-        std::size_t done = 0;
-        for (int b = bins - 1; b >= 0; --b) {
-            std::vector<Slot>& bucket = buckets[b];
-            for (std::size_t i = 0; i < bucket.size(); ++i) {  // grows while visited
-                if ((++done & 0xfffff) == 0) checkCancelled(progress);
-                const Slot u = bucket[i];
-                const std::int32_t r = region[u];
-                index.forEachNeighbourSlot(u, [&](Slot t, int) {
-                    if (region[t] == -1) {
-                        region[t] = r;
-                        buckets[std::min(b, binOf(t))].push_back(t);
-                    }
-                });
-            }
-            std::vector<Slot>().swap(bucket);
-        }
-        markHoles(HOLE, -1);
-        // Pieces without any core voxel (too thin everywhere): one region each.
-        std::vector<Slot> queue;
-        for (Slot s = 0; s < n; ++s) {
-            if (!index.isLumen(s) || region[s] >= 0) continue;
-            const std::int32_t id = regionCount++;
-            queue.assign(1, s);
-            region[s] = id;
-            for (std::size_t head = 0; head < queue.size(); ++head)
-                index.forEachNeighbour(queue[head], [&](Slot t, int) {
-                    if (region[t] < 0) {
-                        region[t] = id;
-                        queue.push_back(t);
-                    }
-                });
-        }
-    }
+    // 1.-3. Cores, chunks, regions (contact_regions.h).
+    const std::size_t blocks = index.blockOrigin.size();
+    contact_regions::Regions flooded = contact_regions::lumenRegions(index, voxelMm, params.chunkMm, progress);
+    std::vector<std::int32_t>& region = flooded.region;
+    const std::int32_t regionCount = flooded.count;
     report.regions = static_cast<std::size_t>(regionCount);
     std::vector<float> peak(regionCount, -1.0f);
     std::vector<Slot> peakSlot(regionCount, NO_SLOT);
@@ -278,25 +123,71 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
     }
     reportProgress(progress, 0.5, "contacts: region graph");
 
-    // 4. Links between touching regions.
+    // 4. Links between touching regions; on the way, the boundary voxels (those with a
+    // 26-neighbour in another region: the only ones that can lie on an interface, step 5).
     std::vector<Link> links;
+    std::vector<Slot> boundary;
     {
         using Map = std::unordered_map<std::uint64_t, Link>;
         tbb::enumerable_thread_specific<Map> local;
-        const std::size_t blocks = index.blockOrigin.size();
+        // Per range of blocks, its boundary voxels in slot order; ranges in order at the end.
+        tbb::enumerable_thread_specific<std::vector<std::pair<std::size_t, std::vector<Slot>>>> boundaryParts;
+        // A block whose lumen voxels are all in one region (uniform) has no boundary voxel
+        // inside (away from its faces), and none at all when its neighbour blocks are uniform
+        // in the same region: those voxels are skipped (they touch no other region).
+        constexpr std::int32_t MIXED = -1;
+        std::vector<std::int32_t> uniform(blocks, MIXED);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t blk = r.begin(); blk != r.end(); ++blk) {
+                std::int32_t only = MIXED;
+                bool mixed = false;
+                for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS && !mixed; ++s) {
+                    if (!index.isLumen(s)) continue;
+                    if (only == MIXED) only = region[s];
+                    else mixed = region[s] != only;
+                }
+                uniform[blk] = mixed ? MIXED : only;
+            }
+        });
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 16),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             Map& map = local.local();
-            for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
+            std::vector<Slot> part;
+            for (std::size_t blk = r.begin(); blk != r.end(); ++blk) {
+                const std::int32_t only = uniform[blk];
+                if (only != MIXED) {
+                    bool alone = true;
+                    for (std::int32_t nb : index.neighbour[blk])
+                        if (nb >= 0 && uniform[static_cast<std::size_t>(nb)] != only) alone = false;
+                    if (alone) continue;
+                }
                 for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s) {
                     if (!index.isLumen(s)) continue;
+                    if (only != MIXED) {
+                        const int off = static_cast<int>(s % LEAF_VOXELS);
+                        const int x = off >> (2 * LEAF_LOG2), y = (off >> LEAF_LOG2) & (LEAF_DIM - 1),
+                                  z = off & (LEAF_DIM - 1);
+                        if (x > 0 && x < LEAF_DIM - 1 && y > 0 && y < LEAF_DIM - 1 && z > 0 && z < LEAF_DIM - 1)
+                            continue;
+                    }
                     const std::int32_t rs = region[s];
-                    index.forEachNeighbour(s, [&](Slot t, int k) {
+                    std::int32_t lastRegion = rs;  // the link of the last neighbour in another region
+                    Link* last = nullptr;
+                    bool onBoundary = false;
+                    // Holes hold region -1: one read of `region` tests a neighbour.
+                    index.forEachNeighbourSlot(s, [&](Slot t, int k) {
                         const std::int32_t rt = region[t];
-                        if (k >= HALF_STEPS || rt == rs) return;
+                        if (rt == rs || rt < 0) return;
+                        onBoundary = true;
+                        if (k >= HALF_STEPS) return;
                         const float saddle = std::min(index.depthMm[s], index.depthMm[t]);
                         const Slot sa = rs < rt ? s : t, sb = rs < rt ? t : s;
-                        Link& l = map[pairKey(rs, rt)];
+                        if (rt != lastRegion) {
+                            last = &map[pairKey(rs, rt)];
+                            lastRegion = rt;
+                        }
+                        Link& l = *last;
                         if (l.sa == NO_SLOT) {
                             l.a = std::min(rs, rt);
                             l.b = std::max(rs, rt);
@@ -307,8 +198,20 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                             l.sb = sb;
                         }
                     });
+                    if (onBoundary) part.push_back(s);
                 }
+            }
+            if (!part.empty()) boundaryParts.local().push_back({r.begin(), std::move(part)});
         });
+        std::vector<std::pair<std::size_t, std::vector<Slot>>> parts;
+        for (auto& p : boundaryParts)
+            for (auto& q : p) parts.push_back(std::move(q));
+        std::sort(parts.begin(), parts.end(),
+                  [](const auto& x, const auto& y) { return x.first < y.first; });
+        std::size_t total = 0;
+        for (const auto& p : parts) total += p.second.size();
+        boundary.reserve(total);
+        for (const auto& p : parts) boundary.insert(boundary.end(), p.second.begin(), p.second.end());
         Map all;
         for (const Map& m : local)
             for (const auto& [key, l] : m) {
@@ -392,22 +295,28 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         }
     std::vector<std::vector<Slot>> interfaceOf(narrowLinks.size());
     if (!narrowLinks.empty()) {
+        // Only the voxels of regions with a narrow link can be on an interface.
+        std::vector<std::uint8_t> hasNarrow(static_cast<std::size_t>(regionCount), 0);
+        for (std::size_t i : narrowLinks) hasNarrow[links[i].a] = hasNarrow[links[i].b] = 1;
         using Hits = std::vector<std::pair<int, Slot>>;
         tbb::enumerable_thread_specific<Hits> local;
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, boundary.size(), 4096),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             Hits& hits = local.local();
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                if (!index.isLumen(static_cast<Slot>(s))) continue;
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const Slot s = boundary[i];
                 const std::int32_t rs = region[s];
+                if (!hasNarrow[rs]) continue;
                 int last = -1;
-                index.forEachNeighbour(static_cast<Slot>(s), [&](Slot t, int) {
+                std::int32_t lastRegion = rs;  // a neighbour of the same region as the last: no new link
+                index.forEachNeighbourSlot(s, [&](Slot t, int) {
                     const std::int32_t rt = region[t];
-                    if (rt == rs) return;
+                    if (rt == lastRegion || rt < 0) return;  // a hole: -1
+                    lastRegion = rt;
                     auto it = narrowOf.find(pairKey(rs, rt));
                     if (it == narrowOf.end() || it->second == last) return;
                     last = it->second;
-                    hits.push_back({it->second, static_cast<Slot>(s)});
+                    hits.push_back({it->second, s});
                 });
             }
         });
@@ -594,9 +503,21 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
     // adds one piece, a cycle link's none), else add them one at a time and keep those that do
     // not; write them to the grids with the distances near them corrected.
     if (!cuts.empty()) {
+        // The lumen's pieces without the removed voxels (contact_regions::piecesWithout: only
+        // the regions the cuts pass through are searched voxel by voxel).
+        std::vector<std::pair<std::int32_t, std::int32_t>> touching;
+        touching.reserve(links.size());
+        for (const Link& l : links) touching.push_back({l.a, l.b});
+        auto piecesAfterCuts = [&]() {
+            std::vector<Slot> removedSlots;
+            for (const Cut& c : cuts)
+                for (Slot s : interfaceOf[c.narrow])
+                    if (removed[s]) removedSlots.push_back(s);
+            return contact_regions::piecesWithout(index, flooded, touching, removed, removedSlots, progress);
+        };
         std::size_t treeCuts = 0;
         for (const Cut& c : cuts) treeCuts += c.tree;
-        if (countPieces(index, removed, progress) > report.pieces + treeCuts) {
+        if (piecesAfterCuts() > report.pieces + treeCuts) {
             std::fill(removed.begin(), removed.end(), 0);
             std::size_t allowed = report.pieces;
             for (Cut& c : cuts) {
@@ -606,7 +527,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
                         removed[s] = 1;
                         added.push_back(s);
                     }
-                if (countPieces(index, removed, progress) > allowed + (c.tree ? 1 : 0)) {
+                if (piecesAfterCuts() > allowed + (c.tree ? 1 : 0)) {
                     for (Slot s : added) removed[s] = 0;
                     c.info.cut = false;
                     c.info.reason = "a contact whose cut would split the lumen further: kept";
