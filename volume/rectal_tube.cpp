@@ -37,8 +37,13 @@ constexpr double MAX_FOLLOW_MM = 200.0;
 constexpr double LOWEST_END_REACH_MM = 60.0;
 /// Directions around the axis sampled for the ring and for the body surface.
 constexpr int RING_DIRECTIONS = 12;
-/// The ring must show in at least this many of them.
+/// The ring must show in at least this many of them; inside the rectum's air (the lumen all
+/// round beyond the tube's wall), in at least RING_MIN_HITS_INSIDE.
 constexpr int RING_MIN_HITS = 9;
+constexpr int RING_MIN_HITS_INSIDE = 6;
+/// Inside the rectum's air, the ring's directions without wall in a row: at most this many
+/// (a side of the ring; not a half).
+constexpr int RING_MAX_GAP_INSIDE = 4;
 /// The tube is followed into the rectum along directions up to this far (degrees) from the
 /// piece's last direction, in this many tilts and azimuths.
 constexpr double FOLLOW_CONE_DEG = 90.0;
@@ -343,20 +348,113 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         }
         return !setAcc.isValueOn(c);
     };
-    auto ringAround = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
+    // The lumen all round p at the probe's distance (beyond the tube's wall): p lies inside
+    // the rectum's air, not against its wall nor in the anal canal.
+    const double insideProbe = radius + TUBE_MAX_WALL_MM + 2.0 * h;
+    auto inColonAir = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
         int hits = 0;
         for (int j = 0; j < RING_DIRECTIONS; ++j) {
             const double t = 2.0 * PI * j / RING_DIRECTIONS;
-            const Vec3d e = u * std::cos(t) + v * std::sin(t);
-            for (double r = radius + 0.5 * h; r <= radius + 3.0; r += 0.5 * h)
-                if (wallAt(p + e * r)) {
-                    ++hits;
-                    break;
-                }
+            hits += inLumen(p + (u * std::cos(t) + v * std::sin(t)) * insideProbe) ? 1 : 0;
         }
         return hits >= RING_MIN_HITS;
     };
-    const Vec3d start = tube.axis.front();
+    auto ringAround = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
+        int hits = 0, gap = 0, run = 0, leading = -1;
+        for (int j = 0; j < RING_DIRECTIONS; ++j) {
+            const double t = 2.0 * PI * j / RING_DIRECTIONS;
+            const Vec3d e = u * std::cos(t) + v * std::sin(t);
+            bool hit = false;
+            for (double r = radius + 0.5 * h; r <= radius + 3.0 && !hit; r += 0.5 * h) hit = wallAt(p + e * r);
+            if (hit) {
+                ++hits;
+                if (leading < 0) leading = run;
+                run = 0;
+            } else {
+                gap = std::max(gap, ++run);
+            }
+        }
+        gap = std::max(gap, run + std::max(leading, 0));  // the misses that wrap round
+        // Inside the rectum's air no wall but the tube's lies this near its axis, so a ring
+        // with a gap is still the tube: at coarse voxels a mask's 2 mm wall misses a whole
+        // side of the ring over several slices, depending on where the axis lies in its
+        // voxels. Not a wall on one side only (a point beside the tube, off its axis).
+        return hits >= RING_MIN_HITS ||
+               (hits >= RING_MIN_HITS_INSIDE && gap <= RING_MAX_GAP_INSIDE && inColonAir(p, u, v));
+    };
+    // The centre of the tube's air core in the plane of u and v near p: the centroid of the
+    // lumen (interpolated: CT air, or the mask's inside) reached from p's nearest lumen sample
+    // within the core's radius and half a voxel, twice (a point off the axis by up to a voxel
+    // sees part of the core first). The straight runs and the bin centroids of the thin piece
+    // stray from the axis by up to a voxel; the core's centre is the axis.
+    auto airness = [&](const Vec3d& q) {  // > 0: lumen
+        const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
+        const Coord c0 = Coord::floor(ijk);
+        const openvdb::Vec3d f = ijk - c0.asVec3d();
+        double sum = 0;
+        for (int k = 0; k < 8; ++k) {
+            const Coord c = c0.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+            const double w = ((k & 1) ? f[0] : 1 - f[0]) * (((k >> 1) & 1) ? f[1] : 1 - f[1]) *
+                             (((k >> 2) & 1) ? f[2] : 1 - f[2]);
+            double a;
+            if (huAcc) {
+                float hu = 0;
+                a = huAcc->probeValue(c, hu) ? double(LUMEN_MAX_HU - hu) : -1000.0;
+            } else {
+                a = setAcc.isValueOn(c) ? 0.5 : -0.5;
+            }
+            sum += w * a;
+        }
+        return sum;
+    };
+    auto centreOnCore = [&](Vec3d p, const Vec3d& d) {
+        Vec3d u, v;
+        perpendiculars(d, u, v);
+        const double step = 0.25 * h, disc = radius + 0.5 * h;
+        const int n = int(std::ceil(disc / step));
+        const int side = 2 * n + 1;
+        for (int round = 0; round < 2; ++round) {
+            std::vector<std::int8_t> state(std::size_t(side * side), 0);  // 0 unseen, 1 lumen, 2 reached
+            int seed = -1;
+            double seedDistance = std::numeric_limits<double>::max();
+            for (int a = -n; a <= n; ++a)
+                for (int b = -n; b <= n; ++b) {
+                    const double r = step * std::sqrt(double(a * a + b * b));
+                    if (r > disc) continue;
+                    if (airness(p + u * (a * step) + v * (b * step)) <= 0) continue;
+                    const int k = (a + n) + side * (b + n);
+                    state[std::size_t(k)] = 1;
+                    if (r < seedDistance) {
+                        seedDistance = r;
+                        seed = k;
+                    }
+                }
+            if (seed < 0) return p;
+            std::vector<int> stack{seed};
+            state[std::size_t(seed)] = 2;
+            double su = 0, sv = 0;
+            std::size_t count = 0;
+            while (!stack.empty()) {
+                const int k = stack.back();
+                stack.pop_back();
+                const int a = k % side - n, b = k / side - n;
+                su += a * step;
+                sv += b * step;
+                ++count;
+                const int next[4][2] = {{a - 1, b}, {a + 1, b}, {a, b - 1}, {a, b + 1}};
+                for (const auto& q : next) {
+                    if (q[0] < -n || q[0] > n || q[1] < -n || q[1] > n) continue;
+                    const int m = (q[0] + n) + side * (q[1] + n);
+                    if (state[std::size_t(m)] != 1) continue;
+                    state[std::size_t(m)] = 2;
+                    stack.push_back(m);
+                }
+            }
+            p = p + u * (su / double(count)) + v * (sv / double(count));
+        }
+        return p;
+    };
+    const Vec3d start = centreOnCore(tube.axis.front(), dir);
     // The last point of the straight run from `from` along `d` (misses of up to two steps
     // allowed), at most `maxMm` long.
     auto follow = [&](const Vec3d& from, const Vec3d& d, double maxMm) {
@@ -381,7 +479,8 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     double followedMm = 0;
     Vec3d heading = dir;
     for (int run = 0; run < FOLLOW_MAX_RUNS && followedMm < MAX_FOLLOW_MM; ++run) {
-        const Vec3d from = followed.back();
+        // Each run starts from the core's centre: a start off the axis leaves the core early.
+        const Vec3d from = followed.back() = centreOnCore(followed.back(), heading);
         const double maxMm = MAX_FOLLOW_MM - followedMm;
         Vec3d best = follow(from, heading, maxMm), bestDir = heading;
         Vec3d u, v;
@@ -402,6 +501,20 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         followedMm += distance(from, best);
         followed.push_back(best);
         heading = bestDir;
+    }
+    // The followed axis: each run resampled every AXIS_BIN_MM, each sample moved to the
+    // core's centre (a run's ends are centred, its straight line need not be).
+    {
+        std::vector<Vec3d> centred{followed.front()};
+        for (std::size_t i = 0; i + 1 < followed.size(); ++i) {
+            const double len = distance(followed[i], followed[i + 1]);
+            const Vec3d d = (followed[i + 1] - followed[i]) / len;
+            const int samples = std::max(1, int(std::ceil(len / AXIS_BIN_MM)));
+            for (int k = 1; k <= samples; ++k)
+                centred.push_back(centreOnCore(followed[i] + d * (len * k / samples), d));
+        }
+        followed.swap(centred);
+        followedMm = polylineLength(followed, 0, followed.size() - 1);
     }
     const Vec3d tip = followed.back();
 

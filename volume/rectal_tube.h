@@ -22,7 +22,10 @@
 ///    as its cross-section shows the tube: air inside, a ring (its wall: not air) around; the
 ///    tip is where that ends. It is followed in straight runs (at most 4), each along the
 ///    direction within 90 degrees of the previous one that goes farthest (a catheter bends
-///    where it enters the rectum). From a mask the same with the ring outside the set: where
+///    where it enters the rectum), each from the centre of the tube's air core; the followed
+///    axis is centred on the core. Inside the rectum's air (the lumen all round beyond the
+///    wall) a ring with one side missing still counts (coarse voxels drop a side of a thin
+///    wall). From a mask the same with the ring outside the set: where
 ///    the mask shows the tube's wall inside the rectum's air, else the tip is where the thin
 ///    piece meets the wide part.
 /// 4. The tube's voxels (the piece, and the air within its lumen radius + one voxel of the

@@ -65,7 +65,7 @@ struct SegmentParams {
     double maskSmoothingVoxels = 1.0;
     /// Contacts between touching loops, cut at the end of the segment stage (contacts.h).
     ContactParams contacts;
-    static constexpr int VERSION = 5;  ///< 3: rectal tube found at coarse voxels, filled inside the rectum; 4: its closed tip too; 5: a resampled mask keeps its one-voxel parts and walls
+    static constexpr int VERSION = 6;  ///< 3: rectal tube found at coarse voxels, filled inside the rectum; 4: its closed tip too; 5: a resampled mask keeps its one-voxel parts and walls; 6: the tube followed on its air core's centre, and through gaps in its ring inside the rectum
 };
 
 /// How far from the seed (mm) an air component may lie and still be taken as the seeded one.
