@@ -28,6 +28,7 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
 
 #include <algorithm>
 #include <atomic>
@@ -41,7 +42,11 @@
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <future>
+#include <mutex>
+#include <condition_variable>
+#include <thread>
 #include <memory>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -298,6 +303,78 @@ void publishFirstPair(const fs::path& dir, const std::string& stagedPair, const 
     fs::remove_all(old);
 }
 
+/// Writes frames one at a time, in the order given, on a thread of its own (started by the
+/// constructor, so it inherits the constructing thread's signal mask): write() waits for the
+/// previous frame's write, hands the frame on and returns, so the caller must keep the frame
+/// until its next write() or finish(). A failed write is rethrown by the next write() or finish().
+class FrameWriter {
+public:
+    explicit FrameWriter(std::function<void(const RgbImage&)> sink)
+        : mSink(std::move(sink)), mThread([this] { loop(); })
+    {
+    }
+    ~FrameWriter() { stop(); }
+    FrameWriter(const FrameWriter&) = delete;
+    FrameWriter& operator=(const FrameWriter&) = delete;
+
+    void write(const RgbImage& frame)
+    {
+        std::unique_lock<std::mutex> lock(mMutex);
+        mIdle.wait(lock, [this] { return mPending == nullptr; });
+        if (mError) std::rethrow_exception(mError);
+        mPending = &frame;
+        mWork.notify_one();
+    }
+
+    void finish()
+    {
+        stop();
+        if (mError) std::rethrow_exception(mError);
+    }
+
+private:
+    void loop()
+    {
+        std::unique_lock<std::mutex> lock(mMutex);
+        for (;;) {
+            mWork.wait(lock, [this] { return mPending != nullptr || mStop; });
+            if (mPending == nullptr) return;  // stopped, nothing left
+            const RgbImage* frame = mPending;
+            lock.unlock();
+            std::exception_ptr error;
+            if (!mError) {
+                try {
+                    mSink(*frame);
+                } catch (...) {
+                    error = std::current_exception();
+                }
+            }
+            lock.lock();
+            if (error) mError = error;
+            mPending = nullptr;
+            mIdle.notify_all();
+        }
+    }
+
+    void stop()
+    {
+        {
+            std::lock_guard<std::mutex> lock(mMutex);
+            mStop = true;
+            mWork.notify_one();
+        }
+        if (mThread.joinable()) mThread.join();
+    }
+
+    std::function<void(const RgbImage&)> mSink;
+    std::mutex mMutex;
+    std::condition_variable mWork, mIdle;
+    const RgbImage* mPending = nullptr;
+    bool mStop = false;
+    std::exception_ptr mError;
+    std::thread mThread;  // last: starts once the members above exist
+};
+
 } // namespace
 
 RenderInputs::~RenderInputs() = default;
@@ -533,41 +610,61 @@ json runVideo(StudyRun& run, Progress* progress)
             if (it == ids.end() || *it != centerlineIndex) return nullptr;
             return &framePairs->files[std::size_t(it - ids.begin())];
         };
-        std::size_t reused = 0;
+        // The frames are rendered (or read back) several at a time by whichever threads are
+        // free, so that the video, the longest render step, keeps both cores busy once the
+        // other steps have ended; they reach ffmpeg in order (the MP4 is the same, byte for
+        // byte). The writer is a thread of this step's own: FfmpegVideo blocks SIGPIPE on the
+        // thread that made it, and a thread it starts inherits that.
+        constexpr std::size_t IN_FLIGHT = 4;  // frames rendered at once, at most
+        const std::size_t n = vIdx.size();
+        std::vector<json> cameraPoses(n);
+        std::atomic<std::size_t> reused{0};
         writeAtomically(videoDir.path("flyover.mp4"), [&](const std::string& tmp) {
             FfmpegVideo video(ffmpeg, tmp, videoDir.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
-            // Two frames in turn: frame k is rendered (or read back) while frame k - 1 is
-            // converted and written to ffmpeg on another thread, so that no core waits on the
-            // pipe. One set of buffers per slot: no allocation per rendered frame.
-            PairBuffers b[2];
-            std::future<void> writing;  // the previous frame's write; declared after its buffers
-            for (std::size_t k = 0; k < vIdx.size(); ++k) {
-                const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
-                const std::string* file = framePairFile(vIdx[k]);
-                RgbImage& pair = b[k % 2].pair;
-                if (file) {
-                    pair = readPng(*file);
-                    if (pair.width != pairWidth || pair.height != rp.heightPx)
-                        throw std::runtime_error(*file + ": a fly-over pair of " + std::to_string(pair.width) + " x " +
-                                                 std::to_string(pair.height) + " px where the video needs " +
-                                                 std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
-                    ++reused;
-                } else {
-                    renderView(*in.scene, cams[0], s.ro, b[k % 2].left);
-                    renderView(*in.scene, cams[1], s.ro, b[k % 2].right);
-                    sideBySide(b[k % 2].left, b[k % 2].right, pair);
-                }
-                if (writing.valid()) writing.get();  // frame k - 1 is in the pipe; rethrows its failure
-                writing = std::async(std::launch::async, [&video, &pair] { video.write(pair); });
-                vPoses.push_back(json{{"frame", k},
-                                      {"centerline_index", vIdx[k]},
-                                      {"arc_mm", double(vIdx[k]) * s.clStep},
-                                      {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}});
-                if (k % 32 == 0) reportProgress(progress, double(k + 1) / double(vIdx.size()), "video frames");
-            }
-            if (writing.valid()) writing.get();
+            // Frames in flight are consecutive (the last filter takes them in order), plus the
+            // one being written: slot k % (IN_FLIGHT + 1) is free when frame k enters.
+            std::vector<PairBuffers> slots(IN_FLIGHT + 1);
+            FrameWriter writer([&video](const RgbImage& frame) { video.write(frame); });
+            std::size_t next = 0;
+            tbb::parallel_pipeline(
+                IN_FLIGHT,
+                tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
+                                                    [&](tbb::flow_control& fc) -> std::size_t {
+                                                        if (next == n) fc.stop();
+                                                        return next < n ? next++ : 0;
+                                                    }) &
+                    tbb::make_filter<std::size_t, std::size_t>(
+                        tbb::filter_mode::parallel,
+                        [&](std::size_t k) {
+                            const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
+                            PairBuffers& b = slots[k % slots.size()];
+                            if (const std::string* file = framePairFile(vIdx[k])) {
+                                b.pair = readPng(*file);
+                                if (b.pair.width != pairWidth || b.pair.height != rp.heightPx)
+                                    throw std::runtime_error(
+                                        *file + ": a fly-over pair of " + std::to_string(b.pair.width) + " x " +
+                                        std::to_string(b.pair.height) + " px where the video needs " +
+                                        std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
+                                ++reused;
+                            } else {
+                                renderView(*in.scene, cams[0], s.ro, b.left);
+                                renderView(*in.scene, cams[1], s.ro, b.right);
+                                sideBySide(b.left, b.right, b.pair);
+                            }
+                            cameraPoses[k] = json{{"frame", k},
+                                                  {"centerline_index", vIdx[k]},
+                                                  {"arc_mm", double(vIdx[k]) * s.clStep},
+                                                  {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
+                            return k;
+                        }) &
+                    tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t k) {
+                        writer.write(slots[k % slots.size()].pair);  // waits for frame k - 1's write
+                        if (k % 32 == 0) reportProgress(progress, double(k + 1) / double(n), "video frames");
+                    }));
+            writer.finish();  // rethrows a failed write
             video.finish();
         });
+        vPoses = std::move(cameraPoses);
         fs::remove(videoDir.path(".ffmpeg.log"));
         writeJson(videoDir.path("poses.json"),
                   json{{"schema", "flyover.video/1"},
@@ -581,7 +678,7 @@ json runVideo(StudyRun& run, Progress* progress)
                        {"render", renderOptionsJson(s.ro)},
                        {"frames", vPoses}});
         frameCount = vIdx.size();
-        reusedPairs = reused;
+        reusedPairs = reused.load();
     }
     videoDir.commit();
     return json{{"video_frames", frameCount}, {"frames_from_frame_pairs", reusedPairs}};

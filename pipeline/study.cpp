@@ -55,6 +55,10 @@ struct StageSpec {
     bool writeBehind = false;
     /// A stage of a part study (`flyover inspect`): its parameters are InspectParams'.
     bool part = false;
+    /// Of the stages ready at once, those of higher priority start first (TBB flow graph node
+    /// priority; order only). The video, the longest render step and the one that runs mostly
+    /// on one thread, starts first so that it does not run alone at the end of the run.
+    tbb::flow::node_priority_t priority = tbb::flow::no_priority;
 };
 
 /// The segment stage: from the CT's air, or from the external mask when the run has one.
@@ -88,9 +92,9 @@ const std::vector<StageSpec>& stageSpecs()
         {"overviews", renderUp, renderIn, {"overview.png", "overviews"}, runOverviews, RENDER_GROUP,
          {"overview_px", "overview_marker_mm", "ost", "supersample", "smooth_shading", "depth_cue"}, {"frames"}},
         {"video", renderUp, renderIn, {"video"}, runVideo, RENDER_GROUP,
-         {"video", "video_step_mm", "video_fps", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}},
+         {"video", "video_step_mm", "video_fps", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}, false, false, 2},
         {"coverage", renderUp, renderIn, {"coverage", "review"}, runCoverage, RENDER_GROUP,
-         {"coverage", "review", "review_target", "coverage_px", "coverage_step_mm", "flythrough_fov_deg", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}},
+         {"coverage", "review", "review_target", "coverage_px", "coverage_step_mm", "flythrough_fov_deg", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}, false, false, 1},
     };
     return specs;
 }
@@ -460,7 +464,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     std::map<std::string, std::unique_ptr<continue_node<continue_msg>>> nodes;
     for (const auto& spec : specs)
         nodes[spec.name] = std::make_unique<continue_node<continue_msg>>(
-            g, [&execute, &spec](const continue_msg&) { execute(spec); });
+            g, [&execute, &spec](const continue_msg&) { execute(spec); }, spec.priority);
     for (const auto& spec : specs) {
         for (const auto& u : spec.upstream) make_edge(*nodes[u], *nodes[spec.name]);
         for (const auto& u : spec.after) make_edge(*nodes[u], *nodes[spec.name]);

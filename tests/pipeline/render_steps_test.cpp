@@ -10,6 +10,7 @@
 #include "volume/error.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -213,6 +214,45 @@ TEST_F(StudyTest, FirstPairIsWrittenAndAnnouncedBeforeTheOtherRenderSteps)
     o.log = &log2;
     runPipeline(o);
     EXPECT_EQ(out2.str().find("first_pair"), std::string::npos) << out2.str();
+}
+
+// The video, the longest render step, starts first of the steps after the frames (then
+// coverage), so that it does not run alone at the end of the run (issue 15). With one thread
+// the order is the whole story; the MP4 must be the same, byte for byte, whether its frames are
+// rendered one at a time or several at once.
+TEST_F(StudyTest, VideoStartsFirstAfterTheFramesAndIsTheSameOnAnyNumberOfThreads)
+{
+    if (!haveFfmpeg()) GTEST_SKIP() << "no ffmpeg on PATH";
+    RunOptions o = options("videofirst");
+    o.params.render.video = true;
+    o.params.render.videoStepMm = 4;  // many frames in flight at once
+    std::ostringstream out;
+    RunLog log(RunLog::Mode::Json, out);
+    o.log = &log;
+    std::map<std::string, nlohmann::json> oneThread;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        oneThread = outputDigests(runPipeline(o));
+    }
+    std::vector<std::string> started;
+    bool framesDone = false;
+    std::istringstream lines(out.str());
+    for (std::string line; std::getline(lines, line);) {
+        const auto e = nlohmann::json::parse(line);
+        if (e.at("event") == "stage_finished" && e.value("stage", "") == "frames") framesDone = true;
+        if (framesDone && e.at("event") == "stage_started") started.push_back(e.at("stage"));
+    }
+    ASSERT_EQ(started.size(), 4u) << out.str();
+    EXPECT_EQ(started[0], "video") << "the render steps after the frames started in this order: " << started[0]
+                                   << ", " << started[1] << ", " << started[2] << ", " << started[3];
+    EXPECT_EQ(started[1], "coverage");
+
+    o.log = nullptr;
+    o.studyDir += "-threads";
+    const auto manyThreads = outputDigests(runPipeline(o));
+    EXPECT_EQ(oneThread.at("video"), manyThreads.at("video"))
+        << "video/ (flyover.mp4, poses.json) differs between one thread and the default number";
+    EXPECT_EQ(oneThread.at("frames"), manyThreads.at("frames"));
 }
 
 TEST_F(StudyTest, StatusComparesTheStudysFilesWithTheRecord)
