@@ -143,22 +143,27 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
         }
         // Lumen voxels left unreached (in pieces without core voxels) still hold their bin (< 0).
         // Pieces without any core voxel (too thin everywhere): one region each.
-        std::vector<Slot> queue;
-        for (Slot s = 0; s < n; ++s) {
-            if (!index.isLumen(s) || region[s] >= 0) continue;
-            const std::int32_t id = regionCount++;
-            queue.assign(1, s);
-            region[s] = id;
-            for (std::size_t head = 0; head < queue.size(); ++head)
-                index.forEachNeighbour(queue[head], [&](Slot t, int) {
-                    if (region[t] < 0) {
-                        region[t] = id;
-                        queue.push_back(t);
-                    }
-                });
-        }
+        labelUnreachedPieces(index, region, regionCount);
     }
     return {std::move(region), regionCount};
+}
+
+void labelUnreachedPieces(const LumenIndex& index, std::vector<std::int32_t>& region, std::int32_t& count)
+{
+    std::vector<Slot> queue;
+    for (Slot s = 0; s < index.slotCount(); ++s) {
+        if (!index.isLumen(s) || region[s] >= 0) continue;
+        const std::int32_t id = count++;
+        queue.assign(1, s);
+        region[s] = id;
+        for (std::size_t head = 0; head < queue.size(); ++head)
+            index.forEachNeighbour(queue[head], [&](Slot t, int) {
+                if (region[t] < 0) {
+                    region[t] = id;
+                    queue.push_back(t);
+                }
+            });
+    }
 }
 
 std::size_t piecesWithout(const LumenIndex& index, const Regions& regions,

@@ -80,6 +80,12 @@ struct Regions {
 Regions lumenRegions(const lumen_index::LumenIndex& index, double voxelMm, double chunkMm,
                      Progress* progress = nullptr);
 
+/// Step 3's end: every lumen slot whose region is still < 0 (not reached by the flood: a
+/// piece with no core voxel) takes a new id (from `count` on), one per 26-connected piece of
+/// such slots, numbered in slot order of their first voxel.
+void labelUnreachedPieces(const lumen_index::LumenIndex& index, std::vector<std::int32_t>& region,
+                          std::int32_t& count);
+
 /// The number of 26-connected pieces of the lumen without the voxels with removed[slot] != 0,
 /// given its regions (lumenRegions), every pair of regions with 26-neighbouring voxels
 /// (`touching`, any order, repeats allowed) and the removed slots (`removedSlots`, repeats

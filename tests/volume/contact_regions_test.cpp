@@ -93,20 +93,7 @@ contact_regions::Regions referenceRegions(const LumenIndex& index, double voxelM
             });
         }
     }
-    std::vector<Slot> queue;
-    for (Slot s = 0; s < n; ++s) {
-        if (!index.isLumen(s) || region[s] >= 0) continue;
-        const std::int32_t id = regionCount++;
-        queue.assign(1, s);
-        region[s] = id;
-        for (std::size_t head = 0; head < queue.size(); ++head)
-            index.forEachNeighbour(queue[head], [&](Slot t, int) {
-                if (region[t] < 0) {
-                    region[t] = id;
-                    queue.push_back(t);
-                }
-            });
-    }
+    contact_regions::labelUnreachedPieces(index, region, regionCount);
     return {std::move(region), regionCount};
 }
 
