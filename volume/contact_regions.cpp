@@ -182,7 +182,7 @@ std::size_t piecesWithout(const LumenIndex& index, const Regions& regions,
     // regionCount on (the touched regions' own ids stay unused).
     std::unordered_map<Slot, std::int32_t> part;
     part.reserve(kept.size());
-    UnionFind uf(regionCount);
+    UnionFind<> uf(regionCount);
     std::vector<Slot> queue;
     for (Slot s : kept) {
         if (part.count(s)) continue;

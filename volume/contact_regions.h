@@ -8,10 +8,10 @@
 
 #include "volume/lumen_index.h"
 #include "volume/progress.h"
+#include "volume/union_find.h"
 
 #include <algorithm>
 #include <cstdint>
-#include <numeric>
 #include <utility>
 #include <vector>
 
@@ -43,25 +43,6 @@ private:
     std::uint64_t& word(lumen_index::Slot s) { return lines_[s / BLOCK].words[(s % BLOCK) >> 6]; }
     const std::uint64_t& word(lumen_index::Slot s) const { return lines_[s / BLOCK].words[(s % BLOCK) >> 6]; }
     std::vector<Line> lines_;
-};
-
-/// Union-find over ids 0 .. n-1 (more may be added to parent); a set's root is its smallest id.
-struct UnionFind {
-    std::vector<int> parent;
-    explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-    int find(int x)
-    {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    }
-    bool unite(int a, int b)
-    {
-        a = find(a);
-        b = find(b);
-        if (a == b) return false;
-        parent[std::max(a, b)] = std::min(a, b);
-        return true;
-    }
 };
 
 struct Regions {

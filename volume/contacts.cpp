@@ -45,7 +45,6 @@ constexpr int HALF_STEPS = 13;
 
 constexpr double PI = 3.14159265358979323846;
 
-using contact_regions::UnionFind;
 
 /// Two touching regions: the saddle of D across their interface.
 struct Link {
@@ -231,7 +230,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
 
     // 5. Maximum spanning forest; the links left out close cycles.
     {
-        UnionFind uf(static_cast<std::size_t>(regionCount));
+        UnionFind<> uf(static_cast<std::size_t>(regionCount));
         for (Link& l : links) l.tree = uf.unite(l.a, l.b);
         std::size_t pieces = 0;
         for (std::int32_t r = 0; r < regionCount; ++r) pieces += uf.find(r) == r;
@@ -578,7 +577,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         // One contact per place: the links cut within the smaller lumen radius (at least three
         // voxels) of each other are one contact (a channel touching several regions on a side);
         // it is reported by its narrowest link.
-        UnionFind same(cuts.size());
+        UnionFind<> same(cuts.size());
         for (std::size_t i = 0; i < cuts.size(); ++i)
             for (std::size_t j = i + 1; j < cuts.size(); ++j) {
                 const ContactInfo &x = cuts[i].info, &y = cuts[j].info;

@@ -31,6 +31,7 @@
 #include "volume/voids.h"
 
 #include "volume/error.h"
+#include "volume/union_find.h"
 
 #include <openvdb/tools/Count.h>
 #include <openvdb/tools/LevelSetUtil.h>
@@ -694,16 +695,9 @@ MaskComponents faceConnectedComponents(const BoolTree& mask, const CoordBBox& bo
             edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
         }
     });
-    std::vector<uint32_t> parent(nUnits);
-    for (uint32_t i = 0; i < nUnits; ++i) parent[i] = i;
-    auto find = [&parent](uint32_t i) {
-        while (parent[i] != i) { parent[i] = parent[parent[i]]; i = parent[i]; }
-        return i;
-    };
-    auto unite = [&](const Edge& e) {
-        const uint32_t a = find(e.first), b = find(e.second);
-        if (a < b) parent[b] = a; else if (b < a) parent[a] = b;  // the root is the smallest unit
-    };
+    UnionFind<uint32_t> joined(nUnits);  // the root is the smallest unit
+    auto find = [&joined](uint32_t i) { return joined.find(i); };
+    auto unite = [&joined](const Edge& e) { joined.unite(e.first, e.second); };
     for (auto& edges : leafEdges) { for (const Edge& e : edges) unite(e); std::vector<Edge>().swap(edges); }
     for (auto& edges : tileEdges) { for (const Edge& e : edges) unite(e); std::vector<Edge>().swap(edges); }
     std::vector<uint8_t> touches(nUnits, 0);
