@@ -332,14 +332,16 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     BoolConstAccessor setAcc(set);
     std::optional<FloatConstAccessor> huAcc;
     if (search.hu) huAcc.emplace(*search.hu);
-    auto inLumen = [&](const Vec3d& p) {
-        const Coord c = nearestIndex(xf, p);
+    // A voxel's air: > 0 in the lumen (CT: LUMEN_MAX_HU - HU, outside the grid -1000; mask:
+    // +-0.5), so that interpolated it is > 0 nearer the lumen (airness below).
+    auto airAt = [&](const Coord& c) {
         if (huAcc) {
             float hu = 0;
-            return huAcc->probeValue(c, hu) && hu < LUMEN_MAX_HU;
+            return huAcc->probeValue(c, hu) ? double(LUMEN_MAX_HU - hu) : -1000.0;
         }
-        return setAcc.isValueOn(c);
+        return setAcc.isValueOn(c) ? 0.5 : -0.5;
     };
+    auto inLumen = [&](const Vec3d& p) { return airAt(nearestIndex(xf, p)) > 0; };
     auto wallAt = [&](const Vec3d& q) {
         const Coord c = nearestIndex(xf, q);
         if (huAcc) {
@@ -396,14 +398,7 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
             const Coord c = c0.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1);
             const double w = ((k & 1) ? f[0] : 1 - f[0]) * (((k >> 1) & 1) ? f[1] : 1 - f[1]) *
                              (((k >> 2) & 1) ? f[2] : 1 - f[2]);
-            double a;
-            if (huAcc) {
-                float hu = 0;
-                a = huAcc->probeValue(c, hu) ? double(LUMEN_MAX_HU - hu) : -1000.0;
-            } else {
-                a = setAcc.isValueOn(c) ? 0.5 : -0.5;
-            }
-            sum += w * a;
+            sum += w * airAt(c);
         }
         return sum;
     };
