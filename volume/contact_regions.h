@@ -62,7 +62,8 @@ struct FloodOptions {
 /// Calls fn(t) for each 26-neighbour slot t of `s` whose bit in `bits` is clear, in
 /// LumenIndex::forEachNeighbourSlot's order. For a voxel whose neighbours all lie in its block,
 /// the clear bits of each of the three x-slices' 3x3 windows are read as one masked word (the
-/// window's bits in increasing (y, z) order, the steps' order); fn may set t's bit.
+/// window's bits in increasing (y, z) order, the steps' order); for one whose z-neighbours lie
+/// in its block, each (dx, dy) row's three bits as one masked word; fn may set t's bit.
 template <typename Fn>
 void forEachClearNeighbour(const lumen_index::LumenIndex& index, const SlotBits& bits, lumen_index::Slot s, Fn&& fn)
 {
@@ -81,6 +82,30 @@ void forEachClearNeighbour(const lumen_index::LumenIndex& index, const SlotBits&
                 const int pos = __builtin_ctzll(clear);
                 clear &= clear - 1;
                 fn(base + static_cast<Slot>((x + dx) * 64 + pos));
+            }
+        }
+        return;
+    }
+    if (z >= 1 && z <= LEAF_DIM - 2) {
+        // Neighbours in other blocks along x or y only: per (dx, dy), the three z-neighbours'
+        // bits from one word of that row's block.
+        const auto& nb = index.neighbour[s / LEAF_VOXELS];
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int nx = x + dx;
+            for (int dy = -1; dy <= 1; ++dy) {
+                const int ny = y + dy;
+                const std::int32_t b = nb[((nx >> LEAF_LOG2) + 1) * 9 + ((ny >> LEAF_LOG2) + 1) * 3 + 1];
+                if (b < 0) continue;
+                const int lx = nx & (LEAF_DIM - 1), ly = ny & (LEAF_DIM - 1);
+                const int first = ly * 8 + z - 1;
+                std::uint64_t clear = (~bits.blockWords(static_cast<std::size_t>(b))[lx] >> first) & 7u;
+                if (dx == 0 && dy == 0) clear &= ~std::uint64_t(2);  // the voxel itself
+                const Slot row = static_cast<Slot>(b) * LEAF_VOXELS + static_cast<Slot>(lx * 64 + first);
+                while (clear) {
+                    const int pos = __builtin_ctzll(clear);
+                    clear &= clear - 1;
+                    fn(row + static_cast<Slot>(pos));
+                }
             }
         }
         return;
