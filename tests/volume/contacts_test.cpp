@@ -186,8 +186,9 @@ TEST(Contacts, HelixWithThreeNecksIsCutAtEveryNeck)
 
 TEST(Contacts, SameCutsOnAnyNumberOfThreads)
 {
-    // The flood's batches and the ways round before the first cut run side by side when more
-    // than one thread may: the report and the cut grids must be those of one thread.
+    // The ways round before the first cut run side by side when more than one thread may (the
+    // flood's batches too, on lumens larger than these: ContactRegions.* covers them): the
+    // report and the cut grids must be those of one thread.
     for (const Touching& tc : {helixWithNecks(true, 0.75), uWithNeck(true, 0.75)}) {
         SCOPED_TRACE(tc.describe());
         ContactReport expected;
