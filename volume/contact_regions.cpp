@@ -1,10 +1,14 @@
 // Steps 1-3 of the contact search (contact_regions.h). Per-slot flags are bits, a block's 512
 // in one cache line (SlotBits), so that testing a voxel's 26 neighbours reads a few lines
-// instead of 26 scattered bytes or words; the searches are serial and deterministic.
+// instead of 26 scattered bytes or words; the searches are deterministic: the same regions on
+// any number of threads.
 #include "volume/contact_regions.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -16,12 +20,15 @@ namespace flyover::contact_regions {
 
 using namespace lumen_index;
 
-Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Progress* progress)
+Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Progress* progress,
+                     const FloodOptions& flood)
 {
     const std::size_t n = index.slotCount();
     const std::size_t blocks = index.blockOrigin.size();
-    // 1. Cores, one bit per slot (SlotBits: a block's bits in one cache line).
-    SlotBits core(blocks);
+    // 1. Cores: the bit of every slot that is not a core voxel is set (SlotBits: a block's bits
+    // in one cache line), so that the searches below find the core voxels not yet reached as
+    // clear bits (forEachClearNeighbour).
+    SlotBits notCore(blocks);
     {
         const std::vector<float> nearby = nearbyMaxDepth(index);
         const float minCore = static_cast<float>(voxelMm);
@@ -31,7 +38,7 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
                 const float half = 0.5f * nearby[blk];
                 for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s) {
                     const float d = index.depthMm[s];
-                    if (d >= minCore && d >= half) core.set(s);
+                    if (!(d >= minCore && d >= half)) notCore.set(s);
                 }
             }
         });
@@ -49,28 +56,27 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
         const double shellSteps = std::max(1.0, chunkMm / (1.2 * voxelMm));
         auto shellOf = [&](std::int32_t steps) { return static_cast<std::int32_t>(double(steps) / shellSteps); };
         std::vector<std::pair<Slot, std::int32_t>> stepQueue;
-        SlotBits seen(blocks);
+        SlotBits seen = notCore;  // and the core voxels reached
         for (Slot s = 0; s < n; ++s) {
-            if (!core.test(s) || seen.test(s)) continue;
+            if (seen.test(s)) continue;
             stepQueue.assign(1, {s, 0});
             seen.set(s);
             shell[s] = shellOf(0);
             for (std::size_t head = 0; head < stepQueue.size(); ++head) {
                 if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
                 const auto [u, steps] = stepQueue[head];
-                index.forEachNeighbourSlot(u, [&](Slot t, int) {
-                    if (core.test(t) && !seen.testAndSet(t)) {
-                        shell[t] = shellOf(steps + 1);
-                        stepQueue.push_back({t, steps + 1});
-                    }
+                forEachClearNeighbour(index, seen, u, [&](Slot t) {
+                    seen.set(t);
+                    shell[t] = shellOf(steps + 1);
+                    stepQueue.push_back({t, steps + 1});
                 });
             }
         }
         std::vector<std::pair<Slot, std::int32_t>>().swap(stepQueue);
-        SlotBits labelled(blocks);
+        SlotBits labelled = std::move(notCore);  // and the core voxels labelled
         std::vector<Slot> queue;
         for (Slot s = 0; s < n; ++s) {
-            if (!core.test(s) || labelled.test(s)) continue;
+            if (labelled.test(s)) continue;
             const std::int32_t id = regionCount++;
             const std::int32_t part = shell[s];  // every voxel of the part is in this shell
             queue.assign(1, s);
@@ -78,12 +84,11 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
             region[s] = id;
             for (std::size_t head = 0; head < queue.size(); ++head) {
                 if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-                index.forEachNeighbourSlot(queue[head], [&](Slot t, int) {
-                    if (core.test(t) && !labelled.test(t) && shell[t] == part) {
-                        labelled.set(t);
-                        region[t] = id;
-                        queue.push_back(t);
-                    }
+                forEachClearNeighbour(index, labelled, queue[head], [&](Slot t) {
+                    if (shell[t] != part) return;
+                    labelled.set(t);
+                    region[t] = id;
+                    queue.push_back(t);
                 });
             }
         }
@@ -126,18 +131,70 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
                     else region[s] = UNREACHED - binOf(s);
                 }
         });
+        // Large batches in two passes (contact_regions.h): the first lists, per task of
+        // consecutive entries, the neighbours not taken when the batch began, each with the
+        // region of the first of the task's entries to reach it and its bin (read from
+        // `region` there, in parallel); the second takes them in the queue's order.
+        struct Listed {
+            Slot t;
+            std::int32_t r;
+            std::int32_t code;  ///< region[t] when listed: UNREACHED - its bin
+        };
+        const int threads = std::min<int>(tbb::this_task_arena::max_concurrency(),
+                                          static_cast<int>(tbb::global_control::active_value(
+                                              tbb::global_control::max_allowed_parallelism)));
+        const std::size_t chunkEntries = std::max<std::size_t>(1, flood.chunkEntries);
+        tbb::enumerable_thread_specific<SlotBits> listedBits([&] { return SlotBits(blocks); });
+        std::vector<std::vector<Listed>> lists;
+        tbb::enumerable_thread_specific<std::vector<Listed>> scratch;
         std::size_t done = 0;
         for (int b = bins - 1; b >= 0; --b) {
             std::vector<Entry>& bucket = buckets[b];
-            for (std::size_t i = 0; i < bucket.size(); ++i) {  // grows while visited
-                if ((++done & 0xfffff) == 0) checkCancelled(progress);
-                const Entry e = bucket[i];
-                index.forEachNeighbourSlot(e.s, [&](Slot t, int) {
-                    if (taken.testAndSet(t)) return;
-                    const int bin = UNREACHED - region[t];
-                    region[t] = e.r;
-                    buckets[std::min(b, bin)].push_back({t, e.r});
+            std::size_t i = 0;
+            while (i < bucket.size()) {  // grows while visited
+                const std::size_t end = bucket.size();
+                if (threads < 2 || end - i < std::max<std::size_t>(1, flood.minParallelBatch)) {
+                    for (; i < end; ++i) {
+                        if ((++done & 0xfffff) == 0) checkCancelled(progress);
+                        const Entry e = bucket[i];
+                        forEachClearNeighbour(index, taken, e.s, [&](Slot t) {
+                            taken.set(t);
+                            const int bin = UNREACHED - region[t];
+                            region[t] = e.r;
+                            buckets[std::min(b, bin)].push_back({t, e.r});
+                        });
+                    }
+                    continue;
+                }
+                checkCancelled(progress);
+                const std::size_t tasks = (end - i + chunkEntries - 1) / chunkEntries;
+                if (lists.size() < tasks) lists.resize(tasks);
+                tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tasks, 1),
+                                  [&](const tbb::blocked_range<std::size_t>& r) {
+                    SlotBits& mine = listedBits.local();
+                    std::vector<Listed>& out = scratch.local();  // not lists[task]: no false sharing
+                    for (std::size_t task = r.begin(); task != r.end(); ++task) {
+                        out.clear();
+                        const std::size_t from = i + task * chunkEntries, to = std::min(end, from + chunkEntries);
+                        for (std::size_t j = from; j < to; ++j) {
+                            const Entry e = bucket[j];
+                            forEachClearNeighbour(index, taken, e.s, [&](Slot t) {
+                                if (mine.testAndSet(t)) return;
+                                out.push_back({t, e.r, region[t]});
+                            });
+                        }
+                        for (const Listed& l : out) mine.reset(l.t);
+                        lists[task].swap(out);
+                    }
                 });
+                for (std::size_t task = 0; task < tasks; ++task)
+                    for (const Listed& l : lists[task]) {
+                        if (taken.testAndSet(l.t)) continue;
+                        region[l.t] = l.r;
+                        buckets[std::min(b, UNREACHED - l.code)].push_back({l.t, l.r});
+                    }
+                done += end - i;
+                i = end;
             }
             std::vector<Entry>().swap(bucket);
         }

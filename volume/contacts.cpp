@@ -10,7 +10,9 @@
 //  6. cut: the interface voxels of both regions, checked not to split the lumen more than the
 //     kind of cut allows; written back to the grids with the distances near the cut corrected;
 //     cuts close together reported as one contact.
-// Searches are serial and deterministic; scans over voxels run in parallel.
+// Searches are deterministic (the same result on any number of threads); scans over voxels run
+// in parallel, and so do the region flood's large batches (contact_regions.h) and the ways round
+// of 5a up to the first cut.
 #include "volume/contacts.h"
 
 #include "volume/contact_regions.h"
@@ -19,9 +21,12 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -60,6 +65,42 @@ std::uint64_t pairKey(std::int32_t a, std::int32_t b)
     if (a > b) std::swap(a, b);
     return (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
 }
+
+/// The distances of one search over the lumen's slots (+inf where none), held for the blocks
+/// the search reaches only: a search reaches few, and searches side by side each need their own.
+class SparseReach {
+public:
+    explicit SparseReach(std::size_t blocks) : blockOf_(blocks, -1) {}
+    float get(Slot s) const
+    {
+        const std::int32_t b = blockOf_[s / LEAF_VOXELS];
+        return b < 0 ? std::numeric_limits<float>::infinity() : pool_[std::size_t(b)][s % LEAF_VOXELS];
+    }
+    /// The slot's distance, to be written (+inf when first reached).
+    float& at(Slot s)
+    {
+        std::int32_t& b = blockOf_[s / LEAF_VOXELS];
+        if (b < 0) {
+            b = static_cast<std::int32_t>(used_++);
+            if (used_ > pool_.size()) pool_.emplace_back();
+            pool_[std::size_t(b)].fill(std::numeric_limits<float>::infinity());
+            reached_.push_back(s / LEAF_VOXELS);
+        }
+        return pool_[std::size_t(b)][s % LEAF_VOXELS];
+    }
+    void clear()
+    {
+        for (std::size_t blk : reached_) blockOf_[blk] = -1;
+        reached_.clear();
+        used_ = 0;
+    }
+
+private:
+    std::vector<std::int32_t> blockOf_;  ///< per block: its index in pool_, or -1
+    std::vector<std::array<float, LEAF_VOXELS>> pool_;
+    std::vector<std::size_t> reached_;
+    std::size_t used_ = 0;
+};
 
 /// Whether (saddle, sa, sb) beats the link's current saddle: larger, then lower slots.
 bool better(const Link& l, float saddle, Slot sa, Slot sb)
@@ -336,10 +377,11 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
     // its distance is the shortest (the same as Dijkstra's), and a voxel whose distance plus
     // bound exceeds boundMm lies on no way round shorter than boundMm; but it visits the voxels
     // towards `to` first, instead of a ball of radius boundMm around `from`.
+    // `reach`: the search's own distances (searches may run side by side, each with its own).
     std::vector<std::uint8_t> removed(n, 0);
-    std::vector<float> reach(n, std::numeric_limits<float>::infinity());
-    auto wayRoundMm = [&](Slot from, Slot to, float above, double boundMm) {
-        std::vector<Slot> touched;
+    auto wayRoundMm = [&](SparseReach& reach, Slot from, Slot to, float above, double boundMm,
+                          Progress* cancelWith) {
+        reach.clear();
         struct Entry {
             float f, g;  ///< g + the bound of the rest, g = the distance from `from`
             Slot s;
@@ -352,18 +394,17 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
             const Coord d = index.coord(t) - target;
             return boundScale * std::sqrt(double(d.x()) * d.x() + double(d.y()) * d.y() + double(d.z()) * d.z());
         };
-        reach[from] = 0.0f;
-        touched.push_back(from);
+        reach.at(from) = 0.0f;
         heap.push({static_cast<float>(restMm(from)), 0.0f, from});
         double found = std::numeric_limits<double>::infinity();
         std::size_t pops = 0;
         while (!heap.empty()) {
             const Entry e = heap.top();
             heap.pop();
-            if ((++pops & 0xfffff) == 0) checkCancelled(progress);
+            if ((++pops & 0xfffff) == 0) checkCancelled(cancelWith);
             const float d = e.g;
             const Slot u = e.s;
-            if (d > reach[u]) continue;
+            if (d > reach.get(u)) continue;
             if (u == to) {
                 found = d;
                 break;
@@ -371,16 +412,14 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
             index.forEachNeighbour(u, [&](Slot t, int k) {
                 if (removed[t] || !(index.depthMm[t] > above)) return;
                 const float nd = d + static_cast<float>(STEPS[k].lengthVoxels * voxelMm);
-                if (!(nd < reach[t])) return;
+                if (!(nd < reach.get(t))) return;
                 const double rest = restMm(t);
                 if (nd + rest <= boundMm) {
-                    if (reach[t] == std::numeric_limits<float>::infinity()) touched.push_back(t);
-                    reach[t] = nd;
+                    reach.at(t) = nd;
                     heap.push({static_cast<float>(nd + rest), nd, t});
                 }
             });
         }
-        for (Slot s : touched) reach[s] = std::numeric_limits<float>::infinity();
         return found;
     };
 
@@ -412,13 +451,40 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         std::stable_sort(order.begin(), order.end(), [&](int x, int y) {
             return links[narrowLinks[x]].saddle > links[narrowLinks[y]].saddle;
         });
-        for (int k : order) {
+        auto needMm = [&](const ContactInfo& c) {
+            const double aroundMm = PI * std::max(c.sideRadiusMm[0], c.sideRadiusMm[1]);
+            return std::max(params.minDetourRatio * c.straightMm, c.straightMm + std::max(params.minDetourMm, aroundMm));
+        };
+        // Until the first cut no voxel is removed: the searches up to there are those of an
+        // unchanged lumen, made side by side beforehand when more than one thread may run
+        // (the same searches, the same results); after a cut, each is made in turn.
+        const int threads = std::min<int>(tbb::this_task_arena::max_concurrency(),
+                                          static_cast<int>(tbb::global_control::active_value(
+                                              tbb::global_control::max_allowed_parallelism)));
+        std::vector<double> uncut;
+        if (threads > 1 && order.size() > 1) {
+            uncut.resize(order.size());
+            tbb::enumerable_thread_specific<SparseReach> reaches([&] { return SparseReach(blocks); });
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 1),
+                              [&](const tbb::blocked_range<std::size_t>& r) {
+                SparseReach& reach = reaches.local();
+                for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                    const Link& l = links[narrowLinks[order[i]]];
+                    uncut[i] = wayRoundMm(reach, peakSlot[l.a], peakSlot[l.b], l.saddle, needMm(contactInfo(l)),
+                                          nullptr);
+                }
+            });
+            checkCancelled(progress);
+        }
+        SparseReach reach(blocks);
+        for (std::size_t i = 0; i < order.size(); ++i) {
+            const int k = order[i];
             const Link& l = links[narrowLinks[k]];
             ContactInfo c = contactInfo(l);
-            const double aroundMm = PI * std::max(c.sideRadiusMm[0], c.sideRadiusMm[1]);
-            const double need = std::max(params.minDetourRatio * c.straightMm,
-                                         c.straightMm + std::max(params.minDetourMm, aroundMm));
-            const double way = wayRoundMm(peakSlot[l.a], peakSlot[l.b], l.saddle, need);
+            const double need = needMm(c);
+            const double way = cuts.empty() && !uncut.empty()
+                                   ? uncut[i]
+                                   : wayRoundMm(reach, peakSlot[l.a], peakSlot[l.b], l.saddle, need, progress);
             if (way < need) continue;  // regions meeting around a fold, a bend or a pocket
             c.detourMm = need;  // at least
             c.reason = "narrowest link of a cycle through the lumen: a contact between loops";

@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -146,6 +148,33 @@ openvdb::FloatGrid::Ptr randomLumen(unsigned seed, double voxelMm, bool quantize
     return grid;
 }
 
+/// The flood's ways of sharing its work: one entry at a time (one thread), and the two-pass
+/// batches (contact_regions.h) in arenas of 2 and 4 threads, every batch or the large ones.
+struct FloodRun {
+    int threads;
+    contact_regions::FloodOptions options;
+    const char* what;
+};
+const std::vector<FloodRun>& floodRuns()
+{
+    static const std::vector<FloodRun> runs = {
+        {1, {}, "1 thread"},
+        {2, {1, 3}, "2 threads, every batch in two passes, 3 entries a task"},
+        {4, {1, 1}, "4 threads, every batch in two passes, 1 entry a task"},
+        {2, {64, 16}, "2 threads, batches of 64 or more in two passes, 16 entries a task"},
+        {4, {}, "4 threads, default batches"},
+    };
+    return runs;
+}
+
+contact_regions::Regions regionsIn(const FloodRun& run, const LumenIndex& index, double voxelMm, double chunkMm)
+{
+    tbb::task_arena arena(run.threads);
+    contact_regions::Regions regions;
+    arena.execute([&] { regions = contact_regions::lumenRegions(index, voxelMm, chunkMm, nullptr, run.options); });
+    return regions;
+}
+
 TEST(ContactRegions, SameAsTheReferenceFloodOnRandomLumens)
 {
     openvdb::initialize();
@@ -158,22 +187,56 @@ TEST(ContactRegions, SameAsTheReferenceFloodOnRandomLumens)
                 const LumenIndex index = buildIndex(grid->tree());
                 ASSERT_GT(index.slotCount(), 0u);
                 const contact_regions::Regions expected = referenceRegions(index, voxelMm, chunkMm);
-                const contact_regions::Regions seen = contact_regions::lumenRegions(index, voxelMm, chunkMm);
-                std::ostringstream what;
-                what << "seed " << seed << ", voxel " << voxelMm << " mm, chunk " << chunkMm << " mm"
-                     << (quantize ? ", quantized depths" : "");
-                ASSERT_GT(expected.count, 3) << what.str() << ": expected several regions";
-                EXPECT_EQ(seen.count, expected.count) << what.str() << ": region count";
-                ASSERT_EQ(seen.region.size(), expected.region.size()) << what.str();
-                std::size_t differ = 0, first = 0;
-                for (std::size_t s = 0; s < expected.region.size(); ++s)
-                    if (seen.region[s] != expected.region[s] && differ++ == 0) first = s;
-                EXPECT_EQ(differ, 0u) << what.str() << ": " << differ << " slots differ; first at slot " << first
-                                      << " " << index.coord(static_cast<Slot>(first)) << ": expected region "
-                                      << expected.region[first] << ", seen " << seen.region[first];
-                ++compared;
+                for (const FloodRun& run : floodRuns()) {
+                    const contact_regions::Regions seen = regionsIn(run, index, voxelMm, chunkMm);
+                    std::ostringstream what;
+                    what << "seed " << seed << ", voxel " << voxelMm << " mm, chunk " << chunkMm << " mm"
+                         << (quantize ? ", quantized depths" : "") << ", " << run.what;
+                    ASSERT_GT(expected.count, 3) << what.str() << ": expected several regions";
+                    EXPECT_EQ(seen.count, expected.count) << what.str() << ": region count";
+                    ASSERT_EQ(seen.region.size(), expected.region.size()) << what.str();
+                    std::size_t differ = 0, first = 0;
+                    for (std::size_t s = 0; s < expected.region.size(); ++s)
+                        if (seen.region[s] != expected.region[s] && differ++ == 0) first = s;
+                    EXPECT_EQ(differ, 0u) << what.str() << ": " << differ << " slots differ; first at slot " << first
+                                          << " " << index.coord(static_cast<Slot>(first)) << ": expected region "
+                                          << expected.region[first] << ", seen " << seen.region[first];
+                    ++compared;
+                }
             }
-    EXPECT_EQ(compared, 24);
+    EXPECT_EQ(compared, 24 * 5);
+}
+
+/// A lumen large enough for the default batches: tubes of radius 6-9 voxels winding through a
+/// 96^3 box, touching in places.
+TEST(ContactRegions, ParallelFloodSameAsOneByOneOnALargeLumen)
+{
+    openvdb::initialize();
+    const double voxelMm = 0.7;
+    auto grid = openvdb::FloatGrid::create(static_cast<float>(3 * voxelMm));
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(voxelMm));
+    auto acc = grid->getAccessor();
+    const int size = 96;
+    for (int i = 0; i < size; ++i)
+        for (int j = 0; j < size; ++j)
+            for (int k = 0; k < size; ++k) {
+                // Two sine-bent tubes along x and one along z: they cross and touch.
+                const double a = std::hypot(j - 30 - 10 * std::sin(i * 0.15), k - 30 - 8 * std::cos(i * 0.1)) - 8.0;
+                const double b = std::hypot(j - 62 - 6 * std::sin(i * 0.2), k - 60) - 9.0;
+                const double c = std::hypot(i - 48 - 12 * std::sin(k * 0.12), j - 46) - 6.0 - 2 * std::sin(k * 0.3);
+                const double d = std::min({a, b, c}) * voxelMm;
+                if (d < 3 * voxelMm) acc.setValue(openvdb::Coord(i, j, k), static_cast<float>(d));
+            }
+    const LumenIndex index = buildIndex(grid->tree());
+    const contact_regions::Regions expected = regionsIn(floodRuns()[0], index, voxelMm, 6.0);
+    ASSERT_GT(expected.count, 10) << "expected many regions";
+    for (const FloodRun& run : floodRuns()) {
+        const contact_regions::Regions seen = regionsIn(run, index, voxelMm, 6.0);
+        EXPECT_EQ(seen.count, expected.count) << run.what << ": region count";
+        std::size_t differ = 0;
+        for (std::size_t s = 0; s < expected.region.size(); ++s) differ += seen.region[s] != expected.region[s];
+        EXPECT_EQ(differ, 0u) << run.what << ": slots whose region differs from the one-thread flood's";
+    }
 }
 
 /// The 26-connected pieces of the lumen voxels not removed: a search of the whole lumen.

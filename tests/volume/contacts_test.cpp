@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <cmath>
 #include <iostream>
@@ -180,6 +182,53 @@ TEST(Contacts, HelixWithThreeNecksIsCutAtEveryNeck)
     params.rectumMm = tc.frame.worldFromLocal(tc.axis.start());
     const Centerline cl = extractCenterline(*sdf, params);
     checkPath(cl, tc, tc.axis.start());
+}
+
+TEST(Contacts, SameCutsOnAnyNumberOfThreads)
+{
+    // The ways round before the first cut run side by side when more than one thread may (the
+    // flood's batches too, on lumens larger than these: ContactRegions.* covers them): the
+    // report and the cut grids must be those of one thread.
+    for (const Touching& tc : {helixWithNecks(true, 0.75), uWithNeck(true, 0.75)}) {
+        SCOPED_TRACE(tc.describe());
+        ContactReport expected;
+        openvdb::FloatGrid::Ptr expectedSdf;
+        for (int threads : {1, 2, 4}) {
+            auto sdf = tc.sdf();
+            ContactReport r;
+            tbb::task_arena arena(threads);
+            arena.execute([&] { r = cutContacts(*sdf, nullptr, ContactParams{}); });
+            if (threads == 1) {
+                ASSERT_FALSE(r.contacts.empty()) << "expected cut contacts";
+                expected = r;
+                expectedSdf = sdf;
+                continue;
+            }
+            EXPECT_EQ(r.regions, expected.regions) << threads << " threads: regions";
+            EXPECT_EQ(r.links, expected.links) << threads << " threads: links";
+            EXPECT_EQ(r.cycleLinks, expected.cycleLinks) << threads << " threads: cycle links";
+            EXPECT_EQ(r.wideCycles, expected.wideCycles) << threads << " threads: wide cycles";
+            ASSERT_EQ(r.contacts.size(), expected.contacts.size()) << threads << " threads: contacts";
+            for (std::size_t i = 0; i < r.contacts.size(); ++i) {
+                const ContactInfo &a = r.contacts[i], &b = expected.contacts[i];
+                EXPECT_EQ(a.cut, b.cut) << threads << " threads, contact " << i;
+                EXPECT_EQ(a.positionMm.x, b.positionMm.x) << threads << " threads, contact " << i;
+                EXPECT_EQ(a.positionMm.y, b.positionMm.y) << threads << " threads, contact " << i;
+                EXPECT_EQ(a.positionMm.z, b.positionMm.z) << threads << " threads, contact " << i;
+                EXPECT_EQ(a.widthMm, b.widthMm) << threads << " threads, contact " << i;
+                EXPECT_EQ(a.voxelsRemoved, b.voxelsRemoved) << threads << " threads, contact " << i;
+                EXPECT_EQ(a.links, b.links) << threads << " threads, contact " << i;
+            }
+            std::size_t differ = 0, active = 0;
+            auto acc = expectedSdf->getConstAccessor();
+            for (auto it = sdf->cbeginValueOn(); it; ++it, ++active) {
+                float v;
+                if (!acc.probeValue(it.getCoord(), v) || v != *it) ++differ;
+            }
+            EXPECT_EQ(active, expectedSdf->activeVoxelCount()) << threads << " threads: active voxels";
+            EXPECT_EQ(differ, 0u) << threads << " threads: sdf voxels that differ from one thread's cut";
+        }
+    }
 }
 
 TEST(Contacts, LowestEndIsTheRectumWithoutHint)
