@@ -269,10 +269,10 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
 }
 
 /// The fly-over cameras' settings and the frame images' options, as every step derives them.
-/// A pair's two views and the pair image, kept from one pair to the next (one set per thread)
-/// so that rendering a pair allocates nothing.
+/// A pair image, kept from one pair to the next (one per thread) so that rendering a pair
+/// allocates nothing.
 struct PairBuffers {
-    RgbImage left, right, pair;
+    RgbImage pair;
 };
 
 struct FlyoverSetup {
@@ -429,14 +429,12 @@ json runFrames(StudyRun& run, Progress* progress)
     std::vector<json> poses(indices.size());
     double firstRenderSeconds = 0, firstPngSeconds = 0;
     tbb::enumerable_thread_specific<PairBuffers> buffers;
-    auto renderPair = [&](std::size_t f) {
+    auto renderFramePair = [&](std::size_t f) {
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
         const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
         PairBuffers& b = buffers.local();
-        renderView(scene, cams[0], s.ro, b.left);
-        renderView(scene, cams[1], s.ro, b.right);
-        sideBySide(b.left, b.right, b.pair);
+        renderPair(scene, cams[0], cams[1], s.ro, b.pair);
         const auto t1 = Clock::now();
         writePng(frames.path(pairName(f)), b.pair);
         if (f == 0) {
@@ -453,7 +451,7 @@ json runFrames(StudyRun& run, Progress* progress)
                         {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
     };
     // The first pair before anything else, in the study's frames/ at once, announced.
-    renderPair(0);
+    renderFramePair(0);
     publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
     const double firstPairSeconds = secondsSince(tStart);
     const double firstPairSinceRunStart = secondsSince(run.start);
@@ -464,7 +462,7 @@ json runFrames(StudyRun& run, Progress* progress)
     const auto tRest = Clock::now();
     std::atomic<std::size_t> done{1};
     tbb::parallel_for(std::size_t(1), indices.size(), [&](std::size_t f) {
-        renderPair(f);
+        renderFramePair(f);
         reportProgress(progress, double(++done) / double(indices.size()), "fly-over frame pairs");
     });
     writeJson(frames.path("poses.json"),
@@ -515,9 +513,7 @@ json runFlythrough(StudyRun& run, Progress* progress)
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
             PairBuffers& b = buffers.local();
-            renderView(*in.scene, fwd, s.ro, b.left);
-            renderView(*in.scene, back, s.ro, b.right);
-            sideBySide(b.left, b.right, b.pair);
+            renderPair(*in.scene, fwd, back, s.ro, b.pair);
             writePng(flythrough.path(pairName(f)), b.pair);
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
@@ -647,9 +643,7 @@ json runVideo(StudyRun& run, Progress* progress)
                                         std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
                                 ++reused;
                             } else {
-                                renderView(*in.scene, cams[0], s.ro, b.left);
-                                renderView(*in.scene, cams[1], s.ro, b.right);
-                                sideBySide(b.left, b.right, b.pair);
+                                renderPair(*in.scene, cams[0], cams[1], s.ro, b.pair);
                             }
                             cameraPoses[k] = json{{"frame", k},
                                                   {"centerline_index", vIdx[k]},

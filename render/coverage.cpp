@@ -333,25 +333,33 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
                 std::fill(w.stamp.begin(), w.stamp.end(), 0u);
                 w.currentStamp = 1;
             }
-            w.stamp[id] = w.currentStamp;
-            w.queue.assign(1, id);
-            for (std::size_t q = 0; q < w.queue.size(); ++q) {
+            const uint32_t current = w.currentStamp;
+            uint32_t* stamp = w.stamp.data();
+            stamp[id] = current;
+            // The walk's queue is the ray's triangles in the order found. A neighbour that
+            // passes is written at its end, which advances only then: no branch on the
+            // facing and nearness tests, whose outcomes are unpredictable.
+            std::size_t tail = 1;
+            if (w.queue.size() < 64) w.queue.resize(64);
+            w.queue[0] = id;
+            for (std::size_t q = 0; q < tail; ++q) {
                 const uint32_t f = w.queue[q];
-                for (uint32_t k = vt.neighbourStart[f]; k < vt.neighbourStart[f + 1]; ++k) {
+                const uint32_t kBegin = vt.neighbourStart[f], kEnd = vt.neighbourStart[f + 1];
+                if (tail + (kEnd - kBegin) > w.queue.size()) w.queue.resize(2 * (tail + (kEnd - kBegin)));
+                uint32_t* queue = w.queue.data();
+                for (uint32_t k = kBegin; k < kEnd; ++k) {
                     const uint32_t g = vt.neighbours[k];
-                    if (w.stamp[g] == w.currentStamp) continue;
-                    w.stamp[g] = w.currentStamp;
-                    const Vec3d c0 = vertexOf(g, 0);
-                    const bool facing = ost ? dot(c0 - camera.position, vt.normals[g]) < 0.0 : true;
-                    if (!facing) continue;
-                    const Vec3d c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
+                    if (stamp[g] == current) continue;
+                    stamp[g] = current;
+                    const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
+                    const bool facing = !ost || dot(c0 - camera.position, vt.normals[g]) < 0.0;
                     const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
                     const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
-                    if (!near) continue;
-                    out.push_back(g);
-                    w.queue.push_back(g);
+                    queue[tail] = g;
+                    tail += std::size_t(facing & near);
                 }
             }
+            out.insert(out.end(), w.queue.begin() + 1, w.queue.begin() + std::ptrdiff_t(tail));
         }
     return uint64_t(mViewPx) * uint64_t(mViewPx);
 }

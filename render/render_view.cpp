@@ -328,10 +328,13 @@ RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOpt
     return image;
 }
 
-void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
-                HitImage* hits)
+namespace {
+
+/// Renders the view into `rgb`, whose rows are `rowPixels` pixels apart: pixel (x, y) of the
+/// view is rgb[3 * (y * rowPixels + x)]. The caller has validated the options.
+void renderInto(const RayScene& scene, const Camera& camera, const RenderOptions& options, uint8_t* rgb,
+                std::size_t rowPixels, HitImage* hits)
 {
-    validate(camera, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
     const int width = options.widthPx;
     const int height = options.heightPx;
     const int ss = options.supersample;
@@ -355,9 +358,6 @@ void renderView(const RayScene& scene, const Camera& camera, const RenderOptions
                                          : 0.0f,
                         float(cueStartMm));
 
-    image.width = width;
-    image.height = height;
-    image.rgb.resize(std::size_t(width) * std::size_t(height) * 3);  // every pixel is written below
     if (hits) resetHits(*hits, width, height);
 
     // The centre ray of a pixel is one of the n x n samples when n is odd; otherwise it is
@@ -383,9 +383,10 @@ void renderView(const RayScene& scene, const Camera& camera, const RenderOptions
                     shader.shadePacket(packet, shades);
                     for (int i = 0; i < LANES; ++i) {
                         if (!valid[i]) continue;
-                        const std::size_t pix = std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
-                                                std::size_t(tx * PACKET + i % PACKET);
-                        uint8_t* out = &image.rgb[pix * 3];
+                        const std::size_t row = std::size_t(ty * PACKET + i / PACKET);
+                        const std::size_t column = std::size_t(tx * PACKET + i % PACKET);
+                        const std::size_t pix = row * std::size_t(width) + column;
+                        uint8_t* out = rgb + (row * rowPixels + column) * 3;
                         if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
                             out[0] = BACKGROUND[0];
                             out[1] = BACKGROUND[1];
@@ -435,13 +436,49 @@ void renderView(const RayScene& scene, const Camera& camera, const RenderOptions
                     const int px = tx * PACKET + i % PACKET;
                     const int py = ty * PACKET + i / PACKET;
                     if (px >= width || py >= height) continue;
-                    uint8_t* out = &image.rgb[(std::size_t(py) * std::size_t(width) + std::size_t(px)) * 3];
+                    uint8_t* out = rgb + (std::size_t(py) * rowPixels + std::size_t(px)) * 3;
                     for (int c = 0; c < 3; ++c)
                         out[c] = colours.encode(sum[std::size_t(i)][std::size_t(c)] * weight);
                 }
             }
         }
     });
+}
+
+} // namespace
+
+void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
+                HitImage* hits)
+{
+    validate(camera, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
+    image.width = options.widthPx;
+    image.height = options.heightPx;
+    image.rgb.resize(std::size_t(image.width) * std::size_t(image.height) * 3);  // every pixel is written
+    renderInto(scene, camera, options, image.rgb.data(), std::size_t(image.width), hits);
+}
+
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, int gapPx)
+{
+    validate(left, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
+    validate(right, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
+    if (!(gapPx >= 0 && gapPx <= 65536)) {
+        std::ostringstream msg;
+        msg << "renderPair: gapPx must be in 0..65536, got " << gapPx;
+        throw ParameterError(msg.str());
+    }
+    const std::size_t w = std::size_t(options.widthPx), h = std::size_t(options.heightPx), gap = std::size_t(gapPx);
+    pair.width = int(2 * w + gap);
+    pair.height = int(h);
+    const std::size_t row = 2 * w + gap;
+    pair.rgb.resize(row * h * 3);  // every pixel is written
+    for (std::size_t y = 0; y < h; ++y) {
+        uint8_t* separator = pair.rgb.data() + (y * row + w) * 3;
+        for (std::size_t x = 0; x < gap; ++x)
+            for (std::size_t c = 0; c < 3; ++c) separator[x * 3 + c] = SEPARATOR[c];
+    }
+    renderInto(scene, left, options, pair.rgb.data(), row, nullptr);
+    renderInto(scene, right, options, pair.rgb.data() + (w + gap) * 3, row, nullptr);
 }
 
 void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits)

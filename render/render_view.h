@@ -67,6 +67,13 @@ RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOpt
 void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
                 HitImage* hits = nullptr);
 
+/// The pair image of two views, `left` | a `gapPx` dark separator | `right`, rendered in place:
+/// the same pixels as sideBySide(renderView(left), renderView(right), gapPx) without the two
+/// view images and their copy. Reuses `pair`'s buffer (no allocation when the size is unchanged).
+/// @throw ParameterError as renderView, or for gapPx outside 0..65536
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, int gapPx = 4);
+
 /// Only the hit image of the pixel-centre rays (no shading, no supersampling): the same rays
 /// and the same OST and near-plane rules as renderView. For coverage and picking.
 void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits);

@@ -481,5 +481,34 @@ TEST(SideBySide, IntoAReusedImageIsTheFreshPair)
     EXPECT_THROW(sideBySide(left, right, left), ParameterError);
 }
 
+// The render steps render a pair straight into the pair image: the same bytes as the two views
+// placed side by side, for sizes that are not a multiple of the 4 x 4 tiles, OST or plain,
+// supersampled or not, gaps 0 and 3, and into a reused image that held other pixels.
+TEST(RenderPair, IsTheTwoViewsSideBySide)
+{
+    const TriMesh mesh = makeIcosphere(CENTRE, R, 4, true);
+    const RayScene scene(mesh);
+    const Camera left = lookAt(CENTRE + Vec3d{1, -2, 3}, CENTRE + Vec3d{R, 0, 0}, {0, 0, 1}, 80.0);
+    const Camera right = lookAt(CENTRE + Vec3d{5, -25, 12}, CENTRE, {0, 0, 1}, 55.0);
+    RgbImage reused{40, 40, std::vector<uint8_t>(40 * 40 * 3, 77)};
+    for (const bool ost : {true, false})
+        for (const int supersample : {1, 2})
+            for (const int gap : {0, 3}) {
+                RenderOptions options = smallOptions(37, 23, ost);
+                options.supersample = supersample;
+                options.depthCue = true;
+                const RgbImage want =
+                    sideBySide(renderView(scene, left, options), renderView(scene, right, options), gap);
+                renderPair(scene, left, right, options, reused, gap);
+                EXPECT_EQ(reused.width, want.width);
+                EXPECT_EQ(reused.height, want.height);
+                EXPECT_EQ(differingPixels(reused, want, 0), 0)
+                    << "ost " << ost << ", supersample " << supersample << ", gap " << gap;
+                EXPECT_TRUE(reused.rgb == want.rgb);
+            }
+    EXPECT_THROW(renderPair(scene, left, right, smallOptions(37, 23, true), reused, -1), ParameterError);
+    EXPECT_THROW(renderPair(scene, left, right, smallOptions(0, 23, true), reused), ParameterError);
+}
+
 } // namespace
 } // namespace flyover
