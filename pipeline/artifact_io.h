@@ -60,8 +60,13 @@ openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& grid
 /// (the part surfaces: a narrow band around the surfaces of a 1024^3 CT).
 openvdb::GridBase::Ptr readGridDelayed(const std::string& path, const std::string& gridName);
 
-/// Binary PLY through OpenMesh's writer. @throw InputError.
+/// Binary PLY, the bytes of OpenMesh's writer: a triangle mesh without deleted elements is
+/// laid out in memory and written at once (the mesh stage's surface.ply is on the way to the
+/// first pair), any other mesh goes through OpenMesh. @throw InputError.
 void writeMesh(const std::string& path, const TriMesh& mesh);
+/// OpenMesh's binary PLY writer itself, written in place (no temporary): what writeMesh's
+/// bytes are tested against.
+void writeMeshWithOpenMesh(const std::string& path, const TriMesh& mesh);
 TriMesh readMesh(const std::string& path);
 
 /// Reads the vertices and triangles of a binary little-endian PLY with exactly float x, y, z

@@ -351,6 +351,8 @@ nlohmann::json runPipeline(const RunOptions& options)
     // manifest is written (and, being std::async futures, on any way out of this function).
     std::vector<std::pair<std::string, std::future<void>>> behind;
 
+    // Whether this run may announce a first pair: write-behind finishes wait for it then.
+    const bool firstPairWanted = kind == StudyKind::Colon && wanted.count("frames") > 0;
     auto execute = [&](const StageSpec& spec) {
         if (!wanted.count(spec.name)) return;
         std::map<std::string, std::string> inputs;
@@ -387,6 +389,7 @@ nlohmann::json runPipeline(const RunOptions& options)
                 }
                 recordFinished(spec.name, entry);
                 if (spec.name == "segment") run.state.speculativeSegmentation.reset();  // not needed: cancelled
+                if (spec.name == "frames") run.openFirstPairGate();  // no first pair to wait for
                 if (log) log->stageFinished(spec.name, false, secs, "");
                 return;
             }
@@ -418,8 +421,13 @@ nlohmann::json runPipeline(const RunOptions& options)
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        auto finish = [&store, &stamps, &recordFinished, &mutex, &entries, deferred, record2, entry,
-                       name = spec.name]() mutable {
+        auto finish = [&run, &store, &stamps, &recordFinished, &mutex, &entries, deferred, record2, entry,
+                       name = spec.name, behindFirstPair = spec.writeBehind && firstPairWanted]() mutable {
+            // Nothing here is needed for the first pair (the next stages' keys are the digests
+            // taken above): the fsyncs (the disk's writeback of ct.vdb's 224 MB on the full
+            // phantom), renames and records wait until it is out, so as not to share the two
+            // cores with the way to it (or until the frames step is reused, or the graph ends).
+            if (behindFirstPair) run.waitForFirstPair();
             crashPoint(("writebehind:" + name + ":before-finish").c_str());
             // What the body left to be made behind (the mesh checks), before anything is recorded.
             deferred->completeReport(record2["report"]);

@@ -4,8 +4,12 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
 
 namespace fs = std::filesystem;
 using namespace flyover;
@@ -170,4 +174,64 @@ TEST(ArtifactIo, DeferredWritesStayInTheirTemporariesUntilFinished)
     EXPECT_EQ(tmpCount(), 0);
     EXPECT_EQ(readJson(a)["x"], 1);
     fs::remove_all(dir);
+}
+
+namespace {
+std::string fileBytes(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+/// A wavy open sheet of n x n quads split into triangles (boundary, valences 3-6), its
+/// coordinates irregular in their low bits.
+TriMesh wavySheet(int n)
+{
+    TriMesh mesh;
+    std::vector<TriMesh::VertexHandle> v;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i)
+            v.push_back(mesh.add_vertex(TriMesh::Point(0.37f * float(i), 0.41f * float(j),
+                                                       std::sin(0.3f * float(i * j)) + 1e-3f * float(i))));
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            const auto a = v[std::size_t(j * (n + 1) + i)], b = v[std::size_t(j * (n + 1) + i + 1)];
+            const auto c = v[std::size_t((j + 1) * (n + 1) + i)], d = v[std::size_t((j + 1) * (n + 1) + i + 1)];
+            if ((i + j) % 2) {
+                mesh.add_face(a, b, d);
+                mesh.add_face(a, d, c);
+            } else {
+                mesh.add_face(a, b, c);
+                mesh.add_face(b, d, c);
+            }
+        }
+    return mesh;
+}
+} // namespace
+
+TEST(ArtifactIo, MeshFilesHaveTheBytesOfOpenMeshsPlyWriter)
+{
+    const fs::path d = tempDir("ply");
+    const TriMesh sheet = wavySheet(23);
+    TriMesh mesh = sheet;
+    // Faces deleted and collected: the face-vertex circulation starts at other halfedges.
+    mesh.request_face_status();
+    mesh.request_edge_status();
+    mesh.request_vertex_status();
+    for (int f = 0; f < int(mesh.n_faces()); f += 7) mesh.delete_face(OpenMesh::FaceHandle(f), true);
+    mesh.garbage_collection();
+    for (const TriMesh* m : {&sheet, static_cast<const TriMesh*>(&mesh)}) {
+        writeMesh((d / "fast.ply").string(), *m);
+        writeMeshWithOpenMesh((d / "openmesh.ply").string(), *m);
+        const std::string fast = fileBytes(d / "fast.ply"), reference = fileBytes(d / "openmesh.ply");
+        const char* which = m == &sheet ? "sheet" : "sheet with faces deleted and collected";
+        ASSERT_GT(reference.size(), 1000u) << which;
+        EXPECT_EQ(fast.size(), reference.size()) << which;
+        EXPECT_TRUE(fast == reference) << "writeMesh's PLY differs from OpenMesh's bytes (" << which << ")";
+    }
+    writeMesh((d / "fast.ply").string(), mesh);
+    const TriMesh back = readMesh((d / "fast.ply").string());
+    EXPECT_EQ(back.n_faces(), mesh.n_faces());
+    EXPECT_EQ(back.n_vertices(), mesh.n_vertices());
+    fs::remove_all(d);
 }

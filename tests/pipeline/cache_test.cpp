@@ -347,7 +347,10 @@ TEST_F(StudyTest, KilledRunsLeaveNothingThatLies)
                               // ingest's record after its file, both while later stages run;
                               // mesh's report completed behind (its checks), nothing recorded
                               "writebehind:mesh:before-finish", "writebehind:mesh:report-completed",
-                              "stage:ingest:committed"}) {
+                              "stage:ingest:committed",
+                              // the first pair out, ct.vdb still in its temporary (the fsyncs
+                              // and renames wait for the first pair)
+                              "writebehind:ingest:before-finish"}) {
         const std::string s = studyDir(std::string("crash-") + point);
         const int killed = std::system(("FLYOVER_CRASH_AT=" + std::string(point) + " " + flyover + " -q run " +
                                         ctPath() + " --study " + s + common + " 2>/dev/null").c_str());
