@@ -24,14 +24,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-shared_data() {  # shared/data in the nearest parent of the checkout that has one
-  local d=$ROOT
-  while [ "$d" != / ]; do
-    d=$(dirname "$d")
-    [ -d "$d/shared/data" ] && { echo "$d/shared/data"; return; }
-  done
-  echo "$ROOT/../shared/data"
-}
+. "$ROOT/bench/shared_data.sh"
 MASK=${1:-$(shared_data)/real/gca-colon-00020/large_intestine.nii.gz}
 RUNS=${2:-3}
 PAD_MM=${PAD_MM:-10}

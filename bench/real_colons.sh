@@ -43,16 +43,7 @@ VARIANTS=${VARIANTS:-touching redundant tube spacing all}
 MODES=${MODES:-ct mask}
 LIMIT=${LIMIT:-1200}
 GCA=${GCA:-1}
-# The shared data: shared/data in the nearest parent of the checkout that has one (a worktree
-# /work/wt/x finds /work/shared/data as /work/main does).
-shared_data() {
-  local d=$ROOT
-  while [ "$d" != / ]; do
-    d=$(dirname "$d")
-    [ -d "$d/shared/data" ] && { echo "$d/shared/data"; return; }
-  done
-  echo "$ROOT/../shared/data"
-}
+. "$ROOT/bench/shared_data.sh"
 GCA_DIR=${GCA_DIR:-$(shared_data)/real/gca-colon-00020}
 RENDER=${RENDER:-}
 export UNTIL=${UNTIL:-coverage}

@@ -4,6 +4,7 @@
 #include "data/phantom.h"
 #include "volume/image.h"
 #include "volume/image_io.h"
+#include "tests/pipeline/cli_runner.h"
 
 #include <gtest/gtest.h>
 
@@ -22,35 +23,9 @@ using namespace flyover;
 
 namespace {
 
-struct ToolRun {
-    int exitCode = -1;
-    std::string out, err;
-};
+using ToolRun = flyover::test::CliResult;
 
-ToolRun runMaskToCt(const std::string& args)
-{
-    const fs::path errFile = fs::temp_directory_path() / ("mask-to-ct-" + std::to_string(::getpid()) + ".err");
-    const std::string cmd = std::string(MASK_TO_CT_BIN) + " " + args + " 2>" + errFile.string();
-    ToolRun r;
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (!p) return r;
-    std::array<char, 4096> buf;
-    std::size_t n;
-    while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-    const int status = ::pclose(p);
-    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::ifstream in(errFile);
-    r.err.assign(std::istreambuf_iterator<char>(in), {});
-    fs::remove(errFile);
-    return r;
-}
-
-int lines(const std::string& s)
-{
-    int n = 0;
-    for (char c : s) n += c == '\n';
-    return n;
-}
+ToolRun runMaskToCt(const std::string& args) { return flyover::test::runProgram(MASK_TO_CT_BIN, args); }
 
 class MaskToCt : public ::testing::Test {
 protected:
@@ -281,7 +256,7 @@ TEST_F(MaskToCt, BadInputGetsOneLineAndNoFile)
     for (const Case& c : cases) {
         const ToolRun r = runMaskToCt(c.args);
         EXPECT_EQ(r.exitCode, 1) << c.args << "\n" << r.err;
-        EXPECT_EQ(lines(r.err), 1) << c.args << "\n" << r.err;
+        EXPECT_EQ(flyover::test::lineCount(r.err), 1) << c.args << "\n" << r.err;
         EXPECT_NE(r.err.find(c.expect), std::string::npos) << "expected \"" << c.expect << "\" in: " << r.err;
         EXPECT_FALSE(fs::exists(path("out.nii.gz")) || fs::exists(path("out.png"))) << c.args;
         fs::remove(path("out.nii.gz"));

@@ -1,4 +1,4 @@
-// Running the flyover binary from a test: exit code, stdout and stderr.
+// Running the flyover binary (or another program) from a test: exit code, stdout and stderr.
 #pragma once
 
 #include <array>
@@ -17,12 +17,13 @@ struct CliResult {
     std::string err;  ///< stderr
 };
 
-/// Runs `flyover ARGS` (ARGS through the shell) and collects what it printed.
-inline CliResult runFlyover(const std::string& args)
+/// Runs `PROGRAM ARGS` (ARGS through the shell) and collects what it printed.
+inline CliResult runProgram(const std::string& program, const std::string& args)
 {
     namespace fs = std::filesystem;
-    const fs::path errFile = fs::temp_directory_path() / ("flyover-cli-" + std::to_string(::getpid()) + ".err");
-    const std::string cmd = std::string(FLYOVER_BIN) + " " + args + " 2>" + errFile.string();
+    const fs::path errFile = fs::temp_directory_path() /
+                             (fs::path(program).filename().string() + "-cli-" + std::to_string(::getpid()) + ".err");
+    const std::string cmd = program + " " + args + " 2>" + errFile.string();
     CliResult r;
     FILE* p = ::popen(cmd.c_str(), "r");
     if (!p) return r;
@@ -36,6 +37,11 @@ inline CliResult runFlyover(const std::string& args)
     fs::remove(errFile);
     return r;
 }
+
+#ifdef FLYOVER_BIN
+/// Runs `flyover ARGS` (ARGS through the shell) and collects what it printed.
+inline CliResult runFlyover(const std::string& args) { return runProgram(FLYOVER_BIN, args); }
+#endif
 
 inline int lineCount(const std::string& s)
 {
