@@ -17,6 +17,7 @@
 #include <fstream>
 #include <cstdlib>
 #include <filesystem>
+#include <random>
 #include <set>
 #include <sstream>
 
@@ -81,6 +82,61 @@ TEST(RgbToYuv420, Rec601LimitedRangeWithBlockMeanChroma)
                       "Cr of block " + std::to_string(block));
     }
     EXPECT_THROW(rgbToYuv420(rgb.data(), 3, 2, yuv), std::invalid_argument) << "odd width";
+}
+
+// The plain rule of rgbToYuv420, one pixel and one block at a time, as it was before the SSE2
+// version: the reference that every byte of the fast one must equal.
+namespace {
+std::vector<uint8_t> plainRgbToYuv420(const std::vector<uint8_t>& rgb, std::size_t w, std::size_t h)
+{
+    auto fix = [](double c) { return int32_t(c / 255.0 * 65536.0 + (c < 0 ? -0.5 : 0.5)); };
+    const int32_t YR = fix(65.481), YG = fix(128.553), YB = fix(24.966);
+    const int32_t UR = fix(-37.797), UG = fix(-74.203), UB = fix(112.0);
+    const int32_t VR = fix(112.0), VG = fix(-93.786), VB = fix(-18.214);
+    std::vector<uint8_t> yuv(w * h + 2 * (w / 2) * (h / 2));
+    for (std::size_t p = 0; p < w * h; ++p)
+        yuv[p] = uint8_t((YR * rgb[3 * p] + YG * rgb[3 * p + 1] + YB * rgb[3 * p + 2] + (16 << 16) + (1 << 15)) >> 16);
+    for (std::size_t cy = 0; cy < h / 2; ++cy)
+        for (std::size_t cx = 0; cx < w / 2; ++cx) {
+            int32_t r = 0, g = 0, b = 0;
+            for (const std::size_t row : {2 * cy, 2 * cy + 1})
+                for (const std::size_t col : {2 * cx, 2 * cx + 1}) {
+                    const std::size_t i = 3 * (row * w + col);
+                    r += rgb[i], g += rgb[i + 1], b += rgb[i + 2];
+                }
+            const std::size_t c = cy * (w / 2) + cx;
+            yuv[w * h + c] = uint8_t((UR * r + UG * g + UB * b + (128 << 18) + (1 << 17)) >> 18);
+            yuv[w * h + (w / 2) * (h / 2) + c] = uint8_t((VR * r + VG * g + VB * b + (128 << 18) + (1 << 17)) >> 18);
+        }
+    return yuv;
+}
+} // namespace
+
+// The SSE2 conversion (eight pixels at a time, a scalar tail) gives the plain rule's bytes for
+// random images of every even width from 2 to 64 (tails of every length, too narrow for a vector
+// step), the video's 1028 x 512, and images of only extreme values.
+TEST(RgbToYuv420, SameBytesAsThePlainRuleForRandomImagesOfManySizes)
+{
+    std::mt19937 rng(15);
+    std::vector<std::pair<std::size_t, std::size_t>> sizes;
+    for (std::size_t w = 2; w <= 64; w += 2) sizes.emplace_back(w, 2 + 2 * (w % 3));
+    sizes.emplace_back(1028, 512);
+    sizes.emplace_back(1030, 6);
+    for (const auto& [w, h] : sizes)
+        for (const int kind : {0, 1, 2}) {  // uniform random, only 0 and 255, near 255
+            std::vector<uint8_t> rgb(w * h * 3);
+            for (auto& c : rgb)
+                c = kind == 0 ? uint8_t(rng()) : kind == 1 ? uint8_t(rng() % 2 ? 255 : 0) : uint8_t(250 + rng() % 6);
+            std::vector<uint8_t> yuv;
+            rgbToYuv420(rgb.data(), int(w), int(h), yuv);
+            const std::vector<uint8_t> expected = plainRgbToYuv420(rgb, w, h);
+            ASSERT_EQ(yuv.size(), expected.size()) << w << " x " << h;
+            const auto diff = std::mismatch(yuv.begin(), yuv.end(), expected.begin());
+            ASSERT_TRUE(diff.first == yuv.end())
+                << w << " x " << h << " (kind " << kind << "): byte " << (diff.first - yuv.begin()) << " of "
+                << yuv.size() << " (luma plane: " << w * h << " bytes) is " << int(*diff.first) << ", the plain rule gives "
+                << int(*diff.second);
+        }
 }
 
 // A rendered-like image through FfmpegVideo and back through ffmpeg's decoder keeps its pixels
