@@ -216,8 +216,11 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
         const ReviewView& v = review.views[k];
         char name[32];
         std::snprintf(name, sizeof name, "review_%04zu.png", k);
-        RgbImage image = renderView(scene, v.cameras[0], ro);
-        if (v.cameras.size() == 2) image = sideBySide(image, renderView(scene, v.cameras[1], ro));
+        RgbImage image;
+        if (v.cameras.size() == 2)
+            renderPair(scene, v.cameras[0], v.cameras[1], ro, image);
+        else
+            renderView(scene, v.cameras[0], ro, image);
         writePng(folder.path(name), image);
         json cams = json::array();
         for (const Camera& c : v.cameras) cams.push_back(cameraJson(c));
@@ -269,12 +272,6 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
 }
 
 /// The fly-over cameras' settings and the frame images' options, as every step derives them.
-/// A pair image, kept from one pair to the next (one per thread) so that rendering a pair
-/// allocates nothing.
-struct PairBuffers {
-    RgbImage pair;
-};
-
 struct FlyoverSetup {
     FlyoverParams fp;
     RenderOptions ro;
@@ -428,15 +425,15 @@ json runFrames(StudyRun& run, Progress* progress)
     StagedFolder frames(run.dir, "frames");
     std::vector<json> poses(indices.size());
     double firstRenderSeconds = 0, firstPngSeconds = 0;
-    tbb::enumerable_thread_specific<PairBuffers> buffers;
+    tbb::enumerable_thread_specific<RgbImage> buffers;  // a pair image per thread, reused: no allocation per pair
     auto renderFramePair = [&](std::size_t f) {
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
         const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
-        PairBuffers& b = buffers.local();
-        renderPair(scene, cams[0], cams[1], s.ro, b.pair);
+        RgbImage& pair = buffers.local();
+        renderPair(scene, cams[0], cams[1], s.ro, pair);
         const auto t1 = Clock::now();
-        writePng(frames.path(pairName(f)), b.pair);
+        writePng(frames.path(pairName(f)), pair);
         if (f == 0) {
             firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
             firstPngSeconds = secondsSince(t1);
@@ -507,14 +504,14 @@ json runFlythrough(StudyRun& run, Progress* progress)
         const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
         std::vector<json> ftPoses(indices.size());
         std::atomic<std::size_t> done{0};
-        tbb::enumerable_thread_specific<PairBuffers> buffers;
+        tbb::enumerable_thread_specific<RgbImage> buffers;  // a pair image per thread, reused: no allocation per pair
         tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
             const CenterlinePoint& p = cl.points[indices[f]];
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
-            PairBuffers& b = buffers.local();
-            renderPair(*in.scene, fwd, back, s.ro, b.pair);
-            writePng(flythrough.path(pairName(f)), b.pair);
+            RgbImage& pair = buffers.local();
+            renderPair(*in.scene, fwd, back, s.ro, pair);
+            writePng(flythrough.path(pairName(f)), pair);
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
                               {"centerline_index", indices[f]},
@@ -593,7 +590,7 @@ json runVideo(StudyRun& run, Progress* progress)
         const Centerline& cl = *in.centerline;
         const FlyoverSetup s = flyoverSetup(rp, cl);
         const std::vector<std::size_t> vIdx = pathIndices(cl, rp.videoStepMm);
-        const int pairWidth = 2 * rp.widthPx + 4;
+        const int pairWidth = 2 * rp.widthPx + PAIR_GAP_PX;
         std::vector<json> vPoses;
         // The frames step of this run rendered the pairs at its centerline indices with the
         // same cameras and options (both from this run's parameters): those frames are read
@@ -619,7 +616,7 @@ json runVideo(StudyRun& run, Progress* progress)
             FfmpegVideo video(ffmpeg, tmp, videoDir.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
             // Frames in flight are consecutive (the last filter takes them in order), plus the
             // one being written: slot k % (IN_FLIGHT + 1) is free when frame k enters.
-            std::vector<PairBuffers> slots(IN_FLIGHT + 1);
+            std::vector<RgbImage> slots(IN_FLIGHT + 1);
             FrameWriter writer([&video](const RgbImage& frame) { video.write(frame); });
             std::size_t next = 0;
             tbb::parallel_pipeline(
@@ -633,17 +630,17 @@ json runVideo(StudyRun& run, Progress* progress)
                         tbb::filter_mode::parallel,
                         [&](std::size_t k) {
                             const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
-                            PairBuffers& b = slots[k % slots.size()];
+                            RgbImage& pair = slots[k % slots.size()];
                             if (const std::string* file = framePairFile(vIdx[k])) {
-                                b.pair = readPng(*file);
-                                if (b.pair.width != pairWidth || b.pair.height != rp.heightPx)
+                                pair = readPng(*file);
+                                if (pair.width != pairWidth || pair.height != rp.heightPx)
                                     throw std::runtime_error(
-                                        *file + ": a fly-over pair of " + std::to_string(b.pair.width) + " x " +
-                                        std::to_string(b.pair.height) + " px where the video needs " +
+                                        *file + ": a fly-over pair of " + std::to_string(pair.width) + " x " +
+                                        std::to_string(pair.height) + " px where the video needs " +
                                         std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
                                 ++reused;
                             } else {
-                                renderPair(*in.scene, cams[0], cams[1], s.ro, b.pair);
+                                renderPair(*in.scene, cams[0], cams[1], s.ro, pair);
                             }
                             cameraPoses[k] = json{{"frame", k},
                                                   {"centerline_index", vIdx[k]},
@@ -652,7 +649,7 @@ json runVideo(StudyRun& run, Progress* progress)
                             return k;
                         }) &
                     tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t k) {
-                        writer.write(slots[k % slots.size()].pair);  // waits for frame k - 1's write
+                        writer.write(slots[k % slots.size()]);  // waits for frame k - 1's write
                         if (k % 32 == 0) reportProgress(progress, double(k + 1) / double(n), "video frames");
                     }));
             writer.finish();  // rethrows a failed write

@@ -31,6 +31,13 @@ constexpr float INF_F = std::numeric_limits<float>::infinity();
 constexpr std::array<double, 3> TISSUE_DISPLAY = {0.93, 0.62, 0.55};
 constexpr std::array<uint8_t, 3> BACKGROUND = {20, 20, 28};
 constexpr std::array<uint8_t, 3> SEPARATOR = {6, 6, 8};
+
+/// Writes `gapPx` separator pixels from `out` on (one row of a pair image's gap).
+void fillSeparator(uint8_t* out, std::size_t gapPx)
+{
+    for (std::size_t x = 0; x < gapPx; ++x)
+        for (std::size_t c = 0; c < 3; ++c) out[x * 3 + c] = SEPARATOR[c];
+}
 using detail::headlightShade;
 using detail::headlightShadeLanes;
 
@@ -472,11 +479,7 @@ void renderPair(const RayScene& scene, const Camera& left, const Camera& right, 
     pair.height = int(h);
     const std::size_t row = 2 * w + gap;
     pair.rgb.resize(row * h * 3);  // every pixel is written
-    for (std::size_t y = 0; y < h; ++y) {
-        uint8_t* separator = pair.rgb.data() + (y * row + w) * 3;
-        for (std::size_t x = 0; x < gap; ++x)
-            for (std::size_t c = 0; c < 3; ++c) separator[x * 3 + c] = SEPARATOR[c];
-    }
+    for (std::size_t y = 0; y < h; ++y) fillSeparator(pair.rgb.data() + (y * row + w) * 3, gap);
     renderInto(scene, left, options, pair.rgb.data(), row, nullptr);
     renderInto(scene, right, options, pair.rgb.data() + (w + gap) * 3, row, nullptr);
 }
@@ -598,8 +601,7 @@ void sideBySide(const RgbImage& left, const RgbImage& right, RgbImage& out, int 
         uint8_t* row = out.rgb.data() + std::size_t(y) * std::size_t(out.width) * 3;
         std::copy_n(left.rgb.data() + std::size_t(y) * std::size_t(left.width) * 3, std::size_t(left.width) * 3, row);
         uint8_t* gap = row + std::size_t(left.width) * 3;
-        for (int x = 0; x < gapPx; ++x)
-            for (int c = 0; c < 3; ++c) gap[x * 3 + c] = SEPARATOR[std::size_t(c)];
+        fillSeparator(gap, std::size_t(gapPx));
         std::copy_n(right.rgb.data() + std::size_t(y) * std::size_t(right.width) * 3, std::size_t(right.width) * 3,
                     gap + std::size_t(gapPx) * 3);
     }

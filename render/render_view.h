@@ -67,12 +67,15 @@ RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOpt
 void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
                 HitImage* hits = nullptr);
 
+/// Width of the dark separator between the two views of a pair image (pixels).
+constexpr int PAIR_GAP_PX = 4;
+
 /// The pair image of two views, `left` | a `gapPx` dark separator | `right`, rendered in place:
 /// the same pixels as sideBySide(renderView(left), renderView(right), gapPx) without the two
 /// view images and their copy. Reuses `pair`'s buffer (no allocation when the size is unchanged).
 /// @throw ParameterError as renderView, or for gapPx outside 0..65536
 void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
-                RgbImage& pair, int gapPx = 4);
+                RgbImage& pair, int gapPx = PAIR_GAP_PX);
 
 /// Only the hit image of the pixel-centre rays (no shading, no supersampling): the same rays
 /// and the same OST and near-plane rules as renderView. For coverage and picking.
@@ -92,10 +95,10 @@ Vec3d hitPointMm(const Camera& camera, const HitImage& hits, int x, int y);
 int countHitsWithin(const Camera& camera, const HitImage& hits, const Vec3d& centreMm, double radiusMm);
 
 /// Places two images side by side (same height) with a `gapPx` dark separator.
-RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx = 4);
+RgbImage sideBySide(const RgbImage& left, const RgbImage& right, int gapPx = PAIR_GAP_PX);
 
 /// The same into `out`, reusing its buffer (no allocation when the size is unchanged); `out`
 /// must be neither input.
-void sideBySide(const RgbImage& left, const RgbImage& right, RgbImage& out, int gapPx = 4);
+void sideBySide(const RgbImage& left, const RgbImage& right, RgbImage& out, int gapPx = PAIR_GAP_PX);
 
 } // namespace flyover
