@@ -127,6 +127,20 @@ struct StepTimes : Progress {
     }
 };
 
+/// The child's result line (parsed by the parent): the median, min and max wall seconds of the
+/// runs, their median CPU seconds, the memory after loading and at the peak, and `what`; after
+/// the per-step means. Returns 0, the child's exit status.
+int printChildResult(const char* label, std::vector<double> seconds, std::vector<double> cpu, const StepTimes& steps,
+                     int runs, double loadedMb, const std::string& what)
+{
+    std::sort(seconds.begin(), seconds.end());
+    std::sort(cpu.begin(), cpu.end());
+    steps.print(runs);
+    std::printf("%s %.3f %.3f %.3f %.3f %.0f %.0f %s\n", label, seconds[seconds.size() / 2], seconds.front(),
+                seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
+    return 0;
+}
+
 int maskChild(const std::string& maskPath, int runs, bool contacts)
 {
     openvdb::initialize();
@@ -154,12 +168,7 @@ int maskChild(const std::string& maskPath, int runs, bool contacts)
         seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
         cpu.push_back(cpuSeconds() - c0);
     }
-    std::sort(seconds.begin(), seconds.end());
-    std::sort(cpu.begin(), cpu.end());
-    steps.print(runs);
-    std::printf("mask %.3f %.3f %.3f %.3f %.0f %.0f %s\n", seconds[seconds.size() / 2], seconds.front(),
-                seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
-    return 0;
+    return printChildResult("mask", seconds, cpu, steps, runs, loadedMb, what);
 }
 
 /// FNV-1a over the active voxels (coordinates and values, in tree order) of a grid.
@@ -219,12 +228,7 @@ int lumenChild(const std::string& lumenPath, int runs)
           << std::hex << h;
         what = w.str();
     }
-    std::sort(seconds.begin(), seconds.end());
-    std::sort(cpu.begin(), cpu.end());
-    steps.print(runs);
-    std::printf("contacts %.3f %.3f %.3f %.3f %.0f %.0f %s\n", seconds[seconds.size() / 2], seconds.front(),
-                seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
-    return 0;
+    return printChildResult("contacts", seconds, cpu, steps, runs, loadedMb, what);
 }
 
 int child(const std::string& gridPath, const std::string& mode, int runs)
@@ -269,12 +273,7 @@ int child(const std::string& gridPath, const std::string& mode, int runs)
         seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
         cpu.push_back(cpuSeconds() - c0);
     }
-    std::sort(seconds.begin(), seconds.end());
-    std::sort(cpu.begin(), cpu.end());
-    steps.print(runs);
-    std::printf("%s %.3f %.3f %.3f %.3f %.0f %.0f %s\n", mode.c_str(), seconds[seconds.size() / 2],
-                seconds.front(), seconds.back(), cpu[cpu.size() / 2], loadedMb, peakRssMb(), what.c_str());
-    return 0;
+    return printChildResult(mode.c_str(), seconds, cpu, steps, runs, loadedMb, what);
 }
 
 struct Measure {
