@@ -5,10 +5,10 @@
 #include "pipeline/deferred_writes.h"
 #include "pipeline/speculative_mesh.h"
 #include "volume/image_io.h"
+#include "volume/threads.h"
 #include "volume/ingest.h"
 
 #include <sys/resource.h>
-#include <tbb/global_control.h>
 
 #include <filesystem>
 
@@ -80,7 +80,7 @@ json runIngest(StudyRun& run, Progress* progress)
     openvdb::FloatGrid::Ptr grid;
     // Writing and hashing ct.vdb is one thread's work: the segmentation begins beside it (the
     // segment stage takes it, speculative_mesh.h), not with --threads 1.
-    const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
+    const bool threads = threadsThatMayRun() > 1;
     auto beginSegment = [&run](const openvdb::FloatGrid::Ptr& hu) {
         run.state.speculativeSegmentation = std::make_shared<SpeculativeSegmentation>(hu, run.opt.params.segment);
     };

@@ -3,10 +3,10 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/speculative_mesh.h"
 #include "volume/image_io.h"
+#include "volume/threads.h"
 #include "volume/lumen_mask.h"
 #include "volume/segment.h"
 
-#include <tbb/global_control.h>
 
 #include <filesystem>
 #include <iomanip>
@@ -109,7 +109,7 @@ json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
     // changes nothing (not with --threads 1: those threads would be more).
     std::shared_ptr<SpeculativeMesh> mesh;
     std::shared_ptr<SpeculativeCenterline> centerline;
-    const bool threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1;
+    const bool threads = threadsThatMayRun() > 1;
     if (threads && (run.state.meshWanted || run.state.centerlineWanted) && seg.sdf &&
         SpeculativeMesh::applicable(*seg.sdf)) {
         // One copy, read by both (neither changes it).

@@ -3,12 +3,11 @@
 // instead of 26 scattered bytes or words; the searches are deterministic: the same regions on
 // any number of threads.
 #include "volume/contact_regions.h"
+#include "volume/threads.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -140,9 +139,7 @@ Regions lumenRegions(const LumenIndex& index, double voxelMm, double chunkMm, Pr
             std::int32_t r;
             std::int32_t code;  ///< region[t] when listed: UNREACHED - its bin
         };
-        const int threads = std::min<int>(tbb::this_task_arena::max_concurrency(),
-                                          static_cast<int>(tbb::global_control::active_value(
-                                              tbb::global_control::max_allowed_parallelism)));
+        const int threads = threadsThatMayRun();
         const std::size_t chunkEntries = std::max<std::size_t>(1, flood.chunkEntries);
         tbb::enumerable_thread_specific<SlotBits> listedBits([&] { return SlotBits(blocks); });
         std::vector<std::vector<Listed>> lists;

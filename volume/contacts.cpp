@@ -16,14 +16,13 @@
 #include "volume/contacts.h"
 
 #include "volume/contact_regions.h"
+#include "volume/threads.h"
 #include "volume/error.h"
 #include "volume/lumen_index.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -458,9 +457,7 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
         // Until the first cut no voxel is removed: the searches up to there are those of an
         // unchanged lumen, made side by side beforehand when more than one thread may run
         // (the same searches, the same results); after a cut, each is made in turn.
-        const int threads = std::min<int>(tbb::this_task_arena::max_concurrency(),
-                                          static_cast<int>(tbb::global_control::active_value(
-                                              tbb::global_control::max_allowed_parallelism)));
+        const int threads = threadsThatMayRun();
         std::vector<double> uncut;
         if (threads > 1 && order.size() > 1) {
             uncut.resize(order.size());
