@@ -33,7 +33,7 @@ namespace flyover {
 
 namespace {
 
-using Tri = std::array<uint32_t, 3>;
+using Tri = TriangleSoup::value_type;
 
 /// GridSampler<FloatGrid::ConstAccessor, BoxSampler>::wsSample, the same arithmetic (the
 /// transform's worldToIndex, BoxSampler's floor and fraction, its trilinearInterpolation), but
@@ -183,31 +183,6 @@ FaceOrientation countMeshOrientation(const TriMesh& mesh, const openvdb::FloatGr
     return tallyMeshOrientation(mesh, sdf).count;
 }
 
-/// Edge checks on the triangle soup, before OpenMesh refuses anything: the number of edges
-/// with more than two triangles, and of edges two triangles traverse in the same direction.
-std::pair<int64_t, int64_t> countSoupEdgeProblems(const std::vector<Tri>& tris)
-{
-    // Key: (min vertex, max vertex) in the high 63 bits, direction (a < b) in the lowest bit.
-    std::vector<uint64_t> keys;
-    keys.reserve(3 * tris.size());
-    for (const Tri& t : tris)
-        for (int k = 0; k < 3; ++k) {
-            const uint64_t a = t[std::size_t(k)], b = t[std::size_t((k + 1) % 3)];
-            keys.push_back((std::min(a, b) << 32 | std::max(a, b)) << 1 | uint64_t(a < b));
-        }
-    tbb::parallel_sort(keys.begin(), keys.end());
-    int64_t nonManifold = 0, conflicts = 0;
-    for (std::size_t i = 0; i < keys.size();) {
-        std::size_t j = i;
-        std::size_t forward = 0;
-        while (j < keys.size() && (keys[j] >> 1) == (keys[i] >> 1)) forward += keys[j++] & 1u;
-        const std::size_t uses = j - i;
-        if (uses > 2) ++nonManifold;
-        else if (uses == 2 && forward != 1) ++conflicts;
-        i = j;
-    }
-    return {nonManifold, conflicts};
-}
 
 /// Edge-connected components by depth-first search over face neighbours.
 int64_t countComponents(const TriMesh& mesh)
@@ -234,12 +209,25 @@ int64_t countComponents(const TriMesh& mesh)
     return components;
 }
 
+/// The faces (not deleted) without a usable normal, in face order: parallel over the faces,
+/// the parts joined left then right.
 std::vector<TriMesh::FaceHandle> degenerateFaces(const TriMesh& mesh)
 {
-    std::vector<TriMesh::FaceHandle> faces;
-    for (const auto f : mesh.faces())
-        if (!mesh.status(f).deleted() && isDegenerateFace(mesh, f)) faces.push_back(f);
-    return faces;
+    using Faces = std::vector<TriMesh::FaceHandle>;
+    const bool hasStatus = mesh.has_face_status();
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, mesh.n_faces(), 8192), Faces{},
+        [&](const tbb::blocked_range<std::size_t>& range, Faces faces) {
+            for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                const TriMesh::FaceHandle f{int(i)};
+                if (!(hasStatus && mesh.status(f).deleted()) && isDegenerateFace(mesh, f)) faces.push_back(f);
+            }
+            return faces;
+        },
+        [](Faces a, const Faces& b) {
+            a.insert(a.end(), b.begin(), b.end());
+            return a;
+        });
 }
 
 /// Removes faces without a usable normal, which volumeToMesh emits where two of its
@@ -254,9 +242,7 @@ struct DegenerateRepair {
 
 DegenerateRepair repairDegenerateFaces(TriMesh& mesh)
 {
-    std::vector<TriMesh::FaceHandle> bad;
-    for (const auto f : mesh.faces())
-        if (isDegenerateFace(mesh, f)) bad.push_back(f);
+    std::vector<TriMesh::FaceHandle> bad = degenerateFaces(mesh);
     if (bad.empty()) return {};
     const std::size_t facesBefore = mesh.n_faces();
 
@@ -306,8 +292,34 @@ void releaseVector(std::vector<T>& v)
 
 } // namespace
 
+/// Edge checks on the triangle soup, before OpenMesh refuses anything: the number of edges
+/// with more than two triangles, and of edges two triangles traverse in the same direction.
+std::pair<int64_t, int64_t> countSoupEdgeProblems(const TriangleSoup& tris)
+{
+    // Key: (min vertex, max vertex) in the high 63 bits, direction (a < b) in the lowest bit.
+    std::vector<uint64_t> keys;
+    keys.reserve(3 * tris.size());
+    for (const Tri& t : tris)
+        for (int k = 0; k < 3; ++k) {
+            const uint64_t a = t[std::size_t(k)], b = t[std::size_t((k + 1) % 3)];
+            keys.push_back((std::min(a, b) << 32 | std::max(a, b)) << 1 | uint64_t(a < b));
+        }
+    tbb::parallel_sort(keys.begin(), keys.end());
+    int64_t nonManifold = 0, conflicts = 0;
+    for (std::size_t i = 0; i < keys.size();) {
+        std::size_t j = i;
+        std::size_t forward = 0;
+        while (j < keys.size() && (keys[j] >> 1) == (keys[i] >> 1)) forward += keys[j++] & 1u;
+        const std::size_t uses = j - i;
+        if (uses > 2) ++nonManifold;
+        else if (uses == 2 && forward != 1) ++conflicts;
+        i = j;
+    }
+    return {nonManifold, conflicts};
+}
+
 TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, MeshStats* stats,
-                       Progress* progress, bool surfaceStats)
+                       Progress* progress, bool surfaceStats, std::shared_ptr<const TriangleSoup>* soup)
 {
     if (!std::isfinite(params.isoValueMm)) {
         std::ostringstream msg;
@@ -369,8 +381,9 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
         for (auto& t : tris) std::swap(t[1], t[2]);
     }
     // Vertex indices fit in 32 bits (volumeToMesh uses Vec3I/Vec4I).
+    // Counted here, or by the caller from the soup handed back.
     const auto [nonManifoldEdges, orientationConflicts] =
-        stats ? countSoupEdgeProblems(tris) : std::pair<int64_t, int64_t>(0, 0);
+        stats && !soup ? countSoupEdgeProblems(tris) : std::pair<int64_t, int64_t>(0, 0);
 
     reportProgress(progress, 0.6, "build mesh");
     // Only vertices referenced by a face enter the mesh (adaptive meshing can leave unused
@@ -405,6 +418,7 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
             if (a == b || b == c || a == c || !mesh.add_face(a, b, c).is_valid()) ++dropped;
         }
     }
+    if (soup) *soup = std::make_shared<const TriangleSoup>(std::move(tris));
     releaseVector(tris);
     releaseVector(vertexIndex);
 

@@ -8,9 +8,11 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace flyover {
@@ -70,15 +72,27 @@ struct FaceOrientation {
     }
 };
 
+/// volumeToMesh's triangles (quads split, wound as the mesh's faces), vertex indices into its
+/// points, before OpenMesh sees them.
+using TriangleSoup = std::vector<std::array<uint32_t, 3>>;
+
+/// In `soup`: the edges shared by more than two triangles and the edges two triangles traverse
+/// in the same direction (MeshStats::nonManifoldEdges, orientationConflicts).
+std::pair<int64_t, int64_t> countSoupEdgeProblems(const TriangleSoup& soup);
+
 /// @param sdf  signed distance grid (world mm), negative inside the lumen
 /// @param surfaceStats  false: `stats` gets the counts only (vertices, faces, boundary edges,
 ///        dropped faces, degenerate repairs, non-manifold edges, orientation conflicts) and
 ///        leaves components, area, enclosed volume, degenerate faces and inward fraction 0:
 ///        those cost a pass over every face and the level set (the mesh stage's report does not
 ///        show them; its checks measure the final mesh)
+/// @param soup  if given, receives the triangle soup, and `stats` leaves nonManifoldEdges and
+///        orientationConflicts 0 for the caller to count later (countSoupEdgeProblems): a
+///        sort of three keys per triangle that the mesh itself does not need
 /// @throw InputError when the level set has no zero crossing
 TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params,
-                       MeshStats* stats = nullptr, Progress* progress = nullptr, bool surfaceStats = true);
+                       MeshStats* stats = nullptr, Progress* progress = nullptr, bool surfaceStats = true,
+                       std::shared_ptr<const TriangleSoup>* soup = nullptr);
 
 /// Classifies every face of `mesh` by whether its normal agrees with -grad(sdf) at its
 /// centroid (central differences over one voxel, trilinear samples in world space).

@@ -122,12 +122,24 @@ void measureSmoothed(const TriMesh& mesh, const MeshCheck& current, LumenSurface
         rep.smoothingVolumeChange = (rep.smoothedVolumeMm3 - rep.rawVolumeMm3) / rep.rawVolumeMm3;
 }
 
+/// The extraction's soup edge checks, when they were left for later (the soup is kept in
+/// rep.extractedTriangles meanwhile).
+void countSoupEdges(LumenSurfaceReport& rep)
+{
+    if (!rep.extractedTriangles) return;
+    const auto [nonManifoldEdges, orientationConflicts] = countSoupEdgeProblems(*rep.extractedTriangles);
+    rep.extraction.nonManifoldEdges = nonManifoldEdges;
+    rep.extraction.orientationConflicts = orientationConflicts;
+    rep.extractedTriangles.reset();
+}
+
 } // namespace
 
 void checkLumenSurface(const TriMesh& mesh, const openvdb::FloatGrid& sdf, LumenSurfaceReport& rep)
 {
     if (!rep.finalChecksPending) return;
     const auto t0 = std::chrono::steady_clock::now();
+    countSoupEdges(rep);
     rep.check = checkMesh(mesh);
     // The raw (extracted) mesh's measures: its positions were kept when smoothing moved them,
     // else it is the mesh itself.
@@ -159,11 +171,18 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
     const openvdb::Vec3d voxel = sdf.voxelSize();
     const double voxelMm = std::min({voxel[0], voxel[1], voxel[2]});
 
+    // The soup's edge checks wait with the final checks, unless decimation may run (which
+    // makes those checks at once).
+    const bool mayDecimate = params.decimateTargetFaces > 0 || params.decimateFraction < 1.0 ||
+                             params.decimateMaxErrorVoxels > 0.0;
+
     auto t0 = Clock::now();
     auto extractProgress = slice(progress, 0.0, 0.3);
     // With the final checks deferred (the pipeline's mesh stage, on the first pair's path), the
-    // extraction's surface-wide measures no report shows are left out: the counts only.
-    TriMesh mesh = extractSurface(sdf, params, &rep.extraction, ptr(extractProgress), !deferFinalChecks);
+    // extraction's surface-wide measures no report shows are left out: the counts only; its
+    // soup's edge checks wait with the final checks.
+    TriMesh mesh = extractSurface(sdf, params, &rep.extraction, ptr(extractProgress), !deferFinalChecks,
+                                  deferFinalChecks && !mayDecimate ? &rep.extractedTriangles : nullptr);
     rep.extractSeconds = secondsSince(t0);
 
     int64_t target = 0;
@@ -175,6 +194,7 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
     rep.decimationMaxErrorMm = params.decimateMaxErrorVoxels * voxelMm;
     const bool decimating = target > 0 || rep.decimationMaxErrorMm > 0.0;
     const bool later = deferFinalChecks && !decimating;
+    if (!later) countSoupEdges(rep);
 
     // The check of the mesh as it stands; reused as the final check when nothing changes it.
     // Deferred, the raw measures are taken later by checkLumenSurface() (from the extracted

@@ -78,6 +78,10 @@ struct LumenSurfaceReport {
     /// (indexed by vertex), for the raw measures (rawAreaMm2, rawVolumeMm3, rawRoughnessDeg),
     /// which are then pending too. Released by checkLumenSurface().
     std::shared_ptr<const std::vector<TriMesh::Point>> extractedPoints;
+    /// While the final checks are pending: volumeToMesh's triangle soup, whose edge checks
+    /// (extraction.nonManifoldEdges, orientationConflicts) are then pending too. Released by
+    /// checkLumenSurface().
+    std::shared_ptr<const TriangleSoup> extractedTriangles;
 
     /// Every face inward, no outward component, manifold (no refused face, no edge of more
     /// than two faces, no pinched vertex), consistently wound, no degenerate face.
@@ -98,7 +102,9 @@ struct LumenSurfaceReport {
 ///        checkLumenSurface(), so that the mesh can be used first (the pipeline renders the
 ///        first pair meanwhile, issue 15); report->finalChecksPending says whether they were
 ///        left. The raw mesh's measures (rawAreaMm2, rawVolumeMm3, rawRoughnessDeg) are left
-///        too (the extracted positions are kept in report->extractedPoints meanwhile). Ignored
+///        too (the extracted positions are kept in report->extractedPoints meanwhile), and so
+///        are the extraction's soup edge checks (its triangles kept in
+///        report->extractedTriangles). Ignored
 ///        when decimation is asked for (the smoothed measures are then taken before it). The
 ///        mesh is the same either way. It also leaves out the extraction's
 ///        surface-wide stats (report->extraction keeps its counts only: extractSurface's

@@ -28,23 +28,35 @@ struct Adjacency {
 
 Adjacency buildAdjacency(const TriMesh& mesh, int64_t& fixedVertices)
 {
+    // Parallel over vertices (the mesh is only read): the valences, their prefix sums (serial,
+    // cheap), then each vertex's neighbours in its circulation order, as a serial build lists them.
+    const std::size_t n = mesh.n_vertices();
+    const bool hasStatus = mesh.has_vertex_status();  // deleted vertices: skipped, as mesh.vertices() does
     Adjacency a;
-    a.offsets.assign(mesh.n_vertices() + 1, 0);
-    fixedVertices = 0;
-    std::vector<char> movable(mesh.n_vertices(), 0);
-    for (const auto v : mesh.vertices()) {
-        movable[std::size_t(v.idx())] = !mesh.is_boundary(v) && mesh.is_manifold(v) && v.valence() > 0;
-        if (!movable[std::size_t(v.idx())]) ++fixedVertices;
-    }
-    for (const auto v : mesh.vertices())
-        a.offsets[std::size_t(v.idx()) + 1] = movable[std::size_t(v.idx())] ? v.valence() : 0;
+    a.offsets.assign(n + 1, 0);
+    fixedVertices = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, 4096), int64_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, int64_t fixed) {
+            for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                const TriMesh::VertexHandle vh{int(v)};
+                if (hasStatus && mesh.status(vh).deleted()) continue;
+                const std::size_t valence = mesh.valence(vh);
+                const bool movable = !mesh.is_boundary(vh) && mesh.is_manifold(vh) && valence > 0;
+                a.offsets[v + 1] = movable ? valence : 0;
+                if (!movable) ++fixed;
+            }
+            return fixed;
+        },
+        [](int64_t x, int64_t y) { return x + y; });
     for (std::size_t i = 1; i < a.offsets.size(); ++i) a.offsets[i] += a.offsets[i - 1];
     a.neighbours.resize(a.offsets.back());
-    for (const auto v : mesh.vertices()) {
-        if (!movable[std::size_t(v.idx())]) continue;
-        std::size_t k = a.offsets[std::size_t(v.idx())];
-        for (const auto w : mesh.vv_range(v)) a.neighbours[k++] = w.idx();
-    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            std::size_t k = a.offsets[v];
+            if (k == a.offsets[v + 1]) continue;  // fixed
+            for (const auto w : mesh.vv_range(TriMesh::VertexHandle{int(v)})) a.neighbours[k++] = w.idx();
+        }
+    });
     return a;
 }
 

@@ -371,6 +371,33 @@ TEST(ExtractSurface, CountsOnlyStatsKeepTheCountsAndTheMesh)
     EXPECT_EQ(counts.areaMm2, 0.0);
     EXPECT_EQ(counts.enclosedVolumeMm3, 0.0);
     EXPECT_EQ(counts.inwardFraction, 0.0);
+
+    // With the soup handed back, its edge checks are the caller's: the same mesh, the counts
+    // left 0, and the soup (every triangle in) gives full's counts.
+    MeshStats noSoupChecks;
+    std::shared_ptr<const TriangleSoup> soup;
+    const TriMesh c = extractSurface(*grid, MeshParams{}, &noSoupChecks, nullptr, false, &soup);
+    ASSERT_EQ(c.n_faces(), a.n_faces());
+    for (const auto v : a.vertices()) ASSERT_EQ(a.point(v), c.point(v)) << "vertex " << v.idx() << " differs";
+    ASSERT_TRUE(soup) << "the triangle soup was not handed back";
+    EXPECT_EQ(int64_t(soup->size()), full.faces + full.droppedFaces + full.removedDegenerateFaces);
+    EXPECT_EQ(noSoupChecks.faces, full.faces);
+    EXPECT_EQ(noSoupChecks.nonManifoldEdges, 0);
+    const auto [nonManifold, conflicts] = countSoupEdgeProblems(*soup);
+    EXPECT_EQ(nonManifold, full.nonManifoldEdges);
+    EXPECT_EQ(conflicts, full.orientationConflicts);
+}
+
+TEST(ExtractSurface, SoupEdgeChecksCountFansAndConflicts)
+{
+    // A square of two triangles wound alike (clean); a third triangle on edge 0-2 makes it
+    // non-manifold; a fourth on edge 1-2 traversed 1 -> 2 like the first: a conflict.
+    TriangleSoup soup{{0, 1, 2}, {0, 2, 3}};
+    EXPECT_EQ(countSoupEdgeProblems(soup), std::make_pair(int64_t(0), int64_t(0)));
+    soup.push_back({2, 0, 4});
+    EXPECT_EQ(countSoupEdgeProblems(soup), std::make_pair(int64_t(1), int64_t(0)));
+    soup.push_back({1, 2, 5});
+    EXPECT_EQ(countSoupEdgeProblems(soup), std::make_pair(int64_t(1), int64_t(1)));
 }
 
 } // namespace

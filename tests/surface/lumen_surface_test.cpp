@@ -323,12 +323,19 @@ TEST(LumenSurface, FinalChecksMadeLaterGiveTheSameReport)
         EXPECT_EQ(later.rawAreaMm2, 0.0) << "raw mesh measured although asked to wait";
         EXPECT_EQ(later.rawRoughnessDeg, 0.0) << "raw mesh measured although asked to wait";
         EXPECT_EQ(bool(later.extractedPoints), smooth) << "extracted positions kept only when smoothing moved them";
+        // The soup's edge checks wait too, on the soup kept meanwhile (every triangle in).
+        ASSERT_TRUE(later.extractedTriangles) << "the extraction's triangle soup was not kept for its checks";
+        EXPECT_EQ(int64_t(later.extractedTriangles->size()),
+                  later.extraction.faces + later.extraction.droppedFaces + later.extraction.removedDegenerateFaces);
         ASSERT_EQ(a.n_vertices(), b.n_vertices());
         ASSERT_EQ(a.n_faces(), b.n_faces());
         for (const auto v : a.vertices()) ASSERT_EQ(a.point(v), b.point(v)) << "vertex " << v.idx();
         checkLumenSurface(b, *grid, later);
         EXPECT_FALSE(later.finalChecksPending);
         EXPECT_FALSE(later.extractedPoints) << "the extracted positions are kept after the checks";
+        EXPECT_FALSE(later.extractedTriangles) << "the triangle soup is kept after the checks";
+        EXPECT_EQ(later.extraction.nonManifoldEdges, now.extraction.nonManifoldEdges);
+        EXPECT_EQ(later.extraction.orientationConflicts, now.extraction.orientationConflicts);
         EXPECT_GT(later.rawAreaMm2, 0.0);
         EXPECT_EQ(finalCheckCounts(later), finalCheckCounts(now));
         expectSameMeasures(later, now);

@@ -99,6 +99,55 @@ TEST(TaubinSmoothing, ZeroIterationsChangeNothing)
     EXPECT_EQ(report.maxDisplacementMm, 0.0);
 }
 
+TEST(TaubinSmoothing, IsThePlainUmbrellaRuleBitForBit)
+{
+    // The neighbour lists are built in parallel over the vertices: each interior vertex must
+    // still average its own neighbours in circulation order, boundary vertices stay. Reference:
+    // the rule written plainly on OpenMesh's circulators, the same arithmetic in the same order.
+    // A plane big enough for several parallel chunks (4096 vertices each), with a hole (a
+    // second boundary inside) so that fixed and movable vertices alternate along the rows.
+    TriMesh mesh = noisyPlane(90, 0.3, 11);
+    mesh.request_face_status();
+    mesh.request_edge_status();
+    mesh.request_vertex_status();
+    for (int j = 40; j < 44; ++j)
+        for (int i = 40; i < 44; ++i) mesh.delete_face(TriMesh::FaceHandle(2 * (j * 90 + i)), true);
+    mesh.garbage_collection();
+    TriMesh expected = mesh;
+    TaubinParams params;
+    params.iterations = 3;
+    using Vec3d = OpenMesh::Vec3d;
+    std::vector<Vec3d> p(expected.n_vertices()), tmp(p.size());
+    for (const auto v : expected.vertices()) p[std::size_t(v.idx())] = OpenMesh::vector_cast<Vec3d>(expected.point(v));
+    int64_t fixed = 0;
+    for (const auto v : expected.vertices())
+        if (expected.is_boundary(v)) ++fixed;
+    auto step = [&](const std::vector<Vec3d>& in, std::vector<Vec3d>& out, double weight) {
+        for (const auto v : expected.vertices()) {
+            const std::size_t i = std::size_t(v.idx());
+            if (expected.is_boundary(v)) {
+                out[i] = in[i];
+                continue;
+            }
+            Vec3d mean(0.0);
+            for (const auto w : expected.vv_range(v)) mean += in[std::size_t(w.idx())];
+            mean /= double(expected.valence(v));
+            out[i] = in[i] + weight * (mean - in[i]);
+        }
+    };
+    for (int k = 0; k < params.iterations; ++k) {
+        step(p, tmp, params.lambda);
+        step(tmp, p, params.mu());
+    }
+    SmoothReport report;
+    smoothMeshTaubin(mesh, params, &report);
+    EXPECT_EQ(report.fixedVertices, fixed) << "boundary vertices (outer edge and the hole's rim) left in place";
+    EXPECT_GT(fixed, 4 * 90) << "the hole did not open a second boundary";
+    for (const auto v : mesh.vertices())
+        ASSERT_EQ(mesh.point(v), OpenMesh::vector_cast<TriMesh::Point>(p[std::size_t(v.idx())]))
+            << "vertex " << v.idx() << " is not at the plain rule's position";
+}
+
 TEST(TaubinSmoothing, MuFollowsThePassBand)
 {
     TaubinParams p;
