@@ -25,6 +25,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace flyover {
@@ -44,6 +45,9 @@ struct RenderInputs {
     const Centerline* centerline = nullptr;
     std::vector<double> frameRadii;
     double readSurfaceSeconds = 0, buildSceneSeconds = 0, readCenterlineSeconds = 0, frameRadiiSeconds = 0;
+    /// How long the scene took to build beside the mesh stage (StudyRun::beginScene), 0 when
+    /// it was built here (buildSceneSeconds is then the wait for it).
+    double beganSceneSeconds = 0;
     ~RenderInputs();
 };
 
@@ -70,6 +74,9 @@ struct StudyState {
     /// The same for the centerline stage: the segment stage traces its lumen's centerline
     /// beside the contact cut.
     bool centerlineWanted = false;
+    /// Whether this run computes a render step: the mesh stage then begins the render scene
+    /// (StudyRun::beginScene) as soon as its mesh is in memory.
+    bool renderWanted = false;
     /// Whether this run computes the segment stage from the CT: the ingest stage then begins
     /// segmentLumen beside its writing of ct.vdb (speculative_mesh.h).
     bool segmentWanted = false;
@@ -84,6 +91,8 @@ struct StudyState {
 class StudyRun {
 public:
     explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir), start(std::chrono::steady_clock::now()) {}
+    /// Waits for a scene begun by beginScene() (stage_render.cpp: the scene's type is known there).
+    ~StudyRun();
 
     std::string path(const std::string& name) const { return (dir / name).string(); }
 
@@ -95,6 +104,12 @@ public:
     /// centerline ran in this run, else from surface.ply and centerline.json. Built once, by
     /// the first step that asks (the others wait, or help build it: no TBB deadlock).
     const RenderInputs& renderInputs();
+
+    /// Begins building the render scene from state.mesh on a thread of its own (the mesh
+    /// stage calls it once its mesh is in memory, before writing and hashing surface.ply); the
+    /// render steps' renderInputs() takes it. Nobody changes state.mesh afterwards. Building
+    /// the scene renders nothing: a frames step reused from the cache leaves it unused.
+    void beginScene();
 
     /// Work that should not compete with the first pair (the mesh checks made behind, the
     /// fsyncs, renames and records of the write-behind) waits here until the frames step has
@@ -115,6 +130,9 @@ private:
     std::mutex mLoadMutex;
     tbb::collaborative_once_flag mRenderOnce;
     std::unique_ptr<RenderInputs> mRender;
+    /// The scene begun by beginScene(), and how long it took to build (seconds). Last: its
+    /// destructor waits for the build, which reads state.mesh.
+    std::future<std::pair<std::unique_ptr<RayScene>, double>> mScene;
 };
 
 inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }

@@ -4,6 +4,7 @@
 #include "pipeline/deferred_writes.h"
 #include "pipeline/speculative_mesh.h"
 #include "surface/lumen_surface.h"
+#include "volume/threads.h"
 
 #include <algorithm>
 #include <filesystem>
@@ -111,10 +112,12 @@ json runMesh(StudyRun& run, Progress* progress)
     // The segment stage's mesh of this very lumen, made beside its contact cut, when it made one.
     std::shared_ptr<SpeculativeMesh> speculative = std::move(run.state.speculativeMesh);
     if (speculative) reportProgress(progress, 0.0, "waiting for the mesh made beside the contact cut");
-    TriMesh mesh = speculative ? speculative->take(r)
-                               : makeLumenSurface(*sdf, params, &r, progress, true, behind != nullptr);
-    writeMesh(run.path("surface.ply"), mesh);
-    run.state.mesh = std::move(mesh);
+    run.state.mesh = speculative ? speculative->take(r)
+                                 : makeLumenSurface(*sdf, params, &r, progress, true, behind != nullptr);
+    // The render scene (the first pair's) from the mesh in memory at once, beside the writing
+    // and hashing of surface.ply and the frames step's cache lookup (not with --threads 1).
+    if (run.state.renderWanted && threadsThatMayRun() > 1) run.beginScene();
+    writeMesh(run.path("surface.ply"), *run.state.mesh);
     const bool besideCut = bool(speculative);
     if (r.finalChecksPending && !behind) checkLumenSurface(*run.state.mesh, *sdf, r);
     if (r.finalChecksPending) {

@@ -376,13 +376,31 @@ private:
 
 RenderInputs::~RenderInputs() = default;
 
+StudyRun::~StudyRun() = default;
+
+void StudyRun::beginScene()
+{
+    if (mScene.valid() || !state.mesh) return;
+    const TriMesh* mesh = &*state.mesh;
+    mScene = std::async(std::launch::async, [mesh] {
+        const auto t0 = Clock::now();
+        auto scene = std::make_unique<RayScene>(*mesh);
+        return std::make_pair(std::move(scene), secondsSince(t0));
+    });
+}
+
 const RenderInputs& StudyRun::renderInputs()
 {
     tbb::collaborative_call_once(mRenderOnce, [this] {
         auto in = std::make_unique<RenderInputs>();
         const auto t0 = Clock::now();
-        // The scene straight from the mesh in memory, or from surface.ply's arrays (no topology).
-        if (state.mesh) {
+        // The scene begun by the mesh stage, or straight from the mesh in memory, or from
+        // surface.ply's arrays (no topology).
+        if (mScene.valid()) {
+            auto [scene, seconds] = mScene.get();  // rethrows what building it threw
+            in->scene = std::move(scene);
+            in->beganSceneSeconds = seconds;
+        } else if (state.mesh) {
             in->scene = std::make_unique<RayScene>(*state.mesh);
         } else {
             std::vector<float> xyz;
@@ -484,6 +502,7 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"first_pair_breakdown_seconds",
                  {{"read_surface", in.readSurfaceSeconds},
                   {"build_scene", in.buildSceneSeconds},
+                  {"scene_begun_by_mesh_stage", in.beganSceneSeconds},
                   {"read_centerline", in.readCenterlineSeconds},
                   {"frame_radii", in.frameRadiiSeconds},
                   {"wait_for_inputs", inputsSeconds},

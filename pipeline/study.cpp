@@ -9,6 +9,7 @@
 
 #include <tbb/flow_graph.h>
 
+#include <algorithm>
 #include <chrono>
 #include <exception>
 #include <future>
@@ -291,6 +292,9 @@ nlohmann::json runPipeline(const RunOptions& options)
     run.state.meshWanted = wanted.count("mesh") > 0;
     run.state.centerlineWanted = wanted.count("centerline") > 0;
     run.state.segmentWanted = kind == StudyKind::Colon && hasCt && !hasMask && wanted.count("segment") > 0;
+    run.state.renderWanted = kind == StudyKind::Colon && std::any_of(specs.begin(), specs.end(), [&](const StageSpec& s) {
+                                 return s.paramStage == RENDER_GROUP && wanted.count(s.name) > 0;
+                             });
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries

@@ -272,6 +272,47 @@ TEST_F(StudyTest, FirstPairIsWrittenAndAnnouncedBeforeTheOtherRenderSteps)
     EXPECT_EQ(out2.str().find("first_pair"), std::string::npos) << out2.str();
 }
 
+// The mesh stage begins the render scene from its mesh in memory as soon as it has it, beside
+// its writing and hashing of surface.ply (issue 15); the frames step takes that scene. The frames
+// are those of a scene built by the frames step itself: from the mesh with one thread (nothing
+// begun beside), from surface.ply when the mesh stage is reused.
+TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
+{
+    auto framesReport = [](const nlohmann::json& manifest) {
+        for (const auto& s : manifest.at("stages"))
+            if (s.at("stage") == "frames") return s.at("report");
+        ADD_FAILURE() << "no frames stage in the manifest";
+        return nlohmann::json();
+    };
+    auto begun = [&](const nlohmann::json& manifest) {
+        return framesReport(manifest).at("first_pair_breakdown_seconds").at("scene_begun_by_mesh_stage").get<double>();
+    };
+    RunOptions o = options("scenebegun");
+    o.untilStage = "frames";
+    const nlohmann::json early = runPipeline(o);
+    EXPECT_GT(begun(early), 0.0) << "the frames step did not take a scene begun by the mesh stage";
+
+    // Reused mesh: the scene from surface.ply.
+    o.forceStage = "frames";
+    const nlohmann::json fromFile = runPipeline(o);
+    EXPECT_FALSE(computedStages(fromFile).at("mesh"));
+    EXPECT_TRUE(computedStages(fromFile).at("frames"));
+    EXPECT_EQ(begun(fromFile), 0.0) << "a scene begun although the mesh stage was reused";
+    EXPECT_EQ(outputDigests(fromFile).at("frames"), outputDigests(early).at("frames"));
+
+    // One thread: nothing begun beside, the same frames.
+    RunOptions one = options("scenebegun-onethread");
+    one.untilStage = "frames";
+    nlohmann::json oneThread;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        oneThread = runPipeline(one);
+    }
+    EXPECT_EQ(begun(oneThread), 0.0) << "a scene begun beside with --threads 1";
+    EXPECT_EQ(outputDigests(oneThread).at("mesh"), outputDigests(early).at("mesh"));
+    EXPECT_EQ(outputDigests(oneThread).at("frames"), outputDigests(early).at("frames"));
+}
+
 // The video, the longest render step, starts first of the steps after the frames (then
 // coverage), so that it does not run alone at the end of the run (issue 15). With one thread
 // the order is the whole story; the MP4 must be the same, byte for byte, whether its frames are
