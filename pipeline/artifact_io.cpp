@@ -7,6 +7,7 @@
 #include "volume/image.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
+#include <isa-l/igzip_lib.h>
 #include <png.h>
 #include <xxhash.h>
 #include <zlib.h>
@@ -20,6 +21,7 @@
 #include <fstream>
 #include <memory>
 #include <new>
+#include <stdexcept>
 #include <system_error>
 #include <unistd.h>
 #include <vector>
@@ -364,37 +366,126 @@ TriMesh readMesh(const std::string& path)
     return mesh;
 }
 
+namespace {
+
+void appendU32(std::vector<unsigned char>& out, uint32_t v)
+{
+    for (int shift = 24; shift >= 0; shift -= 8) out.push_back(static_cast<unsigned char>(v >> shift));
+}
+
+/// One PNG chunk: length, type, data, and the CRC-32 of type and data.
+void appendChunk(std::vector<unsigned char>& out, const char* type, const unsigned char* data, std::size_t n)
+{
+    appendU32(out, static_cast<uint32_t>(n));
+    const std::size_t typeAt = out.size();
+    out.insert(out.end(), type, type + 4);
+    if (n) out.insert(out.end(), data, data + n);
+    const uLong crc = ::crc32(0L, out.data() + typeAt, static_cast<uInt>(4 + n));
+    appendU32(out, static_cast<uint32_t>(crc));
+}
+
+} // namespace
+
+namespace {
+
+/// PNG bytes of 8-bit pixels, `channels` 1 (gray) or 3 (RGB) per pixel, top row first.
+std::string encodePngPixels(int width, int height, int channels, const uint8_t* pixels)
+{
+    if (width <= 0 || height <= 0) throw InputError("encodePng: empty image");
+    if (static_cast<std::size_t>(width) * std::size_t(channels) + 1 >
+        (std::size_t(1) << 30) / static_cast<std::size_t>(height))
+        throw InputError("encodePng: " + std::to_string(width) + " x " + std::to_string(height) +
+                         " px is too large for one image");
+    // Frames are many: favour speed. Every row filtered with Up (the difference to the row
+    // above, which the fly-over's smooth shading makes mostly small), deflated by ISA-L at
+    // level 1 into one zlib stream: about 4x faster than zlib's run-length deflate at level 3,
+    // the files ~15% larger; the pixels are the same.
+    const std::size_t rowBytes = static_cast<std::size_t>(width) * std::size_t(channels);
+    const std::size_t rows = static_cast<std::size_t>(height);
+    thread_local std::vector<unsigned char> filtered, deflated, levelBuffer;
+    filtered.resize((rowBytes + 1) * rows);
+    for (std::size_t y = 0; y < rows; ++y) {
+        unsigned char* out = filtered.data() + y * (rowBytes + 1);
+        const unsigned char* row = pixels + y * rowBytes;
+        out[0] = 2;  // filter type Up (the first row's "above" is zero)
+        if (y == 0) {
+            std::memcpy(out + 1, row, rowBytes);
+        } else {
+            const unsigned char* above = row - rowBytes;
+            for (std::size_t i = 0; i < rowBytes; ++i) out[1 + i] = static_cast<unsigned char>(row[i] - above[i]);
+        }
+    }
+    levelBuffer.resize(ISAL_DEF_LVL1_DEFAULT);
+    // Stored blocks bound the output: the input plus 5 bytes per 64 KiB, the zlib header and
+    // its Adler-32; grown below should ISA-L ever need more.
+    deflated.resize(filtered.size() + filtered.size() / 8 + 1024);
+    isal_zstream z;
+    isal_deflate_init(&z);
+    z.level = 1;
+    z.level_buf = levelBuffer.data();
+    z.level_buf_size = static_cast<uint32_t>(levelBuffer.size());
+    z.gzip_flag = IGZIP_ZLIB;
+    z.end_of_stream = 1;
+    z.flush = NO_FLUSH;
+    z.next_in = filtered.data();
+    z.avail_in = static_cast<uint32_t>(filtered.size());
+    z.next_out = deflated.data();
+    z.avail_out = static_cast<uint32_t>(deflated.size());
+    while (z.internal_state.state != ZSTATE_END) {
+        if (z.avail_out == 0) {
+            const std::size_t used = deflated.size();
+            deflated.resize(2 * used);
+            z.next_out = deflated.data() + used;
+            z.avail_out = static_cast<uint32_t>(deflated.size() - used);
+        }
+        const int rc = isal_deflate(&z);
+        if (rc != COMP_OK) throw std::runtime_error("encodePng: ISA-L deflate failed (" + std::to_string(rc) + ")");
+    }
+    const std::size_t idatBytes = static_cast<std::size_t>(z.total_out);
+
+    std::vector<unsigned char> png;  // appendChunk's CRC reads it back: built as bytes, then moved
+    png.reserve(idatBytes + 64);
+    static const unsigned char signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    png.insert(png.end(), signature, signature + 8);
+    std::vector<unsigned char> ihdr;
+    appendU32(ihdr, static_cast<uint32_t>(width));
+    appendU32(ihdr, static_cast<uint32_t>(height));
+    const unsigned char colourType = channels == 3 ? 2 : 0;  // RGB or gray
+    ihdr.insert(ihdr.end(), {8, colourType, 0, 0, 0});  // 8 bits, deflate, filter method 0, no interlace
+    appendChunk(png, "IHDR", ihdr.data(), ihdr.size());
+    appendChunk(png, "IDAT", deflated.data(), idatBytes);
+    appendChunk(png, "IEND", nullptr, 0);
+    return std::string(png.begin(), png.end());
+}
+
+} // namespace
+
+std::string encodePng(const RgbImage& image)
+{
+    if (image.rgb.size() != static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height) * 3)
+        throw InputError("encodePng: the buffer does not match the image size");
+    return encodePngPixels(image.width, image.height, 3, image.rgb.data());
+}
+
+std::string encodeGrayPng(int width, int height, const std::vector<uint8_t>& gray)
+{
+    if (width <= 0 || height <= 0 || gray.size() != std::size_t(width) * std::size_t(height))
+        throw InputError("encodeGrayPng: the buffer does not match the image size");
+    return encodePngPixels(width, height, 1, gray.data());
+}
+
 void writePng(const std::string& path, const RgbImage& image)
 {
     if (image.width <= 0 || image.height <= 0 ||
         image.rgb.size() != static_cast<std::size_t>(image.width) * image.height * 3)
         throw InputError(path + ": image buffer does not match its size");
+    const std::string png = encodePng(image);
     writeAtomically(path, [&](const std::string& tmp) {
         std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(tmp.c_str(), "wb"), std::fclose);
-        if (!f) throw InputError(path + ": cannot open for writing");
-        png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-        png_infop info = png ? png_create_info_struct(png) : nullptr;
-        if (!png || !info) {
-            png_destroy_write_struct(&png, &info);
-            throw InputError(path + ": libpng initialisation failed");
-        }
-        if (setjmp(png_jmpbuf(png))) {
-            png_destroy_write_struct(&png, &info);
-            throw InputError(path + ": libpng failed to write");
-        }
-        png_init_io(png, f.get());
-        // Frames are many: favour speed. The Up filter with run-length deflate encodes a frame
-        // pair about 4x faster than libpng's adaptive filters at level 3, and smaller.
-        png_set_compression_level(png, 3);
-        png_set_compression_strategy(png, Z_RLE);
-        png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_UP);
-        png_set_IHDR(png, info, image.width, image.height, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
-                     PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-        png_write_info(png, info);
-        for (int y = 0; y < image.height; ++y)
-            png_write_row(png, image.rgb.data() + static_cast<std::size_t>(y) * image.width * 3);
-        png_write_end(png, nullptr);
-        png_destroy_write_struct(&png, &info);
+        if (!f) throw InputError(path + ": cannot open for writing: " + std::strerror(errno));
+        if (std::fwrite(png.data(), 1, png.size(), f.get()) != png.size())
+            throw InputError(path + ": cannot write: " + std::strerror(errno));
+        if (std::fflush(f.get()) != 0) throw InputError(path + ": cannot write: " + std::strerror(errno));
     });
 }
 

@@ -76,6 +76,11 @@ TriMesh readMesh(const std::string& path);
 /// @throw InputError when it is unreadable, truncated or has a bad vertex index.
 bool readPlainPly(const std::string& path, std::vector<float>& xyz, std::vector<uint32_t>& tris);
 
+/// PNG file bytes of an 8-bit RGB image: every row filtered with Up, one IDAT deflated by ISA-L
+/// (level 1, zlib stream). The frames' writer and the viewer's answers. @throw InputError.
+std::string encodePng(const RgbImage& image);
+/// 8-bit grayscale PNG of width x height bytes, top row first, encoded as encodePng.
+std::string encodeGrayPng(int width, int height, const std::vector<uint8_t>& gray);
 void writePng(const std::string& path, const RgbImage& image);
 /// Reads an 8-bit RGB or RGBA PNG (alpha dropped). @throw InputError.
 RgbImage readPng(const std::string& path);
