@@ -374,33 +374,43 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
         const int bx = (nx + LEAF_DIM - 1) / LEAF_DIM, by = (ny + LEAF_DIM - 1) / LEAF_DIM;
         std::vector<LeafT*> leaves(static_cast<std::size_t>(bx) * by, nullptr);
         // One row of leaves (8 rows of y) per task, read row by row of the slab (sequential
-        // reads; the row's leaves, 2 KB each, stay in cache) rather than leaf by leaf (64
-        // strided streams per leaf). The same values, masks and leaves.
+        // reads from the slab's slices; the row's leaves, 2 KB each, stay in cache) rather than
+        // leaf by leaf (64 strided streams per leaf). A leaf holds the slab's 8 values of an
+        // (x, y) next to each other (z fastest) and their 8 mask bits in one byte: each (x, y)
+        // is written at once from the 8 slices. The same values, masks and leaves.
+        const int zn = z1 - z0;
         tbb::parallel_for(tbb::blocked_range<int>(0, by), [&](const tbb::blocked_range<int>& r) {
             std::vector<float*> values(static_cast<std::size_t>(bx), nullptr);
+            const float* src[LEAF_DIM];
+            const uint8_t* outside[LEAF_DIM];
             for (int yb = r.begin(); yb < r.end(); ++yb) {
                 LeafT** rowLeaves = leaves.data() + static_cast<std::size_t>(yb) * bx;
                 std::fill(values.begin(), values.end(), nullptr);
                 const int y0 = yb * LEAF_DIM, y1 = std::min(ny, y0 + LEAF_DIM);
-                for (int z = z0; z < z1; ++z)
-                    for (int y = y0; y < y1; ++y) {
-                        const std::size_t row = static_cast<std::size_t>(y) * nx;
-                        const uint8_t* outside = outsideSlab.data() + sliceSize * static_cast<std::size_t>(z - z0) + row;
-                        const float* src = sliceValues[static_cast<std::size_t>(z - z0)] + row;
-                        // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
-                        const openvdb::Index yz = static_cast<openvdb::Index>(((y & 7) << 3) | (z & 7));
-                        for (int x = 0; x < nx; ++x) {
-                            if (outside[x] == OUTSIDE) continue;
-                            const std::size_t xb = static_cast<std::size_t>(x >> 3);
-                            if (!values[xb]) {
-                                rowLeaves[xb] = new LeafT(openvdb::Coord(x & ~7, y0, z0), background, false);
-                                values[xb] = rowLeaves[xb]->buffer().data();
-                            }
-                            const openvdb::Index offset = (static_cast<openvdb::Index>(x & 7) << 6) | yz;
-                            values[xb][offset] = src[x];
-                            rowLeaves[xb]->getValueMask().setOn(offset);
-                        }
+                for (int y = y0; y < y1; ++y) {
+                    const std::size_t row = static_cast<std::size_t>(y) * nx;
+                    for (int zi = 0; zi < zn; ++zi) {
+                        src[zi] = sliceValues[static_cast<std::size_t>(zi)] + row;
+                        outside[zi] = outsideSlab.data() + sliceSize * static_cast<std::size_t>(zi) + row;
                     }
+                    for (int x = 0; x < nx; ++x) {
+                        unsigned bits = 0;
+                        for (int zi = 0; zi < zn; ++zi)
+                            bits |= static_cast<unsigned>(outside[zi][x] != OUTSIDE) << zi;
+                        if (!bits) continue;
+                        const std::size_t xb = static_cast<std::size_t>(x >> 3);
+                        if (!values[xb]) {
+                            rowLeaves[xb] = new LeafT(openvdb::Coord(x & ~7, y0, z0), background, false);
+                            values[xb] = rowLeaves[xb]->buffer().data();
+                        }
+                        // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
+                        const openvdb::Index offset = (static_cast<openvdb::Index>(x & 7) << 6) |
+                                                      (static_cast<openvdb::Index>(y & 7) << 3);
+                        float* dst = values[xb] + offset;
+                        for (int zi = 0; zi < zn; ++zi) dst[zi] = (bits >> zi) & 1u ? src[zi][x] : background;
+                        rowLeaves[xb]->getValueMask().template getWord<uint8_t>(offset >> 3) = static_cast<uint8_t>(bits);
+                    }
+                }
             }
         });
         for (LeafT* leaf : leaves)
