@@ -408,7 +408,8 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
                                                       (static_cast<openvdb::Index>(y & 7) << 3);
                         float* dst = values[xb] + offset;
                         for (int zi = 0; zi < zn; ++zi) dst[zi] = (bits >> zi) & 1u ? src[zi][x] : background;
-                        rowLeaves[xb]->getValueMask().template getWord<uint8_t>(offset >> 3) = static_cast<uint8_t>(bits);
+                        rowLeaves[xb]->getValueMask().template getWord<uint8_t>(offset >> 3) =
+                            static_cast<uint8_t>(bits);
                     }
                 }
             }

@@ -383,8 +383,10 @@ TEST(Nifti1Voxels, CorruptOrCutGzipDataIsRefusedInOneLineNamingTheFile)
         const fs::path p = dir.path / c.name;
         writeBytes(p, c.bytes);
         const std::string message = readError(p, c.name.rfind("itk_", 0) == 0 ? scaled : l);
-        EXPECT_NE(message.find(p.string() + ": "), std::string::npos) << c.name << ": expected the file named, got \"" << message << "\"";
-        EXPECT_NE(message.find(c.expect), std::string::npos) << c.name << ": expected \"" << c.expect << "\", got \"" << message << "\"";
+        EXPECT_NE(message.find(p.string() + ": "), std::string::npos)
+            << c.name << ": expected the file named, got \"" << message << "\"";
+        EXPECT_NE(message.find(c.expect), std::string::npos)
+            << c.name << ": expected \"" << c.expect << "\", got \"" << message << "\"";
         EXPECT_EQ(message.find('\n'), std::string::npos) << c.name << ": one line: " << message;
     }
 }

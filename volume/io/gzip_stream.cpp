@@ -60,7 +60,8 @@ GzipStream::~GzipStream()
 
 void GzipStream::fail(const std::string& why)
 {
-    mError = "gzip data is truncated or corrupt after " + std::to_string(mPosition) + " decompressed bytes (" + why + ")";
+    mError = "gzip data is truncated or corrupt after " + std::to_string(mPosition) + " decompressed bytes (" + why +
+             ")";
 }
 
 bool GzipStream::refill()
@@ -156,7 +157,8 @@ std::size_t GzipStream::read(char* out, std::size_t n)
             refill();
             if (!mError.empty()) break;
         }
-        const uint32_t room = static_cast<uint32_t>(std::min<std::size_t>(n - done, std::numeric_limits<uint32_t>::max()));
+        const uint32_t room =
+            static_cast<uint32_t>(std::min<std::size_t>(n - done, std::numeric_limits<uint32_t>::max()));
         s.inflate.next_out = reinterpret_cast<uint8_t*>(out + done);
         s.inflate.avail_out = room;
         const uint32_t inBefore = s.inflate.avail_in;
