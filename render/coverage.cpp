@@ -285,6 +285,18 @@ ViewMarker::~ViewMarker() = default;
 
 uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>& out)
 {
+    return markWith(camera, ost, [&](const uint32_t* begin, const uint32_t* end) { out.insert(out.end(), begin, end); });
+}
+
+uint64_t ViewMarker::mark(const Camera& camera, bool ost, uint8_t* seen)
+{
+    return markWith(camera, ost, [seen](const uint32_t* begin, const uint32_t* end) {
+        for (const uint32_t* f = begin; f != end; ++f) seen[*f] = 1;
+    });
+}
+
+template <typename Shown> uint64_t ViewMarker::markWith(const Camera& camera, bool ost, const Shown& shown)
+{
     const RayScene::Impl& im = mScene.impl();
     const Topology& vt = *mTopology;
     const std::size_t nf = im.triangles;
@@ -317,8 +329,10 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
             const std::size_t pix = std::size_t(y) * std::size_t(hits.width) + std::size_t(x);
             const uint32_t id = hits.primId[pix];
             if (id >= nf) continue;
-            out.push_back(id);
-            if (!mFootprint) continue;
+            if (!mFootprint) {
+                shown(&id, &id + 1);
+                continue;
+            }
             // The ray's footprint: the surface within half the ray spacing of the hit,
             // stretched by 1/cos of the incidence (capped at 4x), walked over edge
             // neighbours that face the camera.
@@ -359,7 +373,7 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
                     tail += std::size_t(facing & near);
                 }
             }
-            out.insert(out.end(), w.queue.begin() + 1, w.queue.begin() + std::ptrdiff_t(tail));
+            shown(w.queue.data(), w.queue.data() + tail);  // the hit triangle and those reached
         }
     return uint64_t(mViewPx) * uint64_t(mViewPx);
 }
@@ -407,19 +421,16 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
     const ViewMarker prototype(scene, params.viewPx, params.footprint);
     struct Worker {
         ViewMarker marker;
-        std::vector<uint32_t> shown;
         std::vector<uint8_t> seen[3];  // fly-over, fly-through forward, backward
         uint64_t rays = 0;
     };
     tbb::enumerable_thread_specific<Worker> workers([&] {
-        Worker w{prototype, {}, {}, 0};
+        Worker w{prototype, {}, 0};
         for (auto& s : w.seen) s.assign(nf, 0);
         return w;
     });
     auto mark = [&](Worker& w, const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
-        w.shown.clear();
-        w.rays += w.marker.mark(camera, ost, w.shown);
-        for (const uint32_t f : w.shown) seen[f] = 1;
+        w.rays += w.marker.mark(camera, ost, seen.data());
     };
     const std::vector<double> frameRadii = params.frameRadiiMm.empty()
                                                ? flyoverFrameRadii(scene, centerline, params.flyover)
