@@ -29,8 +29,6 @@ struct ViewMarker::Topology {
     /// neighbours[neighbourStart[f] .. neighbourStart[f + 1]).
     std::vector<uint32_t> neighbourStart;
     std::vector<uint32_t> neighbours;
-    /// cross(v1 - v0, v2 - v0) of triangle f in double, from the float vertices.
-    std::vector<Vec3d> normals;
 
     explicit Topology(const RayScene::Impl& im)
     {
@@ -59,18 +57,13 @@ struct ViewMarker::Topology {
             std::sort(found.begin(), found.end());
             found.erase(std::unique(found.begin(), found.end()), found.end());
         };
-        // Two parallel passes: count (and the normals), then fill the rows.
+        // Two parallel passes: count, then fill the rows.
         neighbourStart.assign(nf + 1, 0);
-        normals.resize(nf);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf), [&](const tbb::blocked_range<std::size_t>& r) {
             std::vector<uint32_t> found;
             for (std::size_t f = r.begin(); f != r.end(); ++f) {
                 neighboursOf(f, found);
                 neighbourStart[f + 1] = uint32_t(found.size());
-                const uint32_t* t = &im.indices[3 * f];
-                const auto &v0 = im.vertices[t[0]], &v1 = im.vertices[t[1]], &v2 = im.vertices[t[2]];
-                const Vec3d c0{v0.x, v0.y, v0.z}, c1{v1.x, v1.y, v1.z}, c2{v2.x, v2.y, v2.z};
-                normals[f] = cross(c1 - c0, c2 - c0);
             }
         });
         for (std::size_t f = 0; f < nf; ++f) neighbourStart[f + 1] += neighbourStart[f];
@@ -339,7 +332,7 @@ template <typename Shown> uint64_t ViewMarker::markWith(const Camera& camera, bo
             const Vec3d dir = camera.forward + camera.right * w.columnFactor[std::size_t(x)] +
                               camera.up * w.rowFactor[std::size_t(y)];
             const Vec3d hit = camera.position + dir * double(hits.t[pix]);
-            const Vec3d ng = normalize(vt.normals[id]);
+            const Vec3d ng = normalize(cross(vertexOf(id, 1) - vertexOf(id, 0), vertexOf(id, 2) - vertexOf(id, 0)));
             const double cosine = std::fabs(dot(normalize(dir), ng));
             const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
             const double r2 = radius * radius;
@@ -366,7 +359,7 @@ template <typename Shown> uint64_t ViewMarker::markWith(const Camera& camera, bo
                     if (stamp[g] == current) continue;
                     stamp[g] = current;
                     const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
-                    const bool facing = !ost || dot(c0 - camera.position, vt.normals[g]) < 0.0;
+                    const bool facing = !ost || dot(c0 - camera.position, cross(c1 - c0, c2 - c0)) < 0.0;
                     const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
                     const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
                     queue[tail] = g;
