@@ -29,8 +29,6 @@ struct ViewMarker::Topology {
     /// neighbours[neighbourStart[f] .. neighbourStart[f + 1]).
     std::vector<uint32_t> neighbourStart;
     std::vector<uint32_t> neighbours;
-    /// cross(v1 - v0, v2 - v0) of triangle f in double, from the float vertices.
-    std::vector<Vec3d> normals;
 
     explicit Topology(const RayScene::Impl& im)
     {
@@ -59,18 +57,13 @@ struct ViewMarker::Topology {
             std::sort(found.begin(), found.end());
             found.erase(std::unique(found.begin(), found.end()), found.end());
         };
-        // Two parallel passes: count (and the normals), then fill the rows.
+        // Two parallel passes: count, then fill the rows.
         neighbourStart.assign(nf + 1, 0);
-        normals.resize(nf);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf), [&](const tbb::blocked_range<std::size_t>& r) {
             std::vector<uint32_t> found;
             for (std::size_t f = r.begin(); f != r.end(); ++f) {
                 neighboursOf(f, found);
                 neighbourStart[f + 1] = uint32_t(found.size());
-                const uint32_t* t = &im.indices[3 * f];
-                const auto &v0 = im.vertices[t[0]], &v1 = im.vertices[t[1]], &v2 = im.vertices[t[2]];
-                const Vec3d c0{v0.x, v0.y, v0.z}, c1{v1.x, v1.y, v1.z}, c2{v2.x, v2.y, v2.z};
-                normals[f] = cross(c1 - c0, c2 - c0);
             }
         });
         for (std::size_t f = 0; f < nf; ++f) neighbourStart[f + 1] += neighbourStart[f];
@@ -285,6 +278,18 @@ ViewMarker::~ViewMarker() = default;
 
 uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>& out)
 {
+    return markWith(camera, ost, [&](const uint32_t* begin, const uint32_t* end) { out.insert(out.end(), begin, end); });
+}
+
+uint64_t ViewMarker::mark(const Camera& camera, bool ost, uint8_t* seen)
+{
+    return markWith(camera, ost, [seen](const uint32_t* begin, const uint32_t* end) {
+        for (const uint32_t* f = begin; f != end; ++f) seen[*f] = 1;
+    });
+}
+
+template <typename Shown> uint64_t ViewMarker::markWith(const Camera& camera, bool ost, const Shown& shown)
+{
     const RayScene::Impl& im = mScene.impl();
     const Topology& vt = *mTopology;
     const std::size_t nf = im.triangles;
@@ -317,15 +322,17 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
             const std::size_t pix = std::size_t(y) * std::size_t(hits.width) + std::size_t(x);
             const uint32_t id = hits.primId[pix];
             if (id >= nf) continue;
-            out.push_back(id);
-            if (!mFootprint) continue;
+            if (!mFootprint) {
+                shown(&id, &id + 1);
+                continue;
+            }
             // The ray's footprint: the surface within half the ray spacing of the hit,
             // stretched by 1/cos of the incidence (capped at 4x), walked over edge
             // neighbours that face the camera.
             const Vec3d dir = camera.forward + camera.right * w.columnFactor[std::size_t(x)] +
                               camera.up * w.rowFactor[std::size_t(y)];
             const Vec3d hit = camera.position + dir * double(hits.t[pix]);
-            const Vec3d ng = normalize(vt.normals[id]);
+            const Vec3d ng = normalize(cross(vertexOf(id, 1) - vertexOf(id, 0), vertexOf(id, 2) - vertexOf(id, 0)));
             const double cosine = std::fabs(dot(normalize(dir), ng));
             const double radius = 0.5 * spacingAtUnitDepth * double(hits.t[pix]) / std::max(cosine, 0.25);
             const double r2 = radius * radius;
@@ -352,14 +359,14 @@ uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>&
                     if (stamp[g] == current) continue;
                     stamp[g] = current;
                     const Vec3d c0 = vertexOf(g, 0), c1 = vertexOf(g, 1), c2 = vertexOf(g, 2);
-                    const bool facing = !ost || dot(c0 - camera.position, vt.normals[g]) < 0.0;
+                    const bool facing = !ost || dot(c0 - camera.position, cross(c1 - c0, c2 - c0)) < 0.0;
                     const Vec3d d0 = c0 - hit, d1 = c1 - hit, d2 = c2 - hit;
                     const bool near = std::min({dot(d0, d0), dot(d1, d1), dot(d2, d2)}) <= r2;
                     queue[tail] = g;
                     tail += std::size_t(facing & near);
                 }
             }
-            out.insert(out.end(), w.queue.begin() + 1, w.queue.begin() + std::ptrdiff_t(tail));
+            shown(w.queue.data(), w.queue.data() + tail);  // the hit triangle and those reached
         }
     return uint64_t(mViewPx) * uint64_t(mViewPx);
 }
@@ -407,19 +414,16 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
     const ViewMarker prototype(scene, params.viewPx, params.footprint);
     struct Worker {
         ViewMarker marker;
-        std::vector<uint32_t> shown;
         std::vector<uint8_t> seen[3];  // fly-over, fly-through forward, backward
         uint64_t rays = 0;
     };
     tbb::enumerable_thread_specific<Worker> workers([&] {
-        Worker w{prototype, {}, {}, 0};
+        Worker w{prototype, {}, 0};
         for (auto& s : w.seen) s.assign(nf, 0);
         return w;
     });
     auto mark = [&](Worker& w, const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
-        w.shown.clear();
-        w.rays += w.marker.mark(camera, ost, w.shown);
-        for (const uint32_t f : w.shown) seen[f] = 1;
+        w.rays += w.marker.mark(camera, ost, seen.data());
     };
     const std::vector<double> frameRadii = params.frameRadiiMm.empty()
                                                ? flyoverFrameRadii(scene, centerline, params.flyover)

@@ -118,6 +118,9 @@ public:
     /// Appends the triangles that `camera` (viewPx x viewPx rays, OST when `ost`) shows to
     /// `out`; a triangle may be appended more than once. @return the rays traced
     uint64_t mark(const Camera& camera, bool ost, std::vector<uint32_t>& out);
+    /// The same triangles, flagged: seen[f] = 1 for each (`seen` has one byte per triangle of
+    /// the scene). @return the rays traced
+    uint64_t mark(const Camera& camera, bool ost, uint8_t* seen);
 
     struct Topology;
     const Topology& topology() const { return *mTopology; }
@@ -127,6 +130,8 @@ private:
     int mViewPx;
     bool mFootprint;
     std::shared_ptr<const Topology> mTopology;
+    /// mark() with `shown(begin, end)` called for each run of triangles shown.
+    template <typename Shown> uint64_t markWith(const Camera& camera, bool ost, const Shown& shown);
     struct Scratch;
     std::unique_ptr<Scratch> mScratch;
 };

@@ -6,6 +6,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config
   libopenvdb-dev libopenvdb-tools libboost-iostreams-dev zlib1g-dev
+  libisal-dev                            # ISA-L: .nii.gz inflation (volume/io/gzip_stream.h)
   libopenmesh-dev libembree-dev libtbb-dev
   libinsighttoolkit5-dev libgdcm-tools   # gdcm-tools: GDCM's CMake config names its binaries
   libnifti2-dev                          # nifti2.h: the NIfTI-2 header struct (volume/image_io.cpp)

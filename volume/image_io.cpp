@@ -5,10 +5,11 @@
 //   pixel_convert  native voxel types -> float, NaN/Inf refused
 //   geometry_check dimension, pixel type, spacing, origin, direction checks of a header
 //   data_size      where a header's voxels are on disk; truncation checks
-//   gunzip         zlib inflation to a temporary file (for what ITK reads), temporary folders
+//   gunzip         inflation to a temporary file (for what ITK reads), temporary folders
 //   probe          headers parsed in a forked child first (crash isolation); reader choice
 //   metaimage      MetaImage header text check (before MetaIO sees it)
-//   raw_voxels     NIfTI voxels by slab: pread, or inflated by zlib while read (a thread ahead)
+//   raw_voxels     NIfTI voxels by slab: pread, or inflated by ISA-L while read (a thread ahead)
+//   gzip_stream    gzip inflation by ISA-L (igzip), read in order
 //   nifti1         NIfTI-1 voxels read by flyover once ITK has read the header
 //   nifti2         NIfTI-2, read by flyover (ITK 5.2 reads NIfTI-1 only)
 //   file_source    one file through ITK: NIfTI-1, NRRD, MetaImage, single DICOM

@@ -10,7 +10,7 @@
 ///
 /// How voxels are read (memory while a source is open):
 /// - streamed by slab: NIfTI-1 and NIfTI-2 voxels are read by flyover a few slices at a time,
-///   by pread, or for gzipped files (.nii.gz, .img.gz) inflated by zlib while read, on a
+///   by pread, or for gzipped files (.nii.gz, .img.gz) inflated by ISA-L while read, on a
 ///   thread a few slices ahead (volume/io/raw_voxels.h); NIfTI-1 headers are read by ITK.
 ///   MetaImage (.mha/.mhd) is read by region (ITK's IORegion). Analyze 7.5 headers and scaled
 ///   double NIfTI-1 voxels are left to ITK (gzipped: first inflated to a temporary file in

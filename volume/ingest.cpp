@@ -78,19 +78,41 @@ struct SliceWindow {
     }
 };
 
-/// Marks the air outside the body in one slice: pixels flagged already (no data) and pixels
-/// below `airHu` connected (4-connectivity) to the slice border or to a flagged pixel. Per
-/// slice, so that it streams slab by slab; a body cross-section always separates its inner
-/// air (colon, lungs) from the outside in-plane. Scanline fill: whole runs of a row at a
-/// time, so each pixel is visited a few times in memory order.
-void markOutsideAir(const float* slice, int nx, int ny, float airHu, bool anyFlagged, uint8_t* outside,
+/// What markOutsideAir leaves in a pixel of its slice mask.
+constexpr uint8_t BODY = 0;     ///< not air: in the body
+constexpr uint8_t OUTSIDE = 1;  ///< air outside the body, or no data
+constexpr uint8_t INNER = 2;    ///< air not connected to the outside (colon, lungs): in the body
+
+/// The first x in [x, end] whose byte is INNER, or end + 1; eight bytes at a time (only
+/// INNER has bit 1 set).
+inline int nextInner(const uint8_t* row, int x, int end)
+{
+    constexpr uint64_t BIT1 = 0x0202020202020202ull;
+    while (x + 8 <= end + 1) {
+        uint64_t word;
+        std::memcpy(&word, row + x, 8);
+        if (word & BIT1) break;
+        x += 8;
+    }
+    while (x <= end && row[x] != INNER) ++x;
+    return x;
+}
+
+/// Marks the air outside the body in one slice: pixels flagged already (OUTSIDE: no data)
+/// and pixels below `airHu` connected (4-connectivity) to the slice border or to a flagged
+/// pixel become OUTSIDE; the other air pixels INNER, the rest BODY. Per slice, so that it
+/// streams slab by slab; a body cross-section always separates its inner air (colon, lungs)
+/// from the outside in-plane. Scanline fill over the mask (air not yet reached is INNER):
+/// whole runs of a row at a time, each pixel's byte visited a few times in memory order.
+void markOutsideAir(const float* slice, int nx, int ny, float airHu, bool anyFlagged, uint8_t* mask,
                     std::vector<std::pair<int, int>>& seeds)
 {
+    const std::size_t count = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
+    for (std::size_t i = 0; i < count; ++i) {  // air not reached yet: INNER (branch-free: vectorised)
+        const uint8_t flagged = mask[i] != 0, air = slice[i] < airHu;
+        mask[i] = static_cast<uint8_t>(flagged | ((air & (flagged ^ 1)) << 1));
+    }
     seeds.clear();
-    auto open = [&](int x, int y) {
-        const std::size_t i = static_cast<std::size_t>(y) * nx + x;
-        return !outside[i] && slice[i] < airHu;
-    };
     for (int x = 0; x < nx; ++x) {
         seeds.emplace_back(x, 0);
         seeds.emplace_back(x, ny - 1);
@@ -102,7 +124,7 @@ void markOutsideAir(const float* slice, int nx, int ny, float airHu, bool anyFla
     if (anyFlagged)  // grow from the neighbours of no-data pixels too
         for (int y = 0; y < ny; ++y)
             for (int x = 0; x < nx; ++x)
-                if (outside[static_cast<std::size_t>(y) * nx + x]) {
+                if (mask[static_cast<std::size_t>(y) * nx + x] == OUTSIDE) {
                     if (x > 0) seeds.emplace_back(x - 1, y);
                     if (x + 1 < nx) seeds.emplace_back(x + 1, y);
                     if (y > 0) seeds.emplace_back(x, y - 1);
@@ -111,20 +133,19 @@ void markOutsideAir(const float* slice, int nx, int ny, float airHu, bool anyFla
     while (!seeds.empty()) {
         const auto [sx, y] = seeds.back();
         seeds.pop_back();
-        if (!open(sx, y)) continue;
+        uint8_t* row = mask + static_cast<std::size_t>(y) * nx;
+        if (row[sx] != INNER) continue;
         int x0 = sx, x1 = sx;
-        while (x0 > 0 && open(x0 - 1, y)) --x0;
-        while (x1 + 1 < nx && open(x1 + 1, y)) ++x1;
-        uint8_t* row = outside + static_cast<std::size_t>(y) * nx;
-        std::fill(row + x0, row + x1 + 1, uint8_t(1));
-        // One seed per run of open pixels in the rows above and below the span.
+        while (x0 > 0 && row[x0 - 1] == INNER) --x0;
+        while (x1 + 1 < nx && row[x1 + 1] == INNER) ++x1;
+        std::fill(row + x0, row + x1 + 1, OUTSIDE);
+        // One seed per run of air not yet reached in the rows above and below the span.
         for (int ny2 : {y - 1, y + 1}) {
             if (ny2 < 0 || ny2 >= ny) continue;
-            bool inRun = false;
-            for (int x = x0; x <= x1; ++x) {
-                const bool o = open(x, ny2);
-                if (o && !inRun) seeds.emplace_back(x, ny2);
-                inRun = o;
+            const uint8_t* other = mask + static_cast<std::size_t>(ny2) * nx;
+            for (int x = nextInner(other, x0, x1); x <= x1; x = nextInner(other, x, x1)) {
+                seeds.emplace_back(x, ny2);
+                while (x <= x1 && other[x] == INNER) ++x;
             }
         }
     }
@@ -268,6 +289,10 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
     const int slabs = (nz + LEAF_DIM - 1) / LEAF_DIM;
     std::vector<float> slab;
     std::vector<uint8_t> outsideSlab;
+    // Each output slice's values: the input slice in the window itself when it is copied
+    // unchanged (no copy made), else its resampled values in `slab`.
+    std::vector<const float*> sliceValues(LEAF_DIM, nullptr);
+    const bool inPlaneCopy = sameOffsets && planes[0].identity;  // only k is resampled
     SliceWindow window;
     std::size_t windowPeak = 0;
     const float airHu = static_cast<float>(params.outsideAirHu);
@@ -284,18 +309,25 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
         window.cover(source, kLo, kHi, inPerSlice);
         windowPeak = std::max(windowPeak, window.data.size() * sizeof(float));
 
-        slab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), background);
+        bool anyResampled = !inPlaneCopy;
+        for (int z = z0; z < z1 && !anyResampled; ++z) {
+            int64_t k;
+            float wz;
+            bracket(z, k, wz);
+            anyResampled = wz != 0.0f;
+        }
+        if (anyResampled) slab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), background);
         outsideSlab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), 0);
         tbb::parallel_for(z0, z1, [&](int z) {
-            float* dst = slab.data() + sliceSize * static_cast<std::size_t>(z - z0);
+            float* dst = anyResampled ? slab.data() + sliceSize * static_cast<std::size_t>(z - z0) : nullptr;
             uint8_t* noData = outsideSlab.data() + sliceSize * static_cast<std::size_t>(z - z0);
             int64_t k;
             float wz;
             bracket(z, k, wz);
             bool anyNoData = false;
-            const bool inPlaneCopy = sameOffsets && planes[0].identity;  // only k is resampled
+            sliceValues[static_cast<std::size_t>(z - z0)] = dst;
             if (inPlaneCopy && wz == 0.0f) {
-                std::memcpy(dst, window.slice(k, inPerSlice), sliceSize * sizeof(float));
+                sliceValues[static_cast<std::size_t>(z - z0)] = window.slice(k, inPerSlice);  // read in place
             } else if (inPlaneCopy) {
                 const float* s0 = window.slice(k, inPerSlice);
                 const float* s1 = window.slice(std::min(k + 1, inK - 1), inPerSlice);
@@ -336,40 +368,50 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
                     }
             }
             std::vector<std::pair<int, int>> seeds;
-            markOutsideAir(dst, nx, ny, airHu, anyNoData, noData, seeds);
+            markOutsideAir(sliceValues[static_cast<std::size_t>(z - z0)], nx, ny, airHu, anyNoData, noData, seeds);
         });
 
         const int bx = (nx + LEAF_DIM - 1) / LEAF_DIM, by = (ny + LEAF_DIM - 1) / LEAF_DIM;
         std::vector<LeafT*> leaves(static_cast<std::size_t>(bx) * by, nullptr);
         // One row of leaves (8 rows of y) per task, read row by row of the slab (sequential
-        // reads; the row's leaves, 2 KB each, stay in cache) rather than leaf by leaf (64
-        // strided streams per leaf). The same values, masks and leaves.
+        // reads from the slab's slices; the row's leaves, 2 KB each, stay in cache) rather than
+        // leaf by leaf (64 strided streams per leaf). A leaf holds the slab's 8 values of an
+        // (x, y) next to each other (z fastest) and their 8 mask bits in one byte: each (x, y)
+        // is written at once from the 8 slices. The same values, masks and leaves.
+        const int zn = z1 - z0;
         tbb::parallel_for(tbb::blocked_range<int>(0, by), [&](const tbb::blocked_range<int>& r) {
             std::vector<float*> values(static_cast<std::size_t>(bx), nullptr);
+            const float* src[LEAF_DIM];
+            const uint8_t* outside[LEAF_DIM];
             for (int yb = r.begin(); yb < r.end(); ++yb) {
                 LeafT** rowLeaves = leaves.data() + static_cast<std::size_t>(yb) * bx;
                 std::fill(values.begin(), values.end(), nullptr);
                 const int y0 = yb * LEAF_DIM, y1 = std::min(ny, y0 + LEAF_DIM);
-                for (int z = z0; z < z1; ++z)
-                    for (int y = y0; y < y1; ++y) {
-                        const std::size_t row = sliceSize * static_cast<std::size_t>(z - z0) +
-                                                static_cast<std::size_t>(y) * nx;
-                        const uint8_t* outside = outsideSlab.data() + row;
-                        const float* src = slab.data() + row;
-                        // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
-                        const openvdb::Index yz = static_cast<openvdb::Index>(((y & 7) << 3) | (z & 7));
-                        for (int x = 0; x < nx; ++x) {
-                            if (outside[x]) continue;
-                            const std::size_t xb = static_cast<std::size_t>(x >> 3);
-                            if (!values[xb]) {
-                                rowLeaves[xb] = new LeafT(openvdb::Coord(x & ~7, y0, z0), background, false);
-                                values[xb] = rowLeaves[xb]->buffer().data();
-                            }
-                            const openvdb::Index offset = (static_cast<openvdb::Index>(x & 7) << 6) | yz;
-                            values[xb][offset] = src[x];
-                            rowLeaves[xb]->getValueMask().setOn(offset);
-                        }
+                for (int y = y0; y < y1; ++y) {
+                    const std::size_t row = static_cast<std::size_t>(y) * nx;
+                    for (int zi = 0; zi < zn; ++zi) {
+                        src[zi] = sliceValues[static_cast<std::size_t>(zi)] + row;
+                        outside[zi] = outsideSlab.data() + sliceSize * static_cast<std::size_t>(zi) + row;
                     }
+                    for (int x = 0; x < nx; ++x) {
+                        unsigned bits = 0;
+                        for (int zi = 0; zi < zn; ++zi)
+                            bits |= static_cast<unsigned>(outside[zi][x] != OUTSIDE) << zi;
+                        if (!bits) continue;
+                        const std::size_t xb = static_cast<std::size_t>(x >> 3);
+                        if (!values[xb]) {
+                            rowLeaves[xb] = new LeafT(openvdb::Coord(x & ~7, y0, z0), background, false);
+                            values[xb] = rowLeaves[xb]->buffer().data();
+                        }
+                        // Offset within the leaf: x slowest, z fastest (LeafNode::coordToOffset).
+                        const openvdb::Index offset = (static_cast<openvdb::Index>(x & 7) << 6) |
+                                                      (static_cast<openvdb::Index>(y & 7) << 3);
+                        float* dst = values[xb] + offset;
+                        for (int zi = 0; zi < zn; ++zi) dst[zi] = (bits >> zi) & 1u ? src[zi][x] : background;
+                        rowLeaves[xb]->getValueMask().template getWord<uint8_t>(offset >> 3) =
+                            static_cast<uint8_t>(bits);
+                    }
+                }
             }
         });
         for (LeafT* leaf : leaves)

@@ -15,8 +15,9 @@
 /// where its slices really are; output voxels outside every slice's footprint (the edges
 /// of a tilted stack) are background.
 ///
-/// Memory: the grid, plus one output slab (8 slices: floats and a byte mask), plus the
-/// input slices that slab needs (as float, and in their native type while read), plus
+/// Memory: the grid, plus one output slab (8 slices: a byte mask, and floats unless every
+/// slice is an input slice copied unchanged, which is read in place), plus the input slices
+/// that slab needs (as float, and in their native type while read), plus
 /// whatever the source holds (ImageSource::heldBytes(): 0 when it streams).
 #pragma once
 

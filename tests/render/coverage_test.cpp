@@ -196,6 +196,55 @@ TEST(Coverage, FootprintWalkMatchesThePlainRuleOnAFineMesh)
     EXPECT_GE(views, 30u);
 }
 
+TEST(Coverage, FlagsFromMarkAreTheTrianglesItLists)
+{
+    // computeCoverage has mark() flag the triangles in its per-method byte arrays; they must be
+    // exactly those mark() lists (and those the plain rule marks), with and without the
+    // footprint and OST, and flags already set must stay set.
+    const FoldedTube tube;
+    const TriMesh mesh = tube.mesh(0.2, 192);
+    const RayScene scene(mesh);
+    const Centerline line = tube.centerline();
+    const auto around = test::trianglesAroundVertices(scene);
+    FlyoverParams fp;
+    std::size_t views = 0;
+    for (const bool footprint : {true, false}) {
+        ViewMarker marker(scene, 48, footprint);
+        for (std::size_t i = 0; i < line.points.size(); i += 25) {
+            std::vector<Camera> cams;
+            for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
+            cams.push_back(flythroughCamera(line.points[i], false, 90.0));
+            for (const Camera& cam : cams)
+                for (const bool ost : {true, false}) {
+                    std::vector<uint32_t> listed;
+                    const uint64_t raysListed = marker.mark(cam, ost, listed);
+                    std::vector<uint8_t> flags(scene.triangleCount(), 0);
+                    flags[0] = 1;  // set before: must stay set
+                    const uint64_t raysFlagged = marker.mark(cam, ost, flags.data());
+                    EXPECT_EQ(raysFlagged, raysListed);
+                    std::vector<uint32_t> flagged;
+                    for (uint32_t f = 0; f < flags.size(); ++f)
+                        if (flags[f]) flagged.push_back(f);
+                    listed.push_back(0);
+                    std::sort(listed.begin(), listed.end());
+                    listed.erase(std::unique(listed.begin(), listed.end()), listed.end());
+                    EXPECT_EQ(flagged, listed) << "centerline point " << i << ", footprint " << footprint << ", ost "
+                                               << ost << ": " << flagged.size() << " flagged, " << listed.size()
+                                               << " listed";
+                    auto want = test::referenceMark(scene, around, cam, 48, ost, footprint);
+                    want.push_back(0);
+                    std::sort(want.begin(), want.end());
+                    want.erase(std::unique(want.begin(), want.end()), want.end());
+                    EXPECT_EQ(flagged, want) << "centerline point " << i << ", footprint " << footprint << ", ost "
+                                             << ost << ": the plain rule marks " << want.size();
+                    EXPECT_GT(flagged.size(), 50u) << "the view should show many triangles";
+                    ++views;
+                }
+        }
+    }
+    EXPECT_GE(views, 20u);
+}
+
 TEST(Coverage, RejectsBadParameters)
 {
     const TriMesh mesh = test::makeTorus({0, 0, 0}, 60.0, 10.0, 32, 16, true);

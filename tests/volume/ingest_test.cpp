@@ -213,6 +213,61 @@ TEST(Ingest, OutsideAirIsInactiveAndEnclosedGasStaysActive)
     EXPECT_EQ(got.report.sourceHeldBytes, 0) << "uncompressed NIfTI streams";
 }
 
+TEST(Ingest, OutsideAirMatchesABreadthFirstFillOnEverySlice)
+{
+    // Random air and tissue (55% air: long winding channels of outside air that the scanline
+    // fill must follow up and down and back), 67 x 53 x 11 voxels of 1 mm (copied, not
+    // interpolated). Expected: per slice, the air 4-connected to the slice border, found by a
+    // plain breadth-first fill, is inactive background; every other voxel is active with its
+    // value.
+    Image3<float> image;
+    image.geometry.size = {67, 53, 11};
+    image.geometry.spacingMm = {1, 1, 1};
+    image.voxels.resize(67 * 53 * 11);
+    uint32_t state = 7;
+    for (float& v : image.voxels) {
+        state = state * 1664525u + 1013904223u;
+        v = (state >> 8) % 100 < 55 ? -1000.0f + float(state % 7) : 40.0f + float(state % 13);
+    }
+    const auto grid = ingestImage(image, IngestParams{});
+    auto acc = grid->getConstAccessor();
+    const int nx = 67, ny = 53;
+    std::size_t outside = 0, wrong = 0;
+    for (int z = 0; z < 11; ++z) {
+        const float* slice = image.voxels.data() + std::size_t(z) * nx * ny;
+        std::vector<char> reached(std::size_t(nx) * ny, 0);
+        std::vector<std::pair<int, int>> queue;
+        auto visit = [&](int x, int y) {
+            const std::size_t i = std::size_t(y) * nx + x;
+            if (x < 0 || y < 0 || x >= nx || y >= ny || reached[i] || !(slice[i] < -500.0f)) return;
+            reached[i] = 1;
+            queue.emplace_back(x, y);
+        };
+        for (int x = 0; x < nx; ++x) visit(x, 0), visit(x, ny - 1);
+        for (int y = 0; y < ny; ++y) visit(0, y), visit(nx - 1, y);
+        for (std::size_t q = 0; q < queue.size(); ++q) {
+            const auto [x, y] = queue[q];
+            visit(x - 1, y), visit(x + 1, y), visit(x, y - 1), visit(x, y + 1);
+        }
+        outside += queue.size();
+        for (int y = 0; y < ny; ++y)
+            for (int x = 0; x < nx; ++x) {
+                const std::size_t i = std::size_t(y) * nx + x;
+                const openvdb::Coord c(x, y, z);
+                const bool on = acc.isValueOn(c);
+                const float want = reached[i] ? -1000.0f : slice[i];
+                if (on == bool(reached[i]) || acc.getValue(c) != want) {
+                    if (wrong++ < 5)
+                        ADD_FAILURE() << "voxel " << c << ": expected " << (reached[i] ? "inactive" : "active") << " "
+                                      << want << ", got " << (on ? "active " : "inactive ") << acc.getValue(c);
+                }
+            }
+    }
+    EXPECT_EQ(wrong, 0u);
+    EXPECT_GT(outside, std::size_t(67 * 53 * 11 / 10)) << "the pattern has outside air to find";
+    EXPECT_LT(outside, std::size_t(67 * 53 * 11 * 55 / 100)) << "and inner air that stays";
+}
+
 TEST(Ingest, GantryTiltIsCorrectedByResamplingAtTrueSlicePositions)
 {
     const Ingested got = ingestFixture("dicom/tilt");

@@ -3,7 +3,7 @@
 // ITK's readers are trusted for parsing and geometry, not for telling us when data is
 // missing: measured on ITK 5.2, a truncated .nii/.nii.gz reads "successfully" with the tail
 // zero-filled and a short MetaImage only prints to std::cerr. Hence the explicit size checks
-// (data_size.h), the decompression of gzipped NIfTI by zlib (gunzip.h, which reports
+// (data_size.h), the decompression of gzipped NIfTI by flyover (gzip_stream.h, which reports
 // truncation), the sentinel re-read for MetaImage, and the capture of the libraries' console
 // chatter (itk_console.h).
 
@@ -178,7 +178,7 @@ std::unique_ptr<ImageSource> openFile(const std::string& path, const ImageReadOp
         // The voxels straight from the file (inflated while read when gzipped); ITK's reader
         // only for layouts flyover leaves to it.
         const std::string flyoverHow =
-            data.compressed ? "voxels inflated by zlib while streamed by slab" : "voxels streamed by slab";
+            data.compressed ? "voxels inflated by ISA-L while streamed by slab" : "voxels streamed by slab";
         const std::string warning = options.dicomSeriesUid.empty()
                                         ? std::string()
                                         : path + ": a DICOM series UID (" + options.dicomSeriesUid +
@@ -206,7 +206,7 @@ std::unique_ptr<ImageSource> openFile(const std::string& path, const ImageReadOp
             io = createIo(readPath.string());
             if (!io) throw InputError(path + ": the decompressed NIfTI header is unreadable");
             readInformation(*io, readPath.string(), path);
-            how = "gunzipped by zlib to a temporary file, then streamed by slab";
+            how = "gunzipped by ISA-L to a temporary file, then streamed by slab";
         }
     } else if (format == "MetaImage" && io->CanStreamRead()) {
         streamed = true;

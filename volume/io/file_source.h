@@ -12,8 +12,8 @@
 namespace flyover::imageio {
 
 /// Opens one file: checks emptiness, the MetaImage header text, probes the header in a child,
-/// then reads and checks the header and the data size; gzipped NIfTI is inflated by zlib to a
-/// temporary file and streamed by slab from there.
+/// then reads and checks the header and the data size; gzipped NIfTI that flyover does not
+/// read itself is inflated to a temporary file and streamed by slab from there.
 /// @throw InputError naming the file.
 std::unique_ptr<ImageSource> openFile(const std::string& path, const ImageReadOptions& options);
 

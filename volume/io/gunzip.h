@@ -1,7 +1,7 @@
 /// @file gunzip.h
-/// @brief Inflating gzipped voxel data (.nii.gz, .img.gz) with zlib, which reports truncated
-///        and corrupt streams (ITK's readers zero-fill them), and a private temporary folder
-///        for the copy. Internal to volume/.
+/// @brief Inflating gzipped voxel data (.nii.gz, .img.gz) to a file (gzip_stream.h, which
+///        reports truncated and corrupt streams; ITK's readers zero-fill them), and a private
+///        temporary folder for the copy. Internal to volume/.
 #pragma once
 
 #include <cstdint>
@@ -24,7 +24,7 @@ private:
     std::filesystem::path mPath;
 };
 
-/// zlib-decompresses `from` into `to`; refuses truncated or corrupt streams and output
+/// Decompresses `from` into `to`; refuses truncated or corrupt streams and output
 /// shorter than `needBytes`. Messages name `name`.
 /// @throw InputError.
 void gunzipFile(const std::filesystem::path& from, const std::filesystem::path& to, uint64_t needBytes,

@@ -270,7 +270,7 @@ public:
         std::string how = "streamed by slab";
         if (compressed) {
             if (!fs::exists(data)) throw InputError(path + ": its voxel data file " + data.string() + " does not exist");
-            how = "inflated by zlib while streamed by slab";
+            how = "inflated by ISA-L while streamed by slab";
         } else {
             if (!fs::exists(data)) throw InputError(path + ": its voxel data file " + data.string() + " does not exist");
             const uint64_t have = fileBytes(data.string());

@@ -3,9 +3,8 @@
 #include "volume/io/raw_voxels.h"
 
 #include "volume/error.h"
+#include "volume/io/gzip_stream.h"
 #include "volume/io/io_util.h"
-
-#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -31,9 +30,8 @@ public:
     ByteReader(const std::string& name, const RawLayout& layout) : mName(name), mLayout(layout)
     {
         if (layout.compressed) {
-            mGz = ::gzopen(layout.dataPath.c_str(), "rb");
-            if (!mGz) mError = "cannot open " + layout.dataPath + ": " + std::strerror(errno);
-            else ::gzbuffer(mGz, 1 << 20);
+            mGz = std::make_unique<GzipStream>(layout.dataPath);
+            mError = mGz->error();
         } else {
             mFd = ::open(layout.dataPath.c_str(), O_RDONLY | O_CLOEXEC);
             if (mFd < 0) mError = "cannot open " + layout.dataPath + ": " + std::strerror(errno);
@@ -41,7 +39,6 @@ public:
     }
     ~ByteReader()
     {
-        if (mGz) ::gzclose(mGz);
         if (mFd >= 0) ::close(mFd);
     }
     ByteReader(const ByteReader&) = delete;
@@ -68,32 +65,21 @@ public:
     std::string read(char* out, std::size_t n)
     {
         if (!mError.empty()) return mError;
-        const uint64_t need = mLayout.offset + static_cast<uint64_t>(mLayout.size[0] * mLayout.size[1] * mLayout.size[2]) *
-                                                   mLayout.componentBytes;
-        std::size_t done = 0;
         if (mGz) {
-            while (done < n) {
-                const unsigned chunk = static_cast<unsigned>(std::min<std::size_t>(n - done, std::size_t(1) << 30));
-                const int got = ::gzread(mGz, out + done, chunk);
-                if (got <= 0) break;
-                done += static_cast<std::size_t>(got);
-                mPos += static_cast<uint64_t>(got);
-            }
-            if (done == n) return "";
-            int err = Z_OK;
-            const char* zmsg = ::gzerror(mGz, &err);
-            if (err != Z_OK && err != Z_STREAM_END) {
-                std::string why = zmsg ? zmsg : "zlib error";
-                const std::string prefix = mLayout.dataPath + ": ";  // zlib names the file itself
-                if (why.rfind(prefix, 0) == 0) why = why.substr(prefix.size());
-                mError = "gzip data is truncated or corrupt after " + std::to_string(mPos) +
-                         " decompressed bytes (" + why + ")";
+            const std::size_t got = mGz->read(out, n);
+            mPos += got;
+            if (got == n) return "";
+            if (!mGz->error().empty()) {
+                mError = mGz->error();
             } else {
+                const uint64_t need = mLayout.offset + static_cast<uint64_t>(mLayout.size[0] * mLayout.size[1] *
+                                                                             mLayout.size[2]) * mLayout.componentBytes;
                 mError = "header/data size mismatch: the header needs " + std::to_string(need) +
                          " bytes, the decompressed file holds " + std::to_string(mPos) + " (truncated?)";
             }
             return mError;
         }
+        std::size_t done = 0;
         while (done < n) {
             const ssize_t got = ::pread(mFd, out + done, n - done, static_cast<off_t>(mPos));
             if (got < 0 && errno == EINTR) continue;
@@ -108,10 +94,19 @@ public:
         return "";
     }
 
+    /// After the last voxel: the rest of the gzip data, so that the trailer of the last member
+    /// (its CRC-32 and length) is checked as well. "" or the problem.
+    std::string finish()
+    {
+        if (!mError.empty()) return mError;
+        if (mGz && !mGz->readToEnd()) mError = mGz->error();
+        return mError;
+    }
+
 private:
     const std::string& mName;
     const RawLayout& mLayout;
-    gzFile mGz = nullptr;
+    std::unique_ptr<GzipStream> mGz;
     int mFd = -1;
     uint64_t mPos = 0;
     std::string mError;
@@ -184,6 +179,7 @@ void RawVoxels::produce(int64_t fromSlice)
             const std::size_t n = mSliceVoxels * static_cast<std::size_t>(count);
             native.resize(n * mLayout.componentBytes);
             if (problem.empty()) problem = reader.read(native.data(), native.size());
+            if (problem.empty() && k0 + count == mLayout.size[2]) problem = reader.finish();
             if (!problem.empty()) {
                 block->error = mName + ": " + problem;
                 push(std::move(block));

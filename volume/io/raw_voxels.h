@@ -1,11 +1,11 @@
 /// @file raw_voxels.h
 /// @brief The voxels of a NIfTI file (k slowest, then j, then i), read by slices straight from
-///        the file: by pread when it is uncompressed, inflated by zlib while read when it is
-///        gzipped (no temporary copy). A thread reads, byte-swaps, converts to float and scales
-///        a few slices ahead of the consumer, so that inflating overlaps the consumer's work.
-///        Internal to volume/.
+///        the file: by pread when it is uncompressed, inflated by ISA-L while read when it is
+///        gzipped (gzip_stream.h; no temporary copy). A thread reads, byte-swaps, converts to
+///        float and scales a few slices ahead of the consumer, so that inflating overlaps the
+///        consumer's work. Internal to volume/.
 ///
-/// gzip: zlib reports truncated and corrupt streams (ITK's readers zero-fill them); they are
+/// gzip: truncated and corrupt streams are reported (ITK's readers zero-fill them); they are
 /// reported when the consumer reaches the slices that are missing, in one line naming the
 /// file. Reading backwards restarts the inflation from the start of the file.
 #pragma once
@@ -27,7 +27,7 @@ namespace flyover::imageio {
 /// How the voxels lie in the data file.
 struct RawLayout {
     std::string dataPath;        ///< the file holding the voxels
-    bool compressed = false;     ///< gzip (inflated by zlib)
+    bool compressed = false;     ///< gzip (inflated by ISA-L, gzip_stream.h)
     uint64_t offset = 0;         ///< bytes before voxel (0,0,0) (of the decompressed stream)
     IOComponentEnum type = IOComponentEnum::UNKNOWNCOMPONENTTYPE;
     std::size_t componentBytes = 0;
