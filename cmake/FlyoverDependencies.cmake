@@ -21,7 +21,8 @@ find_package(PNG REQUIRED)
 find_package(Threads REQUIRED)
 
 # ISA-L (libisal-dev): gzip inflation of .nii.gz voxels (volume/io/gzip_stream.h), streamed at
-# about 1.9x zlib's speed. Its pkg-config file, as Debian ships it.
+# about 1.9x zlib's speed, and the PNGs' deflate (pipeline/artifact_io.cpp encodePng), ~4x
+# zlib's run-length deflate. Its pkg-config file, as Debian ships it.
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(ISAL REQUIRED IMPORTED_TARGET GLOBAL libisal)
 
