@@ -293,6 +293,15 @@ bool littleEndianHost()
     return firstByte == 1;
 }
 
+/// Writes `n` bytes to `file` (created or truncated) in one call. @throw InputError naming it.
+void writeBytes(const std::string& file, const void* data, std::size_t n)
+{
+    std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(file.c_str(), "wb"), std::fclose);
+    if (!f) throw InputError(file + ": cannot open for writing: " + std::strerror(errno));
+    if (std::fwrite(data, 1, n, f.get()) != n || std::fflush(f.get()) != 0)
+        throw InputError(file + ": cannot write: " + std::strerror(errno));
+}
+
 /// The bytes OpenMesh's binary PLY writer makes of a triangle mesh without deleted elements
 /// (the header, x y z per vertex in index order, then per face the count 3 and the vertex
 /// indices in its face-vertex circulation order), built in memory and written at once instead
@@ -331,10 +340,7 @@ bool writeTrianglePly(const std::string& tmp, const TriMesh& mesh)
         out[0] = char(3);
         std::memcpy(out + 1, idx, sizeof idx);
     }
-    std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(tmp.c_str(), "wb"), std::fclose);
-    if (!f) throw InputError(tmp + ": cannot open for writing: " + std::strerror(errno));
-    if (std::fwrite(bytes.data(), 1, bytes.size(), f.get()) != bytes.size() || std::fflush(f.get()) != 0)
-        throw InputError(tmp + ": cannot write");
+    writeBytes(tmp, bytes.data(), bytes.size());
     return true;
 }
 
@@ -368,25 +374,21 @@ TriMesh readMesh(const std::string& path)
 
 namespace {
 
-void appendU32(std::vector<unsigned char>& out, uint32_t v)
+void appendU32(std::string& out, uint32_t v)
 {
-    for (int shift = 24; shift >= 0; shift -= 8) out.push_back(static_cast<unsigned char>(v >> shift));
+    for (int shift = 24; shift >= 0; shift -= 8) out.push_back(static_cast<char>(v >> shift));
 }
 
 /// One PNG chunk: length, type, data, and the CRC-32 of type and data.
-void appendChunk(std::vector<unsigned char>& out, const char* type, const unsigned char* data, std::size_t n)
+void appendChunk(std::string& out, const char* type, const void* data, std::size_t n)
 {
     appendU32(out, static_cast<uint32_t>(n));
     const std::size_t typeAt = out.size();
-    out.insert(out.end(), type, type + 4);
-    if (n) out.insert(out.end(), data, data + n);
-    const uLong crc = ::crc32(0L, out.data() + typeAt, static_cast<uInt>(4 + n));
+    out.append(type, 4);
+    if (n) out.append(static_cast<const char*>(data), n);
+    const uLong crc = ::crc32(0L, reinterpret_cast<const Bytef*>(out.data() + typeAt), static_cast<uInt>(4 + n));
     appendU32(out, static_cast<uint32_t>(crc));
 }
-
-} // namespace
-
-namespace {
 
 /// PNG bytes of 8-bit pixels, `channels` 1 (gray) or 3 (RGB) per pixel, top row first.
 std::string encodePngPixels(int width, int height, int channels, const uint8_t* pixels)
@@ -443,19 +445,17 @@ std::string encodePngPixels(int width, int height, int channels, const uint8_t* 
     }
     const std::size_t idatBytes = static_cast<std::size_t>(z.total_out);
 
-    std::vector<unsigned char> png;  // appendChunk's CRC reads it back: built as bytes, then moved
+    std::string png("\x89PNG\r\n\x1a\n", 8);
     png.reserve(idatBytes + 64);
-    static const unsigned char signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-    png.insert(png.end(), signature, signature + 8);
-    std::vector<unsigned char> ihdr;
+    std::string ihdr;
     appendU32(ihdr, static_cast<uint32_t>(width));
     appendU32(ihdr, static_cast<uint32_t>(height));
-    const unsigned char colourType = channels == 3 ? 2 : 0;  // RGB or gray
-    ihdr.insert(ihdr.end(), {8, colourType, 0, 0, 0});  // 8 bits, deflate, filter method 0, no interlace
+    const char colourType = channels == 3 ? 2 : 0;  // RGB or gray
+    ihdr += {8, colourType, 0, 0, 0};  // 8 bits, deflate, filter method 0, no interlace
     appendChunk(png, "IHDR", ihdr.data(), ihdr.size());
     appendChunk(png, "IDAT", deflated.data(), idatBytes);
     appendChunk(png, "IEND", nullptr, 0);
-    return std::string(png.begin(), png.end());
+    return png;
 }
 
 } // namespace
@@ -476,17 +476,13 @@ std::string encodeGrayPng(int width, int height, const std::vector<uint8_t>& gra
 
 void writePng(const std::string& path, const RgbImage& image)
 {
-    if (image.width <= 0 || image.height <= 0 ||
-        image.rgb.size() != static_cast<std::size_t>(image.width) * image.height * 3)
-        throw InputError(path + ": image buffer does not match its size");
-    const std::string png = encodePng(image);
-    writeAtomically(path, [&](const std::string& tmp) {
-        std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(tmp.c_str(), "wb"), std::fclose);
-        if (!f) throw InputError(path + ": cannot open for writing: " + std::strerror(errno));
-        if (std::fwrite(png.data(), 1, png.size(), f.get()) != png.size())
-            throw InputError(path + ": cannot write: " + std::strerror(errno));
-        if (std::fflush(f.get()) != 0) throw InputError(path + ": cannot write: " + std::strerror(errno));
-    });
+    std::string png;
+    try {
+        png = encodePng(image);
+    } catch (const InputError& e) {
+        throw InputError(path + ": " + e.what());
+    }
+    writeAtomically(path, [&](const std::string& tmp) { writeBytes(tmp, png.data(), png.size()); });
 }
 
 RgbImage readPng(const std::string& path)
