@@ -7,6 +7,7 @@
 #include "volume/image.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
+#include <isa-l/crc.h>
 #include <isa-l/igzip_lib.h>
 #include <png.h>
 #include <xxhash.h>
@@ -485,8 +486,141 @@ void writePng(const std::string& path, const RgbImage& image)
     writeAtomically(path, [&](const std::string& tmp) { writeBytes(tmp, png.data(), png.size()); });
 }
 
+namespace {
+
+uint32_t readU32(const unsigned char* p)
+{
+    return uint32_t(p[0]) << 24 | uint32_t(p[1]) << 16 | uint32_t(p[2]) << 8 | uint32_t(p[3]);
+}
+
+/// Reverses PNG filtering (filter method 0, types 0-4) of `rows` rows of `rowBytes` bytes
+/// with `bpp` bytes per pixel, each preceded by its filter type byte, into `out`.
+/// @return false for an unknown filter type
+bool unfilterRows(const unsigned char* in, std::size_t rowBytes, std::size_t rows, std::size_t bpp, uint8_t* out)
+{
+    for (std::size_t y = 0; y < rows; ++y) {
+        const unsigned char* src = in + y * (rowBytes + 1);
+        uint8_t* row = out + y * rowBytes;
+        const uint8_t* above = y > 0 ? row - rowBytes : nullptr;
+        const unsigned char type = src[0];
+        ++src;
+        switch (type) {
+        case 0:
+            std::memcpy(row, src, rowBytes);
+            break;
+        case 1:
+            for (std::size_t i = 0; i < rowBytes; ++i)
+                row[i] = uint8_t(src[i] + (i >= bpp ? row[i - bpp] : 0));
+            break;
+        case 2:
+            if (!above) std::memcpy(row, src, rowBytes);
+            else
+                for (std::size_t i = 0; i < rowBytes; ++i) row[i] = uint8_t(src[i] + above[i]);
+            break;
+        case 3:
+            for (std::size_t i = 0; i < rowBytes; ++i) {
+                const unsigned left = i >= bpp ? row[i - bpp] : 0, up = above ? above[i] : 0;
+                row[i] = uint8_t(src[i] + ((left + up) >> 1));
+            }
+            break;
+        case 4:
+            for (std::size_t i = 0; i < rowBytes; ++i) {
+                const int a = i >= bpp ? row[i - bpp] : 0, b = above ? above[i] : 0,
+                          c = (above && i >= bpp) ? above[i - bpp] : 0;
+                const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+                const int predictor = (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c);
+                row[i] = uint8_t(src[i] + predictor);
+            }
+            break;
+        default:
+            return false;
+        }
+    }
+    return true;
+}
+
+} // namespace
+
+// A file with any chunk that could make libpng's simplified reader (PNG_FORMAT_RGB) return
+// other values than the stored ones (gamma, colour space, transparency, palette) is declined.
+bool decodePlainRgbPng(const std::string& bytes, RgbImage& out)
+{
+    const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+    const std::size_t size = bytes.size();
+    if (size < 8 + 25 || std::memcmp(p, "\x89PNG\r\n\x1a\n", 8) != 0) return false;
+    std::size_t at = 8;
+    uint32_t width = 0, height = 0;
+    std::vector<std::pair<const unsigned char*, std::size_t>> idat;
+    bool ended = false, idatClosed = false;
+    while (!ended) {
+        if (size - at < 12) return false;
+        const std::size_t length = readU32(p + at);
+        const unsigned char* type = p + at + 4;
+        if (length > size - at - 12) return false;
+        const unsigned char* data = type + 4;
+        const bool critical = (type[0] & 0x20) == 0;
+        if (critical && crc32_gzip_refl(0, type, 4 + length) != readU32(data + length)) return false;
+        const std::string name(reinterpret_cast<const char*>(type), 4);
+        if (at == 8) {
+            if (name != "IHDR" || length != 13) return false;
+            width = readU32(data);
+            height = readU32(data + 4);
+            // 8 bits, RGB, deflate, filter method 0, no interlace; libpng's default size limit.
+            if (data[8] != 8 || data[9] != 2 || data[10] != 0 || data[11] != 0 || data[12] != 0) return false;
+            if (width == 0 || height == 0 || width > 1000000u || height > 1000000u) return false;
+        } else if (name == "IDAT") {
+            if (idatClosed) return false;
+            idat.emplace_back(data, length);
+        } else {
+            if (!idat.empty()) idatClosed = true;
+            if (name == "IEND") ended = true;
+            else if (name != "tEXt" && name != "zTXt" && name != "iTXt" && name != "tIME" && name != "pHYs")
+                return false;
+        }
+        at += 12 + length;
+    }
+    const std::size_t rowBytes = std::size_t(width) * 3;
+    if ((rowBytes + 1) > (std::size_t(1) << 31) / std::size_t(height)) return false;
+    thread_local std::vector<unsigned char> filtered;
+    filtered.resize((rowBytes + 1) * std::size_t(height));
+    inflate_state s;
+    isal_inflate_init(&s);
+    s.crc_flag = ISAL_ZLIB;
+    s.next_out = filtered.data();
+    s.avail_out = static_cast<uint32_t>(filtered.size());
+    for (std::size_t k = 0; k < idat.size(); ++k) {
+        s.next_in = const_cast<uint8_t*>(idat[k].first);
+        s.avail_in = static_cast<uint32_t>(idat[k].second);
+        while (s.avail_in > 0 && s.block_state != ISAL_BLOCK_FINISH) {
+            const uint32_t inBefore = s.avail_in, outBefore = s.avail_out;
+            if (isal_inflate(&s) != ISAL_DECOMP_OK) return false;
+            if (s.avail_in == inBefore && s.avail_out == outBefore) return false;  // no progress
+        }
+        // Data after the end of the zlib stream: left to libpng's rules.
+        if (s.block_state == ISAL_BLOCK_FINISH && (s.avail_in > 0 || k + 1 < idat.size())) return false;
+    }
+    if (s.block_state != ISAL_BLOCK_FINISH || s.avail_out != 0) return false;
+    out.width = int(width);
+    out.height = int(height);
+    out.rgb.resize(rowBytes * std::size_t(height));
+    return unfilterRows(filtered.data(), rowBytes, std::size_t(height), 3, out.rgb.data());
+}
+
 RgbImage readPng(const std::string& path)
 {
+    {
+        std::string bytes;
+        std::ifstream in(path, std::ios::binary | std::ios::ate);
+        if (in) {
+            const std::streamoff n = in.tellg();
+            if (n > 0 && n < (std::streamoff(1) << 31)) {
+                bytes.resize(std::size_t(n));
+                in.seekg(0);
+                RgbImage fast;
+                if (in.read(bytes.data(), n) && decodePlainRgbPng(bytes, fast)) return fast;
+            }
+        }
+    }
     png_image img{};
     img.version = PNG_IMAGE_VERSION;
     if (!png_image_begin_read_from_file(&img, path.c_str()))

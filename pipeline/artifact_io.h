@@ -82,8 +82,15 @@ std::string encodePng(const RgbImage& image);
 /// 8-bit grayscale PNG of width x height bytes, top row first, encoded as encodePng.
 std::string encodeGrayPng(int width, int height, const std::vector<uint8_t>& gray);
 void writePng(const std::string& path, const RgbImage& image);
-/// Reads an 8-bit RGB or RGBA PNG (alpha dropped). @throw InputError.
+/// Reads an 8-bit RGB or RGBA PNG (alpha dropped). Plain 8-bit RGB files (the frames') are
+/// decoded by decodePlainRgbPng, every other file and any file it declines by libpng.
+/// @throw InputError.
 RgbImage readPng(const std::string& path);
+/// The pixels of a plain PNG file's bytes: 8-bit RGB, not interlaced, only IHDR, IDAT, IEND and
+/// text, time and pHYs chunks, every critical chunk's CRC right and the zlib stream whole
+/// (ISA-L inflate, Adler-32 checked) and exactly one image long. @return false for any other
+/// or damaged file (readPng leaves those to libpng); true: the values libpng would return.
+bool decodePlainRgbPng(const std::string& bytes, RgbImage& out);
 
 /// centerline.json: documented schema "flyover.centerline/1", LPS mm, columnar arrays.
 nlohmann::json centerlineToJson(const Centerline& centerline);

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <png.h>
+#include <zlib.h>
 
 #include <cmath>
 #include <filesystem>
@@ -90,6 +91,178 @@ TEST(ArtifactIo, PngOfManySizesAndContentsReadsBackExactlyThroughLibpng)
     wrong.rgb.resize(17);
     EXPECT_THROW(writePng((d / "b.png").string(), wrong), InputError);
     EXPECT_FALSE(fs::exists(d / "b.png"));
+    fs::remove_all(d);
+}
+
+namespace {
+
+void putU32(std::string& out, uint32_t v)
+{
+    for (int shift = 24; shift >= 0; shift -= 8) out.push_back(char(v >> shift));
+}
+
+void putChunk(std::string& out, const std::string& type, const std::string& data)
+{
+    putU32(out, uint32_t(data.size()));
+    const std::string body = type + data;
+    out += body;
+    putU32(out, uint32_t(::crc32(0L, reinterpret_cast<const Bytef*>(body.data()), uInt(body.size()))));
+}
+
+/// A PNG written independently of the encoder under test: each row with a filter type drawn at
+/// random (None, Sub, Up, Average, Paeth, by the PNG specification), zlib at `level`, the IDAT
+/// data split into `idatChunks` chunks, with a tEXt chunk or another ancillary chunk as asked.
+std::string handMadePng(const RgbImage& img, int colourType, std::mt19937& rng, int level, int idatChunks,
+                        const std::string& extraChunk)
+{
+    const int bpp = colourType == 2 ? 3 : 1;
+    const std::size_t rowBytes = std::size_t(img.width) * std::size_t(bpp);
+    std::vector<uint8_t> px(rowBytes * std::size_t(img.height));
+    for (std::size_t i = 0; i < px.size(); ++i) px[i] = bpp == 3 ? img.rgb[i] : img.rgb[3 * i];
+    std::string raw;
+    for (int y = 0; y < img.height; ++y) {
+        const int type = int(rng() % 5);
+        raw.push_back(char(type));
+        const uint8_t* row = px.data() + std::size_t(y) * rowBytes;
+        const uint8_t* up = y > 0 ? row - rowBytes : nullptr;
+        for (std::size_t i = 0; i < rowBytes; ++i) {
+            const int a = i >= std::size_t(bpp) ? row[i - std::size_t(bpp)] : 0, b = up ? up[i] : 0,
+                      c = (up && i >= std::size_t(bpp)) ? up[i - std::size_t(bpp)] : 0;
+            const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+            const int pred[5] = {0, a, b, (a + b) / 2, (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c)};
+            raw.push_back(char(uint8_t(row[i] - pred[type])));
+        }
+    }
+    std::string z(compressBound(uLong(raw.size())), '\0');
+    uLongf zn = uLongf(z.size());
+    EXPECT_EQ(compress2(reinterpret_cast<Bytef*>(z.data()), &zn, reinterpret_cast<const Bytef*>(raw.data()),
+                        uLong(raw.size()), level),
+              Z_OK);
+    z.resize(zn);
+    std::string png("\x89PNG\r\n\x1a\n", 8), ihdr;
+    putU32(ihdr, uint32_t(img.width));
+    putU32(ihdr, uint32_t(img.height));
+    ihdr += {8, char(colourType), 0, 0, 0};
+    putChunk(png, "IHDR", ihdr);
+    if (!extraChunk.empty()) putChunk(png, extraChunk, extraChunk == "gAMA" ? std::string("\0\0\xb1\x8f", 4) : "a\0b");
+    const std::size_t part = z.size() / std::size_t(idatChunks) + 1;
+    for (std::size_t at = 0; at < z.size(); at += part) putChunk(png, "IDAT", z.substr(at, part));
+    putChunk(png, "IEND", "");
+    return png;
+}
+
+/// libpng's simplified reader on bytes: the pixels as PNG_FORMAT_RGB, or "error: ...".
+std::string libpngRgb(const std::string& bytes, RgbImage& out)
+{
+    png_image pi{};
+    pi.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_memory(&pi, bytes.data(), bytes.size())) return std::string("error: ") + pi.message;
+    pi.format = PNG_FORMAT_RGB;
+    out.width = int(pi.width);
+    out.height = int(pi.height);
+    out.rgb.assign(PNG_IMAGE_SIZE(pi), 0);
+    if (!png_image_finish_read(&pi, nullptr, out.rgb.data(), 0, nullptr)) return std::string("error: ") + pi.message;
+    return "";
+}
+
+} // namespace
+
+// readPng decodes plain 8-bit RGB files itself (ISA-L): every filter type, IDAT split in
+// chunks, text chunks, stored and compressed streams give libpng's pixels; files it must not
+// decode (gray, gamma) are declined and read by libpng with the same result.
+TEST(ArtifactIo, PlainPngDecoderGivesLibpngsPixelsForEveryFilterAndDeclinesTheRest)
+{
+    std::mt19937 rng(11);
+    const int sizes[][2] = {{1, 1}, {2, 3}, {5, 7}, {31, 9}, {130, 66}};
+    int decoded = 0, declined = 0;
+    for (const auto& wh : sizes)
+        for (const int level : {0, 1, 9})
+            for (const std::string extra : {"", "tEXt", "gAMA"})
+                for (const int colourType : {2, 0}) {
+                    RgbImage img;
+                    img.width = wh[0];
+                    img.height = wh[1];
+                    img.rgb.resize(std::size_t(img.width) * std::size_t(img.height) * 3);
+                    for (std::size_t i = 0; i < img.rgb.size(); ++i)
+                        img.rgb[i] = (rng() % 3 == 0) ? uint8_t(rng()) : uint8_t(i * 7 / 5);
+                    const std::string png = handMadePng(img, colourType, rng, level, 1 + int(rng() % 3), extra);
+                    const std::string what = std::to_string(img.width) + " x " + std::to_string(img.height) +
+                                             " level " + std::to_string(level) + " colour type " +
+                                             std::to_string(colourType) + " " + extra;
+                    RgbImage ref;
+                    ASSERT_EQ(libpngRgb(png, ref), "") << what;
+                    RgbImage fast;
+                    const bool plain = colourType == 2 && extra != "gAMA";
+                    EXPECT_EQ(decodePlainRgbPng(png, fast), plain) << what << ": expected the file to be "
+                                                                   << (plain ? "decoded" : "declined");
+                    if (plain) {
+                        ++decoded;
+                        EXPECT_EQ(fast.width, ref.width) << what;
+                        EXPECT_EQ(fast.height, ref.height) << what;
+                        EXPECT_TRUE(fast.rgb == ref.rgb) << what << ": pixels differ from libpng's";
+                        EXPECT_TRUE(fast.rgb == img.rgb) << what << ": pixels differ from those written";
+                    } else {
+                        ++declined;
+                    }
+                }
+    EXPECT_GT(decoded, 0);
+    EXPECT_GT(declined, 0);
+    // The frames' own encoder's files take the plain path.
+    RgbImage frame;
+    frame.width = 1028;
+    frame.height = 512;
+    frame.rgb.resize(std::size_t(1028) * 512 * 3);
+    for (std::size_t i = 0; i < frame.rgb.size(); ++i) frame.rgb[i] = uint8_t((i / 3) % 1028 / 5 + (i % 3) * 40);
+    RgbImage back;
+    ASSERT_TRUE(decodePlainRgbPng(encodePng(frame), back)) << "encodePng's output was declined";
+    EXPECT_TRUE(back.rgb == frame.rgb);
+}
+
+// A damaged plain PNG (bytes changed, cut short, garbage after IEND) gives readPng exactly
+// libpng's answer: the same pixels, or a one-line InputError naming the file; never a crash.
+TEST(ArtifactIo, DamagedPngReadsAsLibpngReadsIt)
+{
+    const fs::path d = tempDir("png-damaged");
+    std::mt19937 rng(5);
+    RgbImage img;
+    img.width = 67;
+    img.height = 41;
+    img.rgb.resize(std::size_t(67) * 41 * 3);
+    for (std::size_t i = 0; i < img.rgb.size(); ++i) img.rgb[i] = uint8_t(i % 67 + (i / 201) * 3);
+    const std::string good = encodePng(img);
+    int errors = 0, read = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        std::string bad = good;
+        const int kind = trial % 3;
+        if (kind == 0) {
+            for (int k = 0, n = 1 + int(rng() % 4); k < n; ++k) bad[rng() % bad.size()] ^= char(1 + rng() % 255);
+        } else if (kind == 1) {
+            bad.resize(rng() % bad.size());
+        } else {
+            bad += std::string(1 + rng() % 20, char(rng()));
+        }
+        const std::string path = (d / "x.png").string();
+        {
+            std::ofstream out(path, std::ios::binary);
+            out << bad;
+        }
+        RgbImage ref;
+        const std::string refError = libpngRgb(bad, ref);
+        try {
+            const RgbImage got = readPng(path);
+            EXPECT_EQ(refError, "") << "trial " << trial << ": readPng read a file libpng refuses";
+            EXPECT_TRUE(got.rgb == ref.rgb && got.width == ref.width) << "trial " << trial << ": pixels differ from libpng's";
+            ++read;
+        } catch (const InputError& e) {
+            EXPECT_NE(refError, "") << "trial " << trial << ": readPng refused a file libpng reads: " << e.what();
+            const std::string msg = e.what();
+            EXPECT_NE(msg.find(path), std::string::npos) << msg;
+            EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+            ++errors;
+        }
+    }
+    EXPECT_GT(errors, 100);
+    EXPECT_GT(read, 20);
     fs::remove_all(d);
 }
 
