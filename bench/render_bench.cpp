@@ -1,7 +1,8 @@
 // render_bench: the fly-over renderer measured on a phantom.
 //
 //   render_bench [--mode speed|coverage|sweep|quads] [--study DIR [--truth FILE]] [--size full|medium|small]
-//                [--seed N] [--px 512] [--threads 2] [--runs 5] [--positions 60] [--pairing coplanar|compact]
+//                [--seed N] [--px 512] [--threads 2] [--runs 5] [--positions 60]
+//                [--pairing coplanar|compact] [--embree-config STRING]
 //
 // speed     frame pairs/s and Mrays/s of the fly-over next to the bare Embree throughput
 //           (16-wide coherent packets, no filter, no shading) for the same rays, for each OST
@@ -114,6 +115,7 @@ struct Args {
     int runs = 5;
     int positions = 60;
     std::string pairing = "coplanar";
+    std::string embreeConfig;  ///< rtcNewDevice's config string (--mode quads)
 };
 
 Args parseArgs(int argc, char** argv)
@@ -135,6 +137,7 @@ Args parseArgs(int argc, char** argv)
         else if (k == "--runs") a.runs = std::stoi(value());
         else if (k == "--positions") a.positions = std::stoi(value());
         else if (k == "--pairing") a.pairing = value();
+        else if (k == "--embree-config") a.embreeConfig = value();
         else throw std::runtime_error("unknown option " + k + " (see the comment at the top of render_bench.cpp)");
     }
     if (a.mode != "speed" && a.mode != "coverage" && a.mode != "sweep" && a.mode != "quads")
@@ -581,8 +584,9 @@ void benchQuads(const Args& a, const Subject& s)
     std::printf("\n%zu triangles -> %zu quads: %.2f%% of the triangles paired (pairing %s, %.2f s)\n", nt, nq,
                 100.0 * double(pairing.pairedTriangles) / double(nt), a.pairing.c_str(), pairTime.wall);
 
-    RTCDevice device = rtcNewDevice(nullptr);
-    if (!device) throw std::runtime_error("rtcNewDevice failed");
+    RTCDevice device = rtcNewDevice(a.embreeConfig.empty() ? nullptr : a.embreeConfig.c_str());
+    if (!device) throw std::runtime_error("rtcNewDevice failed (--embree-config '" + a.embreeConfig + "')");
+    if (!a.embreeConfig.empty()) std::printf("Embree device config: %s\n", a.embreeConfig.c_str());
     auto build = [&](bool quads, bool robust) {
         RTCScene scene = rtcNewScene(device);
         rtcSetSceneFlags(scene, RTCSceneFlags((robust ? RTC_SCENE_FLAG_ROBUST : 0) | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION));
@@ -618,7 +622,7 @@ void benchQuads(const Args& a, const Subject& s)
     const int tilesX = (a.px + P - 1) / P, tilesY = (a.px + P - 1) / P;
     // Variant 0: the packets filled only (the rays' cost, subtracted below); 1: triangles; 2: quads
     // (robust); 3, 4: the same without robust mode.
-    auto trace = [&](int variant, const Camera& camera, uint64_t& hitsOut) {
+    auto trace = [&](int variant, const Camera& camera, uint64_t& hitsOut, std::vector<float>* depth) {
         const Vec3d c = pixelDirection(camera, a.px, a.px, 0.0, 0.0);
         const Vec3d sx = pixelDirection(camera, a.px, a.px, 1.0, 0.0) - c;
         const Vec3d sy = pixelDirection(camera, a.px, a.px, 0.0, 1.0) - c;
@@ -656,8 +660,13 @@ void benchQuads(const Args& a, const Subject& s)
                         packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
                     }
                     if (variant > 0) rtcIntersect16(valid, scenes[variant - 1], &context, &packet);
-                    for (int i = 0; i < L; ++i)
-                        n += (valid[i] && packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) ? 1 : 0;
+                    for (int i = 0; i < L; ++i) {
+                        const bool hit = valid[i] && packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+                        n += hit ? 1 : 0;
+                        if (depth && valid[i])
+                            (*depth)[std::size_t(ty * P + i / P) * std::size_t(a.px) + std::size_t(tx * P + i % P)] =
+                                hit ? packet.ray.tfar[i] : -1.f;
+                    }
                 }
             hits.local() += n;
             _mm_setcsr(csr);
@@ -682,7 +691,7 @@ void benchQuads(const Args& a, const Subject& s)
                 for (int o = 0; o < NV; ++o) {
                     const int variant = (o + view) % NV;
                     uint64_t h = 0;
-                    const Timing t = measure([&] { trace(variant, camera, h); });
+                    const Timing t = measure([&] { trace(variant, camera, h, nullptr); });
                     w[variant] += t.wall;
                     cp[variant] += t.cpu;
                     if (run == 0) hitCount[variant] += h;
@@ -694,6 +703,26 @@ void benchQuads(const Args& a, const Subject& s)
             cpu[v].push_back(cp[v]);
         }
     }
+    // The quad scene is the same surface: the robust scenes' depths agree ray for ray (first
+    // camera of every position, untimed).
+    std::size_t compared = 0, differing = 0;
+    double maxRel = 0;
+    std::vector<float> depthTri(std::size_t(a.px) * std::size_t(a.px)), depthQuad(depthTri.size());
+    for (const auto& pair : path) {
+        uint64_t h = 0;
+        trace(1, pair[0], h, &depthTri);
+        trace(2, pair[0], h, &depthQuad);
+        for (std::size_t i = 0; i < depthTri.size(); ++i) {
+            ++compared;
+            const float x = depthTri[i], y = depthQuad[i];
+            const double rel = (x < 0) != (y < 0) ? 1.0 : std::fabs(double(x) - double(y)) / std::max(1.0, double(x));
+            maxRel = std::max(maxRel, rel);
+            differing += rel > 1e-4 ? 1 : 0;
+        }
+    }
+    std::printf("depths, robust triangles vs quads: %zu of %zu rays differ by more than 1e-4 (relative; hit vs miss "
+                "counts as 1), max %.2g\n",
+                differing, compared, maxRel);
     std::printf("hits: triangles %llu, quads %llu, not robust %llu / %llu (of %.0f rays)\n",
                 static_cast<unsigned long long>(hitCount[1]), static_cast<unsigned long long>(hitCount[2]),
                 static_cast<unsigned long long>(hitCount[3]), static_cast<unsigned long long>(hitCount[4]), rays);
