@@ -1,7 +1,8 @@
 // render_bench: the fly-over renderer measured on a phantom.
 //
-//   render_bench [--mode speed|coverage|sweep] [--study DIR [--truth FILE]] [--size full|medium|small]
+//   render_bench [--mode speed|coverage|sweep|quads] [--study DIR [--truth FILE]] [--size full|medium|small]
 //                [--seed N] [--px 512] [--threads 2] [--runs 5] [--positions 60]
+//                [--pairing coplanar|compact] [--embree-config STRING]
 //
 // speed     frame pairs/s and Mrays/s of the fly-over next to the bare Embree throughput
 //           (16-wide coherent packets, no filter, no shading) for the same rays, for each OST
@@ -12,6 +13,11 @@
 // coverage  coverage fractions against the coverage rays' resolution and step (convergence).
 // sweep     the clip offset sweep: coverage, polyp visibility (also on the cutting line) and
 //           occlusion by other loops of colon for each offset (needs the truth polyps).
+// quads     Embree's traversal of the surface as triangles (RTC_GEOMETRY_TYPE_TRIANGLE, what
+//           RayScene builds) against the same surface as quads (RTC_GEOMETRY_TYPE_QUAD: edge-
+//           adjacent triangles paired, the most nearly coplanar pairs first, an unpaired one as
+//           the degenerate quad (a, b, c, c)), both robust, BVH MEDIUM, the same 16-wide
+//           coherent packets of the fly-over cameras, alternated view by view.
 //
 // Without --study the phantom is generated and taken through ingest, segment, centerline and
 // mesh in memory (about a minute for the full size); with --study the study's surface.ply and
@@ -39,7 +45,10 @@
 #include "volume/ingest.h"
 #include "volume/segment.h"
 
+#include <embree3/rtcore.h>
+#include <tbb/blocked_range2d.h>
 #include <tbb/global_control.h>
+#include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -52,6 +61,11 @@
 #include <map>
 #include <string>
 #include <unistd.h>
+#include <unordered_map>
+#include <xmmintrin.h>
+#include <pmmintrin.h>
+#include <limits>
+#include <cmath>
 #include <vector>
 #pragma GCC diagnostic pop
 
@@ -100,6 +114,8 @@ struct Args {
     int threads = 2;
     int runs = 5;
     int positions = 60;
+    std::string pairing = "coplanar";
+    std::string embreeConfig;  ///< rtcNewDevice's config string (--mode quads)
 };
 
 Args parseArgs(int argc, char** argv)
@@ -120,10 +136,14 @@ Args parseArgs(int argc, char** argv)
         else if (k == "--threads") a.threads = std::stoi(value());
         else if (k == "--runs") a.runs = std::stoi(value());
         else if (k == "--positions") a.positions = std::stoi(value());
+        else if (k == "--pairing") a.pairing = value();
+        else if (k == "--embree-config") a.embreeConfig = value();
         else throw std::runtime_error("unknown option " + k + " (see the comment at the top of render_bench.cpp)");
     }
-    if (a.mode != "speed" && a.mode != "coverage" && a.mode != "sweep")
-        throw std::runtime_error("--mode must be speed, coverage or sweep");
+    if (a.mode != "speed" && a.mode != "coverage" && a.mode != "sweep" && a.mode != "quads")
+        throw std::runtime_error("--mode must be speed, coverage, sweep or quads");
+    if (a.pairing != "coplanar" && a.pairing != "compact")
+        throw std::runtime_error("--pairing must be coplanar or compact");
     if (!(a.runs >= 1 && a.threads >= 1 && a.px >= 8 && a.positions >= 1))
         throw std::runtime_error("--runs, --threads, --positions must be >= 1 and --px >= 8");
     return a;
@@ -471,6 +491,263 @@ void benchSweep(const Args& a, const Subject& s)
     }
 }
 
+
+// ------------------------------------------------------------------------------------ quads
+
+/// Edge-adjacent triangles paired into quads (v0, v1, v2, v3) whose sub-triangles (v0, v1, v3)
+/// and (v2, v3, v1) are the two triangles with their own orientation, greedily: `compact` takes
+/// the pairs whose quad has the smallest bounding box first, otherwise the pairs whose unit
+/// normals agree best come first. An unpaired triangle (a, b, c) becomes (a, b, c, c).
+struct QuadPairing {
+    std::vector<uint32_t> quads;  ///< 4 per quad
+    std::size_t pairedTriangles = 0;
+};
+
+QuadPairing pairTriangles(const std::vector<float>& xyz, const std::vector<uint32_t>& tris, bool compact)
+{
+    const std::size_t nt = tris.size() / 3;
+    auto key = [](uint32_t a, uint32_t b) { return (uint64_t(a) << 32) | b; };
+    std::unordered_map<uint64_t, uint32_t> directed;  // directed edge -> 3 * face + corner
+    directed.reserve(3 * nt);
+    for (std::size_t f = 0; f < nt; ++f)
+        for (uint32_t k = 0; k < 3; ++k)
+            directed.emplace(key(tris[3 * f + k], tris[3 * f + (k + 1) % 3]), uint32_t(3 * f + k));
+    std::vector<std::array<float, 3>> normal(nt);
+    for (std::size_t f = 0; f < nt; ++f) {
+        const float* p[3];
+        for (int k = 0; k < 3; ++k) p[k] = &xyz[3 * std::size_t(tris[3 * f + std::size_t(k)])];
+        const float u[3] = {p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]};
+        const float v[3] = {p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]};
+        const float n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+        const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        normal[f] = len > 0 ? std::array<float, 3>{n[0] / len, n[1] / len, n[2] / len} : std::array<float, 3>{0, 0, 0};
+    }
+    struct Candidate {
+        float score;
+        uint32_t fk, gj;  // 3 * face + corner of the shared edge's start in each
+    };
+    std::vector<Candidate> candidates;
+    for (std::size_t f = 0; f < nt; ++f)
+        for (uint32_t k = 0; k < 3; ++k) {
+            const auto it = directed.find(key(tris[3 * f + (k + 1) % 3], tris[3 * f + k]));
+            if (it == directed.end() || it->second / 3 <= f) continue;
+            const std::size_t g = it->second / 3;
+            float score = normal[f][0] * normal[g][0] + normal[f][1] * normal[g][1] + normal[f][2] * normal[g][2];
+            if (compact) {  // minus the surface area of the quad's bounding box
+                float lo[3], hi[3];
+                for (int d = 0; d < 3; ++d) lo[d] = hi[d] = xyz[3 * std::size_t(tris[3 * f]) + std::size_t(d)];
+                for (const std::size_t t : {f, g})
+                    for (std::size_t q = 0; q < 3; ++q)
+                        for (std::size_t d = 0; d < 3; ++d) {
+                            const float x = xyz[3 * std::size_t(tris[3 * t + q]) + d];
+                            lo[d] = std::min(lo[d], x);
+                            hi[d] = std::max(hi[d], x);
+                        }
+                const float e[3] = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+                score = -(e[0] * e[1] + e[1] * e[2] + e[2] * e[0]);
+            }
+            candidates.push_back({score, uint32_t(3 * f + k), it->second});
+        }
+    std::stable_sort(candidates.begin(), candidates.end(),
+                     [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
+    std::vector<char> used(nt, 0);
+    QuadPairing out;
+    for (const Candidate& c : candidates) {
+        const uint32_t f = c.fk / 3, k = c.fk % 3, g = c.gj / 3, j = c.gj % 3;
+        if (used[f] || used[g]) continue;
+        used[f] = used[g] = 1;
+        const uint32_t x = tris[3 * f + k], y = tris[3 * f + (k + 1) % 3], z = tris[3 * f + (k + 2) % 3];
+        const uint32_t w = tris[3 * g + (j + 2) % 3];
+        out.quads.insert(out.quads.end(), {z, x, w, y});  // (z, x, y) = f, (w, y, x) = g
+        out.pairedTriangles += 2;
+    }
+    for (std::size_t f = 0; f < nt; ++f)
+        if (!used[f]) out.quads.insert(out.quads.end(), {tris[3 * f], tris[3 * f + 1], tris[3 * f + 2], tris[3 * f + 2]});
+    return out;
+}
+
+void benchQuads(const Args& a, const Subject& s)
+{
+    std::vector<float> xyz;
+    for (const auto v : s.mesh.vertices())
+        for (int k = 0; k < 3; ++k) xyz.push_back(s.mesh.point(v)[k]);
+    const std::size_t nv = xyz.size() / 3;
+    xyz.resize(xyz.size() + 4, 0.f);  // Embree reads up to 16 bytes past the last vertex
+    std::vector<uint32_t> tris;
+    for (const auto f : s.mesh.faces())
+        for (const auto v : s.mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    const std::size_t nt = tris.size() / 3;
+
+    QuadPairing pairing;
+    const Timing pairTime = measure([&] { pairing = pairTriangles(xyz, tris, a.pairing == "compact"); });
+    const std::size_t nq = pairing.quads.size() / 4;
+    std::printf("\n%zu triangles -> %zu quads: %.2f%% of the triangles paired (pairing %s, %.2f s)\n", nt, nq,
+                100.0 * double(pairing.pairedTriangles) / double(nt), a.pairing.c_str(), pairTime.wall);
+
+    RTCDevice device = rtcNewDevice(a.embreeConfig.empty() ? nullptr : a.embreeConfig.c_str());
+    if (!device) throw std::runtime_error("rtcNewDevice failed (--embree-config '" + a.embreeConfig + "')");
+    if (!a.embreeConfig.empty()) std::printf("Embree device config: %s\n", a.embreeConfig.c_str());
+    auto build = [&](bool quads, bool robust) {
+        RTCScene scene = rtcNewScene(device);
+        rtcSetSceneFlags(scene, RTCSceneFlags((robust ? RTC_SCENE_FLAG_ROBUST : 0) | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION));
+        rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+        RTCGeometry geom = rtcNewGeometry(device, quads ? RTC_GEOMETRY_TYPE_QUAD : RTC_GEOMETRY_TYPE_TRIANGLE);
+        rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_MEDIUM);
+        rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, xyz.data(), 0,
+                                   3 * sizeof(float), nv);
+        if (quads)
+            rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, pairing.quads.data(), 0,
+                                       4 * sizeof(uint32_t), nq);
+        else
+            rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, tris.data(), 0,
+                                       3 * sizeof(uint32_t), nt);
+        rtcCommitGeometry(geom);
+        rtcAttachGeometry(scene, geom);
+        rtcReleaseGeometry(geom);
+        rtcCommitScene(scene);
+        if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw std::runtime_error("Embree scene build failed");
+        return scene;
+    };
+    // Robust (what RayScene builds) and, for comparison only, Embree's fast mode.
+    RTCScene scenes[4] = {nullptr, nullptr, nullptr, nullptr};
+    const Timing buildTri = measure([&] { scenes[0] = build(false, true); });
+    const Timing buildQuad = measure([&] { scenes[1] = build(true, true); });
+    scenes[2] = build(false, false);
+    scenes[3] = build(true, false);
+    std::printf("BVH build (MEDIUM, robust): triangles %.3f s wall %.3f s CPU, quads %.3f s wall %.3f s CPU\n",
+                buildTri.wall, buildTri.cpu, buildQuad.wall, buildQuad.cpu);
+
+    const auto path = flyoverPath(RayScene(s.mesh), s.centerline, a.positions, FlyoverParams{});
+    constexpr int P = 4, L = 16;
+    const int tilesX = (a.px + P - 1) / P, tilesY = (a.px + P - 1) / P;
+    // Variant 0: the packets filled only (the rays' cost, subtracted below); 1: triangles; 2: quads
+    // (robust); 3, 4: the same without robust mode.
+    auto trace = [&](int variant, const Camera& camera, uint64_t& hitsOut, std::vector<float>* depth) {
+        const Vec3d c = pixelDirection(camera, a.px, a.px, 0.0, 0.0);
+        const Vec3d sx = pixelDirection(camera, a.px, a.px, 1.0, 0.0) - c;
+        const Vec3d sy = pixelDirection(camera, a.px, a.px, 0.0, 1.0) - c;
+        tbb::combinable<uint64_t> hits([] { return uint64_t(0); });
+        tbb::parallel_for(tbb::blocked_range2d<int>(0, tilesY, 8, 0, tilesX, 8), [&](const tbb::blocked_range2d<int>& r) {
+            const unsigned int csr = _mm_getcsr();
+            _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+            _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+            RTCIntersectContext context;
+            rtcInitIntersectContext(&context);
+            context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+            RTCRayHit16 packet;
+            alignas(64) int valid[L];
+            uint64_t n = 0;
+            for (int ty = r.rows().begin(); ty != r.rows().end(); ++ty)
+                for (int tx = r.cols().begin(); tx != r.cols().end(); ++tx) {
+                    for (int i = 0; i < L; ++i) {
+                        const int px = tx * P + i % P, py = ty * P + i / P;
+                        valid[i] = (px < a.px && py < a.px) ? -1 : 0;
+                        const double fx = px + 0.5, fy = py + 0.5;
+                        packet.ray.org_x[i] = float(camera.position.x);
+                        packet.ray.org_y[i] = float(camera.position.y);
+                        packet.ray.org_z[i] = float(camera.position.z);
+                        packet.ray.dir_x[i] = float(c.x + sx.x * fx + sy.x * fy);
+                        packet.ray.dir_y[i] = float(c.y + sx.y * fx + sy.y * fy);
+                        packet.ray.dir_z[i] = float(c.z + sx.z * fx + sy.z * fy);
+                        packet.ray.tnear[i] = float(camera.nearMm);
+                        packet.ray.tfar[i] = std::numeric_limits<float>::infinity();
+                        packet.ray.time[i] = 0.f;
+                        packet.ray.mask[i] = 0xFFFFFFFFu;
+                        packet.ray.id[i] = unsigned(i);
+                        packet.ray.flags[i] = 0;
+                        packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                        packet.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+                        packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+                    }
+                    if (variant > 0) rtcIntersect16(valid, scenes[variant - 1], &context, &packet);
+                    for (int i = 0; i < L; ++i) {
+                        const bool hit = valid[i] && packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+                        n += hit ? 1 : 0;
+                        if (depth && valid[i])
+                            (*depth)[std::size_t(ty * P + i / P) * std::size_t(a.px) + std::size_t(tx * P + i % P)] =
+                                hit ? packet.ray.tfar[i] : -1.f;
+                    }
+                }
+            hits.local() += n;
+            _mm_setcsr(csr);
+        });
+        hitsOut += hits.combine([](uint64_t x, uint64_t y) { return x + y; });
+    };
+    const double rays = 2.0 * a.px * a.px * double(path.size());
+    std::printf("fly-over cameras at %zu positions along the centerline, %d x %d per view: %.1f M rays a run; "
+                "the variants alternate view by view (rotating which goes first)\n",
+                path.size(), a.px, a.px, rays * 1e-6);
+    constexpr int NV = 5;
+    const char* names[NV] = {"rays only (packets filled, no traversal)", "triangles, robust  [RayScene today]",
+                             "quads, robust", "triangles, not robust (comparison only)",
+                             "quads, not robust (comparison only)"};
+    std::vector<double> wall[NV], cpu[NV];
+    uint64_t hitCount[NV] = {0, 0, 0, 0, 0};
+    for (int run = 0; run < a.runs; ++run) {
+        double w[NV] = {0, 0, 0, 0, 0}, cp[NV] = {0, 0, 0, 0, 0};
+        int view = 0;
+        for (const auto& pair : path)
+            for (const Camera& camera : pair) {
+                for (int o = 0; o < NV; ++o) {
+                    const int variant = (o + view) % NV;
+                    uint64_t h = 0;
+                    const Timing t = measure([&] { trace(variant, camera, h, nullptr); });
+                    w[variant] += t.wall;
+                    cp[variant] += t.cpu;
+                    if (run == 0) hitCount[variant] += h;
+                }
+                ++view;
+            }
+        for (int v = 0; v < NV; ++v) {
+            wall[v].push_back(w[v]);
+            cpu[v].push_back(cp[v]);
+        }
+    }
+    // The quad scene is the same surface: the robust scenes' depths agree ray for ray (first
+    // camera of every position, untimed).
+    std::size_t compared = 0, differing = 0;
+    double maxRel = 0;
+    std::vector<float> depthTri(std::size_t(a.px) * std::size_t(a.px)), depthQuad(depthTri.size());
+    for (const auto& pair : path) {
+        uint64_t h = 0;
+        trace(1, pair[0], h, &depthTri);
+        trace(2, pair[0], h, &depthQuad);
+        for (std::size_t i = 0; i < depthTri.size(); ++i) {
+            ++compared;
+            const float x = depthTri[i], y = depthQuad[i];
+            const double rel = (x < 0) != (y < 0) ? 1.0 : std::fabs(double(x) - double(y)) / std::max(1.0, double(x));
+            maxRel = std::max(maxRel, rel);
+            differing += rel > 1e-4 ? 1 : 0;
+        }
+    }
+    std::printf("depths, robust triangles vs quads: %zu of %zu rays differ by more than 1e-4 (relative; hit vs miss "
+                "counts as 1), max %.2g\n",
+                differing, compared, maxRel);
+    std::printf("hits: triangles %llu, quads %llu, not robust %llu / %llu (of %.0f rays)\n",
+                static_cast<unsigned long long>(hitCount[1]), static_cast<unsigned long long>(hitCount[2]),
+                static_cast<unsigned long long>(hitCount[3]), static_cast<unsigned long long>(hitCount[4]), rays);
+    std::printf("  %-44s %9s %9s | %-s\n", "median of runs (traversal = variant - rays only)", "wall s", "CPU s",
+                "CPU-normalised traversal Mrays/s");
+    const double fillCpu = median(cpu[0]);
+    for (int v = 0; v < NV; ++v) {
+        const double trav = median(cpu[v]) - fillCpu;
+        std::printf("  %-44s %9.3f %9.3f", names[v], median(wall[v]), median(cpu[v]));
+        if (v > 0) std::printf(" | %8.1f", rays / (trav / a.threads) * 1e-6);
+        std::printf("\n");
+    }
+    for (const int t : {1, 3}) {
+        std::vector<double> ratio;  // per run: triangles' traversal CPU / quads'
+        for (int r = 0; r < a.runs; ++r)
+            ratio.push_back((cpu[t][std::size_t(r)] - cpu[0][std::size_t(r)]) /
+                            (cpu[t + 1][std::size_t(r)] - cpu[0][std::size_t(r)]));
+        std::printf("quads' traversal speed-up over triangles, %s (CPU, per run): median %.3f, min %.3f, max %.3f\n",
+                    t == 1 ? "robust" : "not robust", median(ratio), *std::min_element(ratio.begin(), ratio.end()),
+                    *std::max_element(ratio.begin(), ratio.end()));
+    }
+    for (RTCScene scene : scenes) rtcReleaseScene(scene);
+    rtcReleaseDevice(device);
+}
+
 } // namespace
 
 int main(int argc, char** argv)
@@ -486,6 +763,8 @@ int main(int argc, char** argv)
             benchThroughput(a, s);
             benchSceneAndPng(a, s);
             if (!a.study.empty()) benchFirstPair(a);
+        } else if (a.mode == "quads") {
+            benchQuads(a, s);
         } else if (a.mode == "coverage") {
             benchCoverage(s);
         } else {
