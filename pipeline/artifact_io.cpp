@@ -11,7 +11,6 @@
 #include <isa-l/igzip_lib.h>
 #include <png.h>
 #include <xxhash.h>
-#include <zlib.h>
 
 #include <cerrno>
 #include <csignal>
@@ -387,8 +386,8 @@ void appendChunk(std::string& out, const char* type, const void* data, std::size
     const std::size_t typeAt = out.size();
     out.append(type, 4);
     if (n) out.append(static_cast<const char*>(data), n);
-    const uLong crc = ::crc32(0L, reinterpret_cast<const Bytef*>(out.data() + typeAt), static_cast<uInt>(4 + n));
-    appendU32(out, static_cast<uint32_t>(crc));
+    // ISA-L's CRC-32 of gzip, the same polynomial and reflection as PNG's (zlib's crc32).
+    appendU32(out, crc32_gzip_refl(0, reinterpret_cast<const unsigned char*>(out.data() + typeAt), 4 + n));
 }
 
 /// PNG bytes of 8-bit pixels, `channels` 1 (gray) or 3 (RGB) per pixel, top row first.
