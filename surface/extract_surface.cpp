@@ -6,8 +6,8 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
+#include "surface/mesh_build.h"
 #include "surface/mesh_checks.h"
-#include "surface/openmesh_log.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/Interpolation.h>
@@ -398,7 +398,6 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     TriMesh mesh;
     // All vertices at once (resize, then set_point) rather than add_vertex one by one.
     mesh.resize(std::size_t(nextVertex), 0, 0);
-    mesh.reserve(std::size_t(nextVertex), tris.size() * 3 / 2 + 16, tris.size());
     for (std::size_t i = 0; i < points.size(); ++i) {
         if (vertexIndex[i] == UNUSED) continue;
         const openvdb::Vec3s& p = points[i];
@@ -406,18 +405,13 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     }
     releaseVector(points);
 
-    int64_t dropped = 0;
-    {
-        // OpenMesh prints one line per refused face on its error stream; we count them instead.
-        const ScopedOpenMeshMute muted(ScopedOpenMeshMute::ERR);
-        for (const auto& t : tris) {
-            const TriMesh::VertexHandle a(vertexIndex[t[0]]), b(vertexIndex[t[1]]),
-                c(vertexIndex[t[2]]);
-            // volumeToMesh can emit a collapsed triangle with a repeated vertex; OpenMesh
-            // would refuse it as well, count it the same way.
-            if (a == b || b == c || a == c || !mesh.add_face(a, b, c).is_valid()) ++dropped;
-        }
-    }
+    // The faces as add_face would add them one by one (the same refusals, handles and order),
+    // built on flat arrays: a third of the time of OpenMesh's own loop on the full phantom.
+    std::vector<std::array<int, 3>> faces(tris.size());
+    for (std::size_t i = 0; i < tris.size(); ++i)
+        faces[i] = {vertexIndex[tris[i][0]], vertexIndex[tris[i][1]], vertexIndex[tris[i][2]]};
+    const int64_t dropped = addFacesLikeOpenMesh(mesh, faces);
+    releaseVector(faces);
     if (soup) *soup = std::make_shared<const TriangleSoup>(std::move(tris));
     releaseVector(tris);
     releaseVector(vertexIndex);
