@@ -406,7 +406,7 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     releaseVector(points);
 
     // The faces as add_face would add them one by one (the same refusals, handles and order),
-    // built on flat arrays: a third of the time of OpenMesh's own loop on the full phantom.
+    // built on flat arrays: ~0.05 instead of ~0.13 CPU s of add_face's loop on the full phantom.
     std::vector<std::array<int, 3>> faces(tris.size());
     for (std::size_t i = 0; i < tris.size(); ++i)
         faces[i] = {vertexIndex[tris[i][0]], vertexIndex[tris[i][1]], vertexIndex[tris[i][2]]};
