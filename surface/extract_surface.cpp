@@ -69,12 +69,33 @@ public:
             data[1][1][0] = leaf->getValue(o + 72);
             data[1][1][1] = leaf->getValue(o + 73);
         } else {
-            openvdb::tools::BoxSampler::probeValues(data, *mAccessor, ijk);
+            cornersAcrossLeaves(ijk, data);
         }
         return openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
     }
 
 private:
+    /// BoxSampler::probeValues' values (each corner's value, active or not) when the corners
+    /// lie in several leaves or in none: each leaf they touch is looked up once (the accessor's
+    /// one-leaf cache would otherwise alternate between them, corner after corner), a corner
+    /// outside every leaf (a tile, the background) is read through the accessor.
+    void cornersAcrossLeaves(const openvdb::Coord& ijk, float (&data)[2][2][2]) const
+    {
+        const int cross[3] = {(ijk.x() & 7) == 7, (ijk.y() & 7) == 7, (ijk.z() & 7) == 7};
+        const LeafT* leaves[2][2][2] = {};
+        for (int i = 0; i <= cross[0]; ++i)
+            for (int j = 0; j <= cross[1]; ++j)
+                for (int k = 0; k <= cross[2]; ++k)
+                    leaves[i][j][k] = mAccessor->probeConstLeaf(ijk.offsetBy(i, j, k));
+        for (int i = 0; i < 2; ++i)
+            for (int j = 0; j < 2; ++j)
+                for (int k = 0; k < 2; ++k) {
+                    const openvdb::Coord c = ijk.offsetBy(i, j, k);
+                    const LeafT* leaf = leaves[i & cross[0]][j & cross[1]][k & cross[2]];
+                    data[i][j][k] = leaf ? leaf->getValue(LeafT::coordToOffset(c)) : mAccessor->getValue(c);
+                }
+    }
+
     const openvdb::FloatGrid::ConstAccessor* mAccessor;
     const openvdb::math::Transform* mTransform;
 };
