@@ -6,8 +6,8 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
+#include "surface/mesh_build.h"
 #include "surface/mesh_checks.h"
-#include "surface/openmesh_log.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/Interpolation.h>
@@ -69,12 +69,33 @@ public:
             data[1][1][0] = leaf->getValue(o + 72);
             data[1][1][1] = leaf->getValue(o + 73);
         } else {
-            openvdb::tools::BoxSampler::probeValues(data, *mAccessor, ijk);
+            cornersAcrossLeaves(ijk, data);
         }
         return openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
     }
 
 private:
+    /// BoxSampler::probeValues' values (each corner's value, active or not) when the corners
+    /// lie in several leaves or in none: each leaf they touch is looked up once (the accessor's
+    /// one-leaf cache would otherwise alternate between them, corner after corner), a corner
+    /// outside every leaf (a tile, the background) is read through the accessor.
+    void cornersAcrossLeaves(const openvdb::Coord& ijk, float (&data)[2][2][2]) const
+    {
+        const int cross[3] = {(ijk.x() & 7) == 7, (ijk.y() & 7) == 7, (ijk.z() & 7) == 7};
+        const LeafT* leaves[2][2][2] = {};
+        for (int i = 0; i <= cross[0]; ++i)
+            for (int j = 0; j <= cross[1]; ++j)
+                for (int k = 0; k <= cross[2]; ++k)
+                    leaves[i][j][k] = mAccessor->probeConstLeaf(ijk.offsetBy(i, j, k));
+        for (int i = 0; i < 2; ++i)
+            for (int j = 0; j < 2; ++j)
+                for (int k = 0; k < 2; ++k) {
+                    const openvdb::Coord c = ijk.offsetBy(i, j, k);
+                    const LeafT* leaf = leaves[i & cross[0]][j & cross[1]][k & cross[2]];
+                    data[i][j][k] = leaf ? leaf->getValue(LeafT::coordToOffset(c)) : mAccessor->getValue(c);
+                }
+    }
+
     const openvdb::FloatGrid::ConstAccessor* mAccessor;
     const openvdb::math::Transform* mTransform;
 };
@@ -398,7 +419,6 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     TriMesh mesh;
     // All vertices at once (resize, then set_point) rather than add_vertex one by one.
     mesh.resize(std::size_t(nextVertex), 0, 0);
-    mesh.reserve(std::size_t(nextVertex), tris.size() * 3 / 2 + 16, tris.size());
     for (std::size_t i = 0; i < points.size(); ++i) {
         if (vertexIndex[i] == UNUSED) continue;
         const openvdb::Vec3s& p = points[i];
@@ -406,18 +426,13 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
     }
     releaseVector(points);
 
-    int64_t dropped = 0;
-    {
-        // OpenMesh prints one line per refused face on its error stream; we count them instead.
-        const ScopedOpenMeshMute muted(ScopedOpenMeshMute::ERR);
-        for (const auto& t : tris) {
-            const TriMesh::VertexHandle a(vertexIndex[t[0]]), b(vertexIndex[t[1]]),
-                c(vertexIndex[t[2]]);
-            // volumeToMesh can emit a collapsed triangle with a repeated vertex; OpenMesh
-            // would refuse it as well, count it the same way.
-            if (a == b || b == c || a == c || !mesh.add_face(a, b, c).is_valid()) ++dropped;
-        }
-    }
+    // The faces as add_face would add them one by one (the same refusals, handles and order),
+    // built on flat arrays: ~0.05 instead of ~0.13 CPU s of add_face's loop on the full phantom.
+    std::vector<std::array<int, 3>> faces(tris.size());
+    for (std::size_t i = 0; i < tris.size(); ++i)
+        faces[i] = {vertexIndex[tris[i][0]], vertexIndex[tris[i][1]], vertexIndex[tris[i][2]]};
+    const int64_t dropped = addFacesLikeOpenMesh(mesh, faces);
+    releaseVector(faces);
     if (soup) *soup = std::make_shared<const TriangleSoup>(std::move(tris));
     releaseVector(tris);
     releaseVector(vertexIndex);
