@@ -39,6 +39,7 @@
 #include "render/coverage.h"
 #include "render/flyover_path.h"
 #include "render/ray_scene.h"
+#include "render/view_rays.h"
 #include "render/render_view.h"
 #include "surface/extract_surface.h"
 #include "volume/centerline.h"
@@ -618,14 +619,12 @@ void benchQuads(const Args& a, const Subject& s)
                 buildTri.wall, buildTri.cpu, buildQuad.wall, buildQuad.cpu);
 
     const auto path = flyoverPath(RayScene(s.mesh), s.centerline, a.positions, FlyoverParams{});
-    constexpr int P = 4, L = 16;
+    constexpr int P = PACKET, L = LANES;
     const int tilesX = (a.px + P - 1) / P, tilesY = (a.px + P - 1) / P;
     // Variant 0: the packets filled only (the rays' cost, subtracted below); 1: triangles; 2: quads
     // (robust); 3, 4: the same without robust mode.
     auto trace = [&](int variant, const Camera& camera, uint64_t& hitsOut, std::vector<float>* depth) {
-        const Vec3d c = pixelDirection(camera, a.px, a.px, 0.0, 0.0);
-        const Vec3d sx = pixelDirection(camera, a.px, a.px, 1.0, 0.0) - c;
-        const Vec3d sy = pixelDirection(camera, a.px, a.px, 0.0, 1.0) - c;
+        const ViewRays rays(camera, a.px, a.px);  // renderView's rays
         tbb::combinable<uint64_t> hits([] { return uint64_t(0); });
         tbb::parallel_for(tbb::blocked_range2d<int>(0, tilesY, 8, 0, tilesX, 8), [&](const tbb::blocked_range2d<int>& r) {
             const unsigned int csr = _mm_getcsr();
@@ -639,26 +638,7 @@ void benchQuads(const Args& a, const Subject& s)
             uint64_t n = 0;
             for (int ty = r.rows().begin(); ty != r.rows().end(); ++ty)
                 for (int tx = r.cols().begin(); tx != r.cols().end(); ++tx) {
-                    for (int i = 0; i < L; ++i) {
-                        const int px = tx * P + i % P, py = ty * P + i / P;
-                        valid[i] = (px < a.px && py < a.px) ? -1 : 0;
-                        const double fx = px + 0.5, fy = py + 0.5;
-                        packet.ray.org_x[i] = float(camera.position.x);
-                        packet.ray.org_y[i] = float(camera.position.y);
-                        packet.ray.org_z[i] = float(camera.position.z);
-                        packet.ray.dir_x[i] = float(c.x + sx.x * fx + sy.x * fy);
-                        packet.ray.dir_y[i] = float(c.y + sx.y * fx + sy.y * fy);
-                        packet.ray.dir_z[i] = float(c.z + sx.z * fx + sy.z * fy);
-                        packet.ray.tnear[i] = float(camera.nearMm);
-                        packet.ray.tfar[i] = std::numeric_limits<float>::infinity();
-                        packet.ray.time[i] = 0.f;
-                        packet.ray.mask[i] = 0xFFFFFFFFu;
-                        packet.ray.id[i] = unsigned(i);
-                        packet.ray.flags[i] = 0;
-                        packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-                        packet.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
-                        packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-                    }
+                    rays.fill(tx, ty, 0.5f, 0.5f, valid, packet);
                     if (variant > 0) rtcIntersect16(valid, scenes[variant - 1], &context, &packet);
                     for (int i = 0; i < L; ++i) {
                         const bool hit = valid[i] && packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;

@@ -2,6 +2,7 @@
 
 #include "render/headlight_shade.h"
 #include "render/ray_scene_impl.h"
+#include "render/view_rays.h"
 #include "volume/error.h"
 
 #include <tbb/blocked_range2d.h>
@@ -20,8 +21,6 @@ namespace flyover {
 namespace {
 
 constexpr double PI = 3.14159265358979323846;
-constexpr int PACKET = 4;  ///< 4 x 4 pixel tiles = one 16-wide ray packet
-constexpr int LANES = PACKET * PACKET;
 constexpr int TILES_PER_TASK = 8;  ///< a task renders up to 8 x 8 tiles (32 x 32 pixels)
 constexpr double GAMMA = 2.2;
 constexpr uint32_t NO_HIT = std::numeric_limits<uint32_t>::max();
@@ -153,56 +152,6 @@ private:
     bool mFilterOnly = false;
     RTCIntersectContext mPlain;
     RTCIntersectContext mFilter;
-};
-
-/// Everything a tile task needs to generate the rays of one view.
-struct ViewRays {
-    float origin[3];
-    float corner[3], stepX[3], stepY[3];
-    float nearMm = 0.f;
-    int width = 0, height = 0;
-
-    ViewRays(const Camera& camera, int w, int h) : width(w), height(h)
-    {
-        // dir(x, y) = corner + stepX * x + stepY * y for image points (x, y) in pixels; equal to
-        // pixelDirection(camera, w, h, x, y): dot(dir, forward) == 1.
-        const Vec3d c = pixelDirection(camera, w, h, 0.0, 0.0);
-        const Vec3d sx = pixelDirection(camera, w, h, 1.0, 0.0) - c;
-        const Vec3d sy = pixelDirection(camera, w, h, 0.0, 1.0) - c;
-        for (int k = 0; k < 3; ++k) {
-            origin[k] = float(camera.position[k]);
-            corner[k] = float(c[k]);
-            stepX[k] = float(sx[k]);
-            stepY[k] = float(sy[k]);
-        }
-        nearMm = float(camera.nearMm);
-    }
-
-    /// Fills the packet for the 4 x 4 tile (tx, ty) at sub-pixel offset (ox, oy).
-    void fill(int tx, int ty, float ox, float oy, int* valid, RTCRayHit16& packet) const
-    {
-        for (int i = 0; i < LANES; ++i) {
-            const int px = tx * PACKET + i % PACKET;
-            const int py = ty * PACKET + i / PACKET;
-            valid[i] = (px < width && py < height) ? -1 : 0;
-            const float fx = float(px) + ox, fy = float(py) + oy;
-            packet.ray.org_x[i] = origin[0];
-            packet.ray.org_y[i] = origin[1];
-            packet.ray.org_z[i] = origin[2];
-            packet.ray.dir_x[i] = corner[0] + stepX[0] * fx + stepY[0] * fy;
-            packet.ray.dir_y[i] = corner[1] + stepX[1] * fx + stepY[1] * fy;
-            packet.ray.dir_z[i] = corner[2] + stepX[2] * fx + stepY[2] * fy;
-            packet.ray.tnear[i] = nearMm;
-            packet.ray.tfar[i] = INF_F;
-            packet.ray.time[i] = 0.f;
-            packet.ray.mask[i] = 0xFFFFFFFFu;
-            packet.ray.id[i] = unsigned(i);
-            packet.ray.flags[i] = 0;
-            packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-            packet.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
-            packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-        }
-    }
 };
 
 /// Headlight diffuse shading of one hit: ambient + diffuse * |cos| between the ray and the
