@@ -6,7 +6,8 @@
 # the median of unchanged re-runs; the process CPU seconds (user + system) at the first pair and
 # at the end (steadier than wall times on a shared machine); then the plain ITK reference
 # (bench/itk_reference: ITK read + threshold + marching cubes of the same file) and the ratio
-# first pair / reference (issue 15 asks <= 0.75). Works only in its own folder (FLYOVER_BENCH_DIR, default
+# first pair / reference (issue 15 asks <= 0.75), and the same against ITK's own mesher
+# (itk_reference --mesher itk: ITK alone, one thread for the mesh). Works only in its own folder (FLYOVER_BENCH_DIR, default
 # /tmp/flyover-bench-first-pair): never in a user's study. Build first: scripts/build.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -66,6 +67,10 @@ if [ -x "$REFERENCE" ]; then
   ref=$(sed -n 's/^reference_seconds //p' "$WORK/reference.txt")
   fpm=$(printf '%s\n' "${first[@]}" | sort -g | awk '{ t[NR] = $1 } END { print (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2) }')
   awk -v a="$fpm" -v b="$ref" 'BEGIN { printf "first pair / ITK reference: %.3f / %.3f = %.2f (target <= 0.75)\n", a, b, a / b }'
+  # The same with ITK's own marching cubes (the pipeline made of ITK alone; slower, 3 runs).
+  "$REFERENCE" "$CT" --runs 3 --mesher itk | tee "$WORK/reference-itk.txt"
+  refItk=$(sed -n 's/^reference_seconds //p' "$WORK/reference-itk.txt")
+  awk -v a="$fpm" -v b="$refItk" 'BEGIN { printf "first pair / ITK-only reference: %.3f / %.3f = %.2f\n", a, b, a / b }'
 else
   echo "no $REFERENCE: build it (cmake --build build --target itk_reference) for the ITK reference"
 fi
