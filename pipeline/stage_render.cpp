@@ -29,6 +29,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -448,10 +449,15 @@ json runFrames(StudyRun& run, Progress* progress)
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
         const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
-        RgbImage& pair = buffers.local();
-        renderPair(scene, cams[0], cams[1], s.ro, pair);
-        const auto t1 = Clock::now();
-        writePng(frames.path(pairName(f)), pair);
+        auto t1 = t0;
+        // Isolated: waiting for this pair's tiles, the thread must not take up another pair,
+        // which would render into this same thread's pair image before it is written.
+        tbb::this_task_arena::isolate([&] {
+            RgbImage& pair = buffers.local();
+            renderPair(scene, cams[0], cams[1], s.ro, pair);
+            t1 = Clock::now();
+            writePng(frames.path(pairName(f)), pair);
+        });
         if (f == 0) {
             firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
             firstPngSeconds = secondsSince(t1);
@@ -528,9 +534,11 @@ json runFlythrough(StudyRun& run, Progress* progress)
             const CenterlinePoint& p = cl.points[indices[f]];
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
-            RgbImage& pair = buffers.local();
-            renderPair(*in.scene, fwd, back, s.ro, pair);
-            writePng(flythrough.path(pairName(f)), pair);
+            tbb::this_task_arena::isolate([&] {  // see runFrames: the thread's pair image, one pair at a time
+                RgbImage& pair = buffers.local();
+                renderPair(*in.scene, fwd, back, s.ro, pair);
+                writePng(flythrough.path(pairName(f)), pair);
+            });
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
                               {"centerline_index", indices[f]},

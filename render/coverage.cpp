@@ -9,6 +9,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -430,15 +431,20 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                                                : params.frameRadiiMm;
     std::atomic<std::size_t> done{0};
     tbb::parallel_for(std::size_t(0), positions.size(), [&](std::size_t k) {
-        Worker& w = workers.local();
-        const CenterlinePoint& p = centerline.points[positions[k]];
-        for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
-            mark(w, c, params.ost, w.seen[0]);
-        // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
-        if (params.flythrough) {
-            mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);
-            mark(w, flythroughCamera(p, false, params.flythroughFovDeg), params.ost, w.seen[2]);
-        }
+        // Isolated: while this thread waits for its view's ray tiles (a nested parallel loop),
+        // it must not take up another position, which would use this same worker's marker
+        // (hit image, walk state) halfway through this one's.
+        tbb::this_task_arena::isolate([&] {
+            Worker& w = workers.local();
+            const CenterlinePoint& p = centerline.points[positions[k]];
+            for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
+                mark(w, c, params.ost, w.seen[0]);
+            // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
+            if (params.flythrough) {
+                mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);
+                mark(w, flythroughCamera(p, false, params.flythroughFovDeg), params.ost, w.seen[2]);
+            }
+        });
         const std::size_t n = ++done;
         if (n % 16 == 0) reportProgress(progress, 0.95 * double(n) / double(positions.size()), "coverage rays");
     });

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -350,6 +351,32 @@ TEST_F(StudyTest, VideoStartsFirstAfterTheFramesAndIsTheSameOnAnyNumberOfThreads
     EXPECT_EQ(oneThread.at("video"), manyThreads.at("video"))
         << "video/ (flyover.mp4, poses.json) differs between one thread and the default number";
     EXPECT_EQ(oneThread.at("frames"), manyThreads.at("frames"));
+}
+
+// A thread's pair image is its own while the pair is rendered and written: waiting for the
+// pair's tiles (a nested parallel loop), the thread must not take up another pair that renders
+// into the same image (frames differed between runs under load). Many threads on few cores
+// make such steals frequent; the frames, fly-through and coverage must be one thread's.
+TEST_F(StudyTest, RenderStepsAreOneThreadsUnderNestedStealing)
+{
+    RunOptions o = options("stealing-one");
+    o.params.render.video = false;
+    std::map<std::string, nlohmann::json> oneThread;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        oneThread = outputDigests(runPipeline(o));
+    }
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 16);
+    tbb::task_arena arena(16);
+    for (int run = 0; run < 3; ++run) {
+        RunOptions m = options("stealing-many-" + std::to_string(run));
+        m.params.render.video = false;
+        std::map<std::string, nlohmann::json> many;
+        arena.execute([&] { many = outputDigests(runPipeline(m)); });
+        for (const char* step : {"frames", "flythrough", "coverage"})
+            EXPECT_EQ(oneThread.at(step), many.at(step)) << "run " << run << ": " << step
+                                                         << "/ differs from one thread's";
+    }
 }
 
 TEST_F(StudyTest, StatusComparesTheStudysFilesWithTheRecord)

@@ -9,6 +9,8 @@
 #include "volume/error.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <limits>
@@ -257,6 +259,38 @@ TEST(Coverage, RejectsBadParameters)
     p.stepMm = 0;
     EXPECT_THROW(computeCoverage(scene, line, p), ParameterError);
     EXPECT_THROW(computeCoverage(scene, Centerline{}, CoverageParams{}), InputError);
+}
+
+// A worker's marker (hit image, walk state) is the thread's own: while a thread waits for the
+// tiles of its view's rays (a nested parallel loop), TBB may hand it another position, which
+// must not take over that marker halfway (issue 15: frames and coverage differed between runs
+// under load). Many threads on few cores make such steals frequent; every run must flag
+// exactly the triangles one thread flags.
+TEST(Coverage, SameFlagsOnAnyNumberOfThreadsUnderNestedStealing)
+{
+    const FoldedTube tube;
+    const TriMesh mesh = tube.mesh();
+    const RayScene scene(mesh);
+    const Centerline line = tube.centerline();
+    CoverageParams p;
+    p.viewPx = 48;
+    p.stepMm = 1.0;
+    CoverageResult one;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        one = computeCoverage(scene, line, p);
+    }
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 16);
+    tbb::task_arena arena(16);
+    for (int run = 0; run < 6; ++run) {
+        CoverageResult many;
+        arena.execute([&] { many = computeCoverage(scene, line, p); });
+        EXPECT_TRUE(many.flyover.seen == one.flyover.seen) << "run " << run << ": fly-over flags differ from one thread's";
+        EXPECT_TRUE(many.flythroughForward.seen == one.flythroughForward.seen)
+            << "run " << run << ": forward fly-through flags differ from one thread's";
+        EXPECT_TRUE(many.flythroughBackward.seen == one.flythroughBackward.seen)
+            << "run " << run << ": backward fly-through flags differ from one thread's";
+    }
 }
 
 } // namespace
