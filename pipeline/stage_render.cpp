@@ -25,11 +25,10 @@
 #include "render/render_view.h"
 #include "render/review.h"
 #include "volume/error.h"
+#include "volume/object_pool.h"
 
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -444,20 +443,18 @@ json runFrames(StudyRun& run, Progress* progress)
     StagedFolder frames(run.dir, "frames");
     std::vector<json> poses(indices.size());
     double firstRenderSeconds = 0, firstPngSeconds = 0;
-    tbb::enumerable_thread_specific<RgbImage> buffers;  // a pair image per thread, reused: no allocation per pair
+    // Pair images reused from pair to pair (no allocation per pair), each lent to one pair at a
+    // time: a thread waiting for a pair's tiles may take up another pair meanwhile (ObjectPool).
+    ObjectPool<RgbImage> buffers([] { return RgbImage{}; });
     auto renderFramePair = [&](std::size_t f) {
         const auto t0 = Clock::now();
         const CenterlinePoint& p = cl.points[indices[f]];
         const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
-        auto t1 = t0;
-        // Isolated: waiting for this pair's tiles, the thread must not take up another pair,
-        // which would render into this same thread's pair image before it is written.
-        tbb::this_task_arena::isolate([&] {
-            RgbImage& pair = buffers.local();
-            renderPair(scene, cams[0], cams[1], s.ro, pair);
-            t1 = Clock::now();
-            writePng(frames.path(pairName(f)), pair);
-        });
+        const auto lease = buffers.take();
+        RgbImage& pair = *lease;
+        renderPair(scene, cams[0], cams[1], s.ro, pair);
+        const auto t1 = Clock::now();
+        writePng(frames.path(pairName(f)), pair);
         if (f == 0) {
             firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
             firstPngSeconds = secondsSince(t1);
@@ -529,16 +526,16 @@ json runFlythrough(StudyRun& run, Progress* progress)
         const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
         std::vector<json> ftPoses(indices.size());
         std::atomic<std::size_t> done{0};
-        tbb::enumerable_thread_specific<RgbImage> buffers;  // a pair image per thread, reused: no allocation per pair
+        ObjectPool<RgbImage> buffers([] { return RgbImage{}; });  // as in runFrames
         tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
             const CenterlinePoint& p = cl.points[indices[f]];
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
-            tbb::this_task_arena::isolate([&] {  // see runFrames: the thread's pair image, one pair at a time
-                RgbImage& pair = buffers.local();
-                renderPair(*in.scene, fwd, back, s.ro, pair);
-                writePng(flythrough.path(pairName(f)), pair);
-            });
+            {
+                const auto lease = buffers.take();
+                renderPair(*in.scene, fwd, back, s.ro, *lease);
+                writePng(flythrough.path(pairName(f)), *lease);
+            }
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
                               {"centerline_index", indices[f]},

@@ -5,11 +5,10 @@
 #include "render/ray_scene_impl.h"
 #include "render/render_view.h"
 #include "volume/error.h"
+#include "volume/object_pool.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -411,14 +410,16 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
     result.positions = positions.size();
 
     // Positions are marked in parallel; each worker has its own marker (hit image, BFS state)
-    // and seen flags (OR-ed at the end), so no two threads write the same byte.
+    // and seen flags (OR-ed at the end), so no two threads write the same byte. A worker is lent
+    // to one position at a time (ObjectPool): a thread waiting for a view's ray tiles may take
+    // up another position meanwhile, which then gets another worker.
     const ViewMarker prototype(scene, params.viewPx, params.footprint);
     struct Worker {
         ViewMarker marker;
         std::vector<uint8_t> seen[3];  // fly-over, fly-through forward, backward
         uint64_t rays = 0;
     };
-    tbb::enumerable_thread_specific<Worker> workers([&] {
+    ObjectPool<Worker> workers([&] {
         Worker w{prototype, {}, 0};
         for (auto& s : w.seen) s.assign(nf, 0);
         return w;
@@ -431,11 +432,9 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                                                : params.frameRadiiMm;
     std::atomic<std::size_t> done{0};
     tbb::parallel_for(std::size_t(0), positions.size(), [&](std::size_t k) {
-        // Isolated: while this thread waits for its view's ray tiles (a nested parallel loop),
-        // it must not take up another position, which would use this same worker's marker
-        // (hit image, walk state) halfway through this one's.
-        tbb::this_task_arena::isolate([&] {
-            Worker& w = workers.local();
+        {
+            const auto lease = workers.take();
+            Worker& w = *lease;
             const CenterlinePoint& p = centerline.points[positions[k]];
             for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
                 mark(w, c, params.ost, w.seen[0]);
@@ -444,16 +443,16 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                 mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);
                 mark(w, flythroughCamera(p, false, params.flythroughFovDeg), params.ost, w.seen[2]);
             }
-        });
+        }
         const std::size_t n = ++done;
         if (n % 16 == 0) reportProgress(progress, 0.95 * double(n) / double(positions.size()), "coverage rays");
     });
     MethodCoverage* methods[3] = {&result.flyover, &result.flythroughForward, &result.flythroughBackward};
-    for (const Worker& w : workers) {
+    workers.forEach([&](const Worker& w) {
         result.rays += w.rays;
         for (int m = 0; m < 3; ++m)
             for (std::size_t f = 0; f < nf; ++f) methods[m]->seen[f] |= w.seen[m][f];
-    }
+    });
     result.flythroughTwoWay.seen.resize(nf);
     for (std::size_t f = 0; f < nf; ++f)
         result.flythroughTwoWay.seen[f] = uint8_t(result.flythroughForward.seen[f] | result.flythroughBackward.seen[f]);

@@ -1,10 +1,9 @@
 #include "render/review.h"
 
 #include "volume/error.h"
+#include "volume/object_pool.h"
 
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -304,7 +303,8 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         std::vector<uint32_t> shown;
         uint64_t rays = 0;
     };
-    tbb::enumerable_thread_specific<Worker> workers([&] { return Worker{prototype, {}, 0}; });
+    // One worker per candidate at a time (see ObjectPool: nested ray tiles).
+    ObjectPool<Worker> workers([&] { return Worker{prototype, {}, 0}; });
     std::vector<uint8_t> inRegion(nf, 0);
     std::vector<Candidate> last;        // the last round's candidates, for the reasons
     std::vector<uint8_t> lastTargets;   // per triangle: in a region the last round planned for
@@ -330,10 +330,9 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         // Each candidate's rays, marked as the coverage marks the fly-over's.
         std::atomic<std::size_t> done{0};
         tbb::parallel_for(std::size_t(0), cands.size(), [&](std::size_t k) {
-            // Isolated: waiting for its rays' tiles, this thread must not take up another
-            // candidate, which would clear and refill this same worker's list halfway.
-            tbb::this_task_arena::isolate([&] {
-                Worker& w = workers.local();
+            {
+                const auto lease = workers.take();
+                Worker& w = *lease;
                 w.shown.clear();
                 for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown);
                 std::vector<uint32_t>& s = cands[k].shows;
@@ -341,7 +340,7 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
                     if (!seen[f]) s.push_back(f);
                 std::sort(s.begin(), s.end());
                 s.erase(std::unique(s.begin(), s.end()), s.end());
-            });
+            }
             const std::size_t n = ++done;
             if (n % 64 == 0)
                 reportProgress(progress, std::min(0.95, (double(round - 1) + double(n) / double(cands.size())) /
@@ -392,7 +391,7 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
     }
     if (int(result.views.size()) >= params.maxViews && seenArea < params.targetFraction * total)
         stopReason = "the review's budget of " + std::to_string(params.maxViews) + " views was spent";
-    for (const Worker& w : workers) result.rays += w.rays;
+    workers.forEach([&](const Worker& w) { result.rays += w.rays; });
 
     result.withReview.seen = seen;
     std::vector<std::vector<uint32_t>> finalTris;
