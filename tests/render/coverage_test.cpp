@@ -22,6 +22,14 @@ namespace {
 
 using test::FoldedTube;
 using test::PI;
+
+/// The folded tube's mesh, its ray scene and its centerline.
+struct FoldedTubeScene {
+    FoldedTube tube;
+    TriMesh mesh = tube.mesh();
+    RayScene scene{mesh};
+    Centerline line = tube.centerline();
+};
 using test::circleCenterline;
 
 TEST(CenterlineLocator, AgreesWithBruteForce)
@@ -87,10 +95,9 @@ TEST(Coverage, FlyoverSeesAllOfATorusLumen)
 
 TEST(Coverage, FoldHidesTheWallBehindItFromTheForwardFlythroughOnly)
 {
-    const FoldedTube tube;
-    const TriMesh mesh = tube.mesh();
-    const RayScene scene(mesh);
-    const Centerline line = tube.centerline();
+    const FoldedTubeScene folded;
+    const RayScene& scene = folded.scene;
+    const Centerline& line = folded.line;
     CoverageParams p;
     p.viewPx = 96;
     p.stepMm = 1.0;
@@ -114,7 +121,7 @@ TEST(Coverage, FoldHidesTheWallBehindItFromTheForwardFlythroughOnly)
         EXPECT_NEAR(m.arcMm, double(m.nearestCenterlineIndex) * line.stepMm, 1e-9);
         EXPECT_NEAR(m.distanceToCenterlineMm, distance(m.centroidMm, line.points[m.nearestCenterlineIndex].positionMm), 1e-9);
         // A ring region has its centroid on the axis; what matters is where along it lies.
-        behindFold = behindFold || (m.centroidMm.z > tube.zFold && m.centroidMm.z < tube.zFold + 15.0);
+        behindFold = behindFold || (m.centroidMm.z > folded.tube.zFold && m.centroidMm.z < folded.tube.zFold + 15.0);
     }
     EXPECT_TRUE(behindFold) << "the largest forward miss is at z = " << c.flythroughForward.missed.front().centroidMm.z;
     double listed = 0;
@@ -268,23 +275,19 @@ TEST(Coverage, RejectsBadParameters)
 // exactly the triangles one thread flags.
 TEST(Coverage, SameFlagsOnAnyNumberOfThreadsUnderNestedStealing)
 {
-    const FoldedTube tube;
-    const TriMesh mesh = tube.mesh();
-    const RayScene scene(mesh);
-    const Centerline line = tube.centerline();
+    const FoldedTubeScene folded;
     CoverageParams p;
-    p.viewPx = 48;
-    p.stepMm = 1.0;
+    p.viewPx = 48;  // views every 1 mm, the default
     CoverageResult one;
     {
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-        one = computeCoverage(scene, line, p);
+        one = computeCoverage(folded.scene, folded.line, p);
     }
     tbb::global_control c(tbb::global_control::max_allowed_parallelism, 16);
     tbb::task_arena arena(16);
     for (int run = 0; run < 6; ++run) {
         CoverageResult many;
-        arena.execute([&] { many = computeCoverage(scene, line, p); });
+        arena.execute([&] { many = computeCoverage(folded.scene, folded.line, p); });
         EXPECT_TRUE(many.flyover.seen == one.flyover.seen) << "run " << run << ": fly-over flags differ from one thread's";
         EXPECT_TRUE(many.flythroughForward.seen == one.flythroughForward.seen)
             << "run " << run << ": forward fly-through flags differ from one thread's";
