@@ -12,6 +12,7 @@
 #include <png.h>
 #include <xxhash.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
@@ -607,25 +608,20 @@ bool decodePlainRgbPng(const std::string& bytes, RgbImage& out)
 
 RgbImage readPng(const std::string& path)
 {
-    {
-        std::string bytes;
-        std::ifstream in(path, std::ios::binary | std::ios::ate);
-        if (in) {
-            const std::streamoff n = in.tellg();
-            if (n > 0 && n < (std::streamoff(1) << 31)) {
-                bytes.resize(std::size_t(n));
-                in.seekg(0);
-                RgbImage fast;
-                if (in.read(bytes.data(), n) && decodePlainRgbPng(bytes, fast)) return fast;
-            }
-        }
-    }
+    // The file is read once: decoded here when plain, else given to libpng from memory.
+    std::ifstream in(path, std::ios::binary | std::ios::ate);
+    if (!in) throw InputError(path + ": cannot open for reading");
+    std::string bytes(static_cast<std::size_t>(std::max<std::streamoff>(0, in.tellg())), '\0');
+    in.seekg(0);
+    if (!in.read(bytes.data(), static_cast<std::streamsize>(bytes.size())))
+        throw InputError(path + ": cannot read");
+    RgbImage out;
+    if (decodePlainRgbPng(bytes, out)) return out;
     png_image img{};
     img.version = PNG_IMAGE_VERSION;
-    if (!png_image_begin_read_from_file(&img, path.c_str()))
+    if (!png_image_begin_read_from_memory(&img, bytes.data(), bytes.size()))
         throw InputError(path + ": cannot read PNG: " + img.message);
     img.format = PNG_FORMAT_RGB;
-    RgbImage out;
     out.width = static_cast<int>(img.width);
     out.height = static_cast<int>(img.height);
     out.rgb.resize(PNG_IMAGE_SIZE(img));

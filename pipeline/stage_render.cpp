@@ -531,11 +531,9 @@ json runFlythrough(StudyRun& run, Progress* progress)
             const CenterlinePoint& p = cl.points[indices[f]];
             const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
             const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
-            {
-                const auto lease = buffers.take();
-                renderPair(*in.scene, fwd, back, s.ro, *lease);
-                writePng(flythrough.path(pairName(f)), *lease);
-            }
+            const auto lease = buffers.take();
+            renderPair(*in.scene, fwd, back, s.ro, *lease);
+            writePng(flythrough.path(pairName(f)), *lease);
             ftPoses[f] = json{{"frame", f},
                               {"file", pairName(f)},
                               {"centerline_index", indices[f]},

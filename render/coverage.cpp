@@ -432,17 +432,15 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
                                                : params.frameRadiiMm;
     std::atomic<std::size_t> done{0};
     tbb::parallel_for(std::size_t(0), positions.size(), [&](std::size_t k) {
-        {
-            const auto lease = workers.take();
-            Worker& w = *lease;
-            const CenterlinePoint& p = centerline.points[positions[k]];
-            for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
-                mark(w, c, params.ost, w.seen[0]);
-            // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
-            if (params.flythrough) {
-                mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);
-                mark(w, flythroughCamera(p, false, params.flythroughFovDeg), params.ost, w.seen[2]);
-            }
+        const auto lease = workers.take();
+        Worker& w = *lease;
+        const CenterlinePoint& p = centerline.points[positions[k]];
+        for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
+            mark(w, c, params.ost, w.seen[0]);
+        // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
+        if (params.flythrough) {
+            mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);
+            mark(w, flythroughCamera(p, false, params.flythroughFovDeg), params.ost, w.seen[2]);
         }
         const std::size_t n = ++done;
         if (n % 16 == 0) reportProgress(progress, 0.95 * double(n) / double(positions.size()), "coverage rays");

@@ -330,17 +330,15 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         // Each candidate's rays, marked as the coverage marks the fly-over's.
         std::atomic<std::size_t> done{0};
         tbb::parallel_for(std::size_t(0), cands.size(), [&](std::size_t k) {
-            {
-                const auto lease = workers.take();
-                Worker& w = *lease;
-                w.shown.clear();
-                for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown);
-                std::vector<uint32_t>& s = cands[k].shows;
-                for (const uint32_t f : w.shown)
-                    if (!seen[f]) s.push_back(f);
-                std::sort(s.begin(), s.end());
-                s.erase(std::unique(s.begin(), s.end()), s.end());
-            }
+            const auto lease = workers.take();
+            Worker& w = *lease;
+            w.shown.clear();
+            for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown);
+            std::vector<uint32_t>& s = cands[k].shows;
+            for (const uint32_t f : w.shown)
+                if (!seen[f]) s.push_back(f);
+            std::sort(s.begin(), s.end());
+            s.erase(std::unique(s.begin(), s.end()), s.end());
             const std::size_t n = ++done;
             if (n % 64 == 0)
                 reportProgress(progress, std::min(0.95, (double(round - 1) + double(n) / double(cands.size())) /
