@@ -448,7 +448,6 @@ const RenderInputs& StudyRun::renderInputs()
 {
     tbb::collaborative_call_once(mRenderOnce, [this] {
         auto in = std::make_unique<RenderInputs>();
-        const auto t0 = Clock::now();
         SurfaceArrays& arrays = surfaceArrays();
         in->readSurfaceSeconds = arrays.readSurfaceSeconds;
         in->prepareSurfaceSeconds = arrays.prepareSeconds;
@@ -463,7 +462,6 @@ const RenderInputs& StudyRun::renderInputs()
         const auto tRadii = Clock::now();
         in->frameRadii = flyoverFrameRadii(*in->scene, *in->centerline, flyoverParamsOf(opt.params.render));
         in->frameRadiiSeconds = secondsSince(tRadii);
-        (void)t0;
         mRender = std::move(in);
     });
     return *mRender;
@@ -479,7 +477,7 @@ struct FirstPairFromSubset {
     std::array<Camera, 2> cameras;
     double frameRadiusMm = 0;
     std::size_t radiusTriangles = 0, pairTriangles = 0, surfaceTriangles = 0;
-    double surfaceSeconds = 0, centerlineSeconds = 0, radiusSceneSeconds = 0, radiusSeconds = 0,
+    double surfaceSeconds = 0, radiusSceneSeconds = 0, radiusSeconds = 0,
            pairSceneSeconds = 0;
 };
 
@@ -491,9 +489,7 @@ FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const
     const SurfaceArrays& arrays = run.surfaceArrays();
     out.surfaceTriangles = arrays.triangles.size() / 3;
     out.surfaceSeconds = secondsSince(t);
-    t = Clock::now();
     const Centerline& cl = run.renderCenterline();
-    out.centerlineSeconds = secondsSince(t);
     t = Clock::now();
     std::vector<uint32_t> radiusTris = frameRadiusTriangles(arrays.xyz, arrays.triangles, cl, fp, index);
     out.radiusTriangles = radiusTris.size() / 3;
@@ -512,15 +508,17 @@ FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const
     return out;
 }
 
+/// Where the first pair's seconds went: with `first`, the wait for the surface's arrays (begun
+/// by the mesh stage), the frame radius's scene and the pair's cull and scene; else the whole
+/// scene and every frame radius (the frames step found them built).
 json firstPairBreakdown(const std::optional<FirstPairFromSubset>& first, const RenderInputs& in,
                         double renderSeconds, double pngSeconds)
 {
     if (first)
-        return json{{"surface_arrays", first->surfaceSeconds},
+        return json{{"wait_for_surface", first->surfaceSeconds},
                     {"read_surface", in.readSurfaceSeconds},
                     {"prepare_surface", in.prepareSurfaceSeconds},
-                    {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
-                    {"read_centerline", first->centerlineSeconds},
+                    {"read_centerline", in.readCenterlineSeconds},
                     {"frame_radius_scene", first->radiusSceneSeconds},
                     {"frame_radius", first->radiusSeconds},
                     {"pair_scene", first->pairSceneSeconds},
@@ -650,6 +648,7 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
                 {"first_pair_breakdown_seconds", firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
                 {"first_pair_scene", firstPairSceneJson(first)},
+                {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
                 {"whole_scene_seconds",
                  {{"wait_for_inputs", inputsSeconds},
                   {"build_scene", first ? in.buildSceneSeconds : 0.0},

@@ -179,8 +179,7 @@ std::vector<uint32_t> frameRadiusTriangles(const std::vector<float>& verticesXyz
     checkedTanHalf(params, options);
     checkIndex(centerline, index, "frameRadiusTriangles");
     checkArrays(verticesXyz, triangleIndices, "frameRadiusTriangles");
-    if (!(marginMm >= 0 && std::isfinite(marginMm)))
-        throw ParameterError("frameRadiusTriangles: marginMm must be finite and >= 0");
+    if (!std::isfinite(marginMm)) throw ParameterError("frameRadiusTriangles: marginMm must be finite");
     const auto [first, last] = reachOf(centerline, index, Smoothing(centerline, options));
     // The cross-section planes of the points that cast rays (bridged points cast none).
     struct Plane {

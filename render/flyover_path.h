@@ -58,7 +58,8 @@ std::pair<std::size_t, std::size_t> frameRadiusReach(const Centerline& centerlin
 /// section plane of a point within frameRadiusReach() and of the ball its rays span (radius
 /// 4 * cap). Conservative: a triangle is dropped only when all three vertices lie beyond the
 /// plane by more than the margin on one side, or when it lies farther from the point than the
-/// rays go plus the margin. The margin must cover the rays' float rounding (about 1e-4 mm).
+/// rays go plus the margin. The margin must cover the rays' float rounding (about 1e-4 mm); a
+/// negative one drops triangles that cross the planes (tests show that R then changes).
 std::vector<uint32_t> frameRadiusTriangles(const std::vector<float>& verticesXyz,
                                            const std::vector<uint32_t>& triangleIndices,
                                            const Centerline& centerline, const FlyoverParams& params,
