@@ -493,17 +493,17 @@ FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const
     t = Clock::now();
     std::vector<uint32_t> radiusTris = frameRadiusTriangles(arrays.xyz, arrays.triangles, cl, fp, index);
     out.radiusTriangles = radiusTris.size() / 3;
-    const RayScene radiusScene(arrays.xyz, std::move(radiusTris), arrays.normals);
+    const auto radiusScene = sceneOfTriangles(arrays.xyz, arrays.normals, radiusTris);
     out.radiusSceneSeconds = secondsSince(t);
     t = Clock::now();
-    out.frameRadiusMm = flyoverFrameRadiusAt(radiusScene, cl, fp, index);
+    out.frameRadiusMm = flyoverFrameRadiusAt(*radiusScene, cl, fp, index);
     out.radiusSeconds = secondsSince(t);
     t = Clock::now();
     out.cameras = flyoverCameras(cl.points[index], fp, out.frameRadiusMm);
     std::vector<uint32_t> pairTris = frustumTriangles(arrays.xyz, arrays.triangles, {out.cameras[0], out.cameras[1]},
                                                       ro.widthPx, ro.heightPx);
     out.pairTriangles = pairTris.size() / 3;
-    pairScene = std::make_unique<RayScene>(arrays.xyz, std::move(pairTris), arrays.normals);
+    pairScene = sceneOfTriangles(arrays.xyz, arrays.normals, pairTris);
     out.pairSceneSeconds = secondsSince(t);
     return out;
 }

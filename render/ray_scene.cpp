@@ -205,6 +205,34 @@ std::vector<float> smoothVertexNormals(const std::vector<float>& verticesXyz,
     return normalsOf(verticesXyz, triangleIndices);
 }
 
+std::unique_ptr<RayScene> sceneOfTriangles(const std::vector<float>& verticesXyz,
+                                           const std::vector<float>& vertexNormalsXyz,
+                                           const std::vector<uint32_t>& triangleIndices, const SceneOptions& options)
+{
+    checkArrays(verticesXyz, triangleIndices);
+    if (vertexNormalsXyz.size() != verticesXyz.size()) {
+        std::ostringstream msg;
+        msg << "RayScene: " << vertexNormalsXyz.size() << " vertex normal coordinates for " << verticesXyz.size()
+            << " vertex coordinates";
+        throw InputError(msg.str());
+    }
+    constexpr uint32_t UNUSED = std::numeric_limits<uint32_t>::max();
+    std::vector<uint32_t> newIndex(verticesXyz.size() / 3, UNUSED), indices(triangleIndices.size());
+    std::vector<float> xyz, normals;
+    for (std::size_t k = 0; k < triangleIndices.size(); ++k) {
+        const uint32_t old = triangleIndices[k];
+        if (newIndex[old] == UNUSED) {
+            newIndex[old] = uint32_t(xyz.size() / 3);
+            xyz.insert(xyz.end(), verticesXyz.begin() + long(3 * std::size_t(old)),
+                       verticesXyz.begin() + long(3 * std::size_t(old) + 3));
+            normals.insert(normals.end(), vertexNormalsXyz.begin() + long(3 * std::size_t(old)),
+                           vertexNormalsXyz.begin() + long(3 * std::size_t(old) + 3));
+        }
+        indices[k] = newIndex[old];
+    }
+    return std::make_unique<RayScene>(std::move(xyz), std::move(indices), normals, options);
+}
+
 RayScene::RayScene(const TriMesh& mesh, const SceneOptions& options)
     : RayScene(meshVertices(mesh), meshTriangles(mesh), options)
 {

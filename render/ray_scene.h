@@ -40,6 +40,18 @@ void triMeshArrays(const TriMesh& mesh, std::vector<float>& verticesXyz, std::ve
 std::vector<float> smoothVertexNormals(const std::vector<float>& verticesXyz,
                                        const std::vector<uint32_t>& triangleIndices);
 
+class RayScene;
+
+/// A scene of some of a surface's triangles (`triangleIndices`, indices into `verticesXyz`) that
+/// holds only the vertices they use and shades them with the surface's `vertexNormalsXyz`: the
+/// same hits, barycentrics and shading as the scene of the whole surface gives on them (the
+/// triangles are numbered in the order given, the vertices in the order of first use).
+/// @throw InputError as RayScene's constructors.
+std::unique_ptr<RayScene> sceneOfTriangles(const std::vector<float>& verticesXyz,
+                                           const std::vector<float>& vertexNormalsXyz,
+                                           const std::vector<uint32_t>& triangleIndices,
+                                           const SceneOptions& options = {});
+
 class RayScene {
 public:
     /// Copies the mesh into Embree buffers, builds the BVH (MEDIUM quality) and computes

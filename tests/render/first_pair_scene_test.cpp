@@ -106,8 +106,7 @@ TEST(FirstPairScene, FrameRadiusFromItsTrianglesIsTheWholeFunctionsDouble)
             std::vector<uint32_t> sub = frameRadiusTriangles(s->xyz, s->tris, s->centerline, fp, i);
             const std::size_t kept = sub.size() / 3;
             EXPECT_LT(kept, s->tris.size() / 3 / 2) << s->name << " index " << i << ": the cull kept most triangles";
-            const RayScene subset(s->xyz, std::move(sub), s->normals);
-            const double r = flyoverFrameRadiusAt(subset, s->centerline, fp, i);
+            const double r = flyoverFrameRadiusAt(*sceneOfTriangles(s->xyz, s->normals, sub), s->centerline, fp, i);
             // The same double: the same rays meet the same triangles, summed in the same order.
             EXPECT_EQ(r, radii[i]) << s->name << " index " << i << ": from " << kept << " of "
                                    << s->tris.size() / 3 << " triangles " << r << " mm, whole surface " << radii[i];
@@ -125,9 +124,9 @@ TEST(FirstPairScene, FrameRadiusFromTooFewTrianglesDiffers)
     const std::vector<double> radii = flyoverFrameRadii(whole, s->centerline, fp);
     int differing = 0;
     for (const std::size_t i : positions(s->centerline, 9)) {
-        const RayScene subset(s->xyz, frameRadiusTriangles(s->xyz, s->tris, s->centerline, fp, i, {}, -1.0),
-                              s->normals);
-        differing += flyoverFrameRadiusAt(subset, s->centerline, fp, i) != radii[i] ? 1 : 0;
+        const auto subset =
+            sceneOfTriangles(s->xyz, s->normals, frameRadiusTriangles(s->xyz, s->tris, s->centerline, fp, i, {}, -1.0));
+        differing += flyoverFrameRadiusAt(*subset, s->centerline, fp, i) != radii[i] ? 1 : 0;
     }
     EXPECT_GT(differing, 0) << "the radius did not notice the triangles the cull dropped";
 }
@@ -145,10 +144,11 @@ TEST(FirstPairScene, PairFromTheFrustumCullIsPixelIdenticalToTheWholeScene)
             std::vector<uint32_t> sub = frustumTriangles(s->xyz, s->tris, {cams[0], cams[1]}, ro.widthPx, ro.heightPx);
             const std::size_t kept = sub.size() / 3;
             EXPECT_LT(kept, s->tris.size() / 3) << s->name << " index " << i << ": the cull dropped nothing";
-            const RayScene subset(s->xyz, std::move(sub), s->normals);
+            const auto subset = sceneOfTriangles(s->xyz, s->normals, sub);
+            EXPECT_LT(subset->vertexCount(), whole.vertexCount()) << "the scene of the cull keeps only its vertices";
             RgbImage a, b;
             renderPair(whole, cams[0], cams[1], ro, a);
-            renderPair(subset, cams[0], cams[1], ro, b);
+            renderPair(*subset, cams[0], cams[1], ro, b);
             // Exact: a closest hit (and its barycentrics) depends on the triangle alone, not on
             // the BVH around it; only an exact tie in t between two triangles could be broken
             // the other way by another BVH (none seen: 27 pairs here, 300 with
@@ -173,11 +173,11 @@ TEST(FirstPairScene, ACullThatDropsAVisibleTriangleChangesThePair)
         const std::vector<double> radii = flyoverFrameRadii(whole, s->centerline, fp);
         const std::size_t i = s->centerline.points.size() / 2;
         const auto cams = flyoverCameras(s->centerline.points[i], fp, radii[i]);
-        const RayScene subset(s->xyz, frustumTriangles(s->xyz, s->tris, {cams[0], cams[1]}, ro.widthPx, ro.heightPx, -2.0),
-                              s->normals);
+        const auto subset = sceneOfTriangles(
+            s->xyz, s->normals, frustumTriangles(s->xyz, s->tris, {cams[0], cams[1]}, ro.widthPx, ro.heightPx, -2.0));
         RgbImage a, b;
         renderPair(whole, cams[0], cams[1], ro, a);
-        renderPair(subset, cams[0], cams[1], ro, b);
+        renderPair(*subset, cams[0], cams[1], ro, b);
         EXPECT_GT(differingPixels(a, b), 0) << s->name << ": a cull 2 mm inside the frusta left the pair unchanged";
     }
 }
@@ -194,6 +194,7 @@ TEST(FirstPairScene, GivenNormalsAreTheScenesOwn)
     std::vector<float> wrong = s->normals;
     wrong.pop_back();
     EXPECT_THROW(RayScene(s->xyz, s->tris, wrong), InputError);
+    EXPECT_THROW(sceneOfTriangles(s->xyz, wrong, s->tris), InputError);
 }
 
 TEST(FirstPairScene, CullsRejectBadInput)
