@@ -135,7 +135,7 @@ public:
 
     /// Work that should not compete with the first pair (the mesh checks made behind, the
     /// fsyncs, renames and records of the write-behind) waits here until the frames step has
-    /// announced it, or is reused from the cache, or the stage graph has ended (frames not run
+    /// announced it and built the whole scene after it, or is reused from the cache, or the stage graph has ended (frames not run
     /// or failed): runPipeline opens the gate then, before it joins the write-behind.
     void waitForFirstPair() { mFirstPairGate.wait(); }
     void openFirstPairGate() { std::call_once(mGateOnce, [this] { mFirstPair.set_value(); }); }

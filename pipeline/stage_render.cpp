@@ -589,11 +589,13 @@ json runFrames(StudyRun& run, Progress* progress)
     const double firstPairSinceRunStart = secondsSince(run.start);
     if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
     crashPoint("frames:first-pair");
-    run.openFirstPairGate();
 
+    // The whole scene, before the work that waited for the first pair (the mesh checks, the
+    // write-behind's fsyncs) starts: the BVH build's temporaries and theirs would add up.
     const auto tInputs = Clock::now();
     const RenderInputs& in = run.renderInputs();
     const double inputsSeconds = secondsSince(tInputs);
+    run.openFirstPairGate();
     const RayScene& scene = *in.scene;
     const Centerline& cl = *in.centerline;
     const FlyoverSetup s = flyoverSetup(rp, cl);
