@@ -73,7 +73,8 @@ struct Smoothing {
     long reach() const { return window + (gaussian ? half : 0); }
 
     /// R(i) from need[j - first] for every j within reach of i.
-    double radiusAt(const std::vector<double>& need, std::size_t first, std::size_t i, const Centerline& centerline) const
+    double radiusAt(const std::vector<double>& need, std::size_t first, std::size_t i,
+                    const Centerline& centerline) const
     {
         const std::size_t n = centerline.points.size();
         auto widened = [&](std::size_t j) {
@@ -117,7 +118,8 @@ std::vector<uint32_t> gather(const std::vector<uint32_t>& triangleIndices, const
     std::vector<uint32_t> out;
     out.reserve(3 * count);
     for (std::size_t f = 0; f < keep.size(); ++f)
-        if (keep[f]) out.insert(out.end(), triangleIndices.begin() + long(3 * f), triangleIndices.begin() + long(3 * f + 3));
+        if (keep[f])
+            out.insert(out.end(), triangleIndices.begin() + long(3 * f), triangleIndices.begin() + long(3 * f + 3));
     return out;
 }
 

@@ -154,7 +154,10 @@ std::vector<float> normalsOf(const std::vector<float>& xyz, const std::vector<ui
     using Vertex = RayScene::Impl::Vertex;
     const std::size_t nv = xyz.size() / 3;
     const auto triangles = uint32_t(indices.size() / 3);
-    auto at = [&](uint32_t i) { return Vertex{xyz[3 * std::size_t(i)], xyz[3 * std::size_t(i) + 1], xyz[3 * std::size_t(i) + 2]}; };
+    auto at = [&](uint32_t i) {
+        const float* p = &xyz[3 * std::size_t(i)];
+        return Vertex{p[0], p[1], p[2]};
+    };
     std::vector<Vertex> faceNormals(triangles);
     tbb::parallel_for(tbb::blocked_range<uint32_t>(0, triangles, 8192), [&](const auto& range) {
         for (uint32_t f = range.begin(); f != range.end(); ++f) {
@@ -283,7 +286,8 @@ void RayScene::build(std::vector<float> verticesXyz, std::vector<uint32_t> trian
     int flags = RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION;
     if (options.robust) flags |= RTC_SCENE_FLAG_ROBUST;
     rtcSetSceneFlags(im.scene, RTCSceneFlags(flags));
-    rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_MEDIUM);
+    const RTCBuildQuality quality = options.fastBuild ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM;
+    rtcSetSceneBuildQuality(im.scene, quality);
     im.throwIfError("scene setup");
 
     // Buffers we own and share with Embree (they live as long as the scene); one padding vertex.
@@ -314,7 +318,7 @@ void RayScene::build(std::vector<float> verticesXyz, std::vector<uint32_t> trian
     if (im.triangles > 0) {
         RTCGeometry geom = rtcNewGeometry(im.device, RTC_GEOMETRY_TYPE_TRIANGLE);
         im.throwIfError("rtcNewGeometry");
-        rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_MEDIUM);
+        rtcSetGeometryBuildQuality(geom, quality);
         // itemCount excludes the padding vertex; it is only there to be readable.
         rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, im.vertices.data(),
                                    0, sizeof(Impl::Vertex), nv);

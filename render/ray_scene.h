@@ -27,6 +27,9 @@ struct SceneOptions {
     /// slip between triangles (a leak shows as a background speckle under OST). Costs about
     /// 10% of tracing speed (bench/render_bench measures it); keep it on for images.
     bool robust = true;
+    /// Embree's LOW build quality (a Morton BVH) instead of MEDIUM: faster to build, slower to
+    /// trace; for a scene that few rays will meet (the first pair's). The hits are the same.
+    bool fastBuild = false;
 };
 
 /// The arrays RayScene's second constructor takes, from a mesh: x, y, z per vertex and three
