@@ -477,8 +477,7 @@ struct FirstPairFromSubset {
     std::array<Camera, 2> cameras;
     double frameRadiusMm = 0;
     std::size_t radiusTriangles = 0, pairTriangles = 0, surfaceTriangles = 0;
-    double surfaceSeconds = 0, radiusSceneSeconds = 0, radiusSeconds = 0,
-           pairSceneSeconds = 0;
+    double surfaceSeconds = 0, radiusSceneSeconds = 0, radiusSeconds = 0, pairSceneSeconds = 0;
 };
 
 FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const RenderOptions& ro, std::size_t index,
