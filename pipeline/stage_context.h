@@ -37,6 +37,18 @@ class SpeculativeSegmentation;
 struct PartAnalysis;
 struct PartSurface;
 
+/// The surface as the render steps' scenes take it: flat arrays (x, y, z per vertex, three
+/// vertex indices per face) and the smooth-shading normals of the whole surface, from which the
+/// first pair's scenes of some of its triangles and then the scene of all of them are built.
+struct SurfaceArrays {
+    std::vector<float> xyz;
+    std::vector<uint32_t> triangles;
+    std::vector<float> normals;
+    double readSurfaceSeconds = 0;  ///< reading surface.ply (0 with the mesh in memory)
+    double prepareSeconds = 0;      ///< the arrays from the mesh (or file) and the normals
+    bool begunByMeshStage = false;  ///< prepared beside the mesh stage (StudyRun::beginSurfaceArrays)
+};
+
 /// What every render step renders from: the Embree scene of the surface, the centerline and
 /// the framed half-width R(p) of every centerline point for the run's fly-over cameras. Built
 /// once per run by whichever render step asks first; the others reuse it.
@@ -44,10 +56,10 @@ struct RenderInputs {
     std::unique_ptr<RayScene> scene;
     const Centerline* centerline = nullptr;
     std::vector<double> frameRadii;
-    double readSurfaceSeconds = 0, buildSceneSeconds = 0, readCenterlineSeconds = 0, frameRadiiSeconds = 0;
-    /// How long the scene took to build beside the mesh stage (StudyRun::beginScene), 0 when
-    /// it was built here (buildSceneSeconds is then the wait for it).
-    double beganSceneSeconds = 0;
+    double readSurfaceSeconds = 0, prepareSurfaceSeconds = 0, buildSceneSeconds = 0, readCenterlineSeconds = 0,
+           frameRadiiSeconds = 0;
+    /// Whether the surface's arrays were prepared beside the mesh stage (beginSurfaceArrays).
+    bool surfaceBegunByMeshStage = false;
     ~RenderInputs();
 };
 
@@ -75,7 +87,7 @@ struct StudyState {
     /// beside the contact cut.
     bool centerlineWanted = false;
     /// Whether this run computes a render step: the mesh stage then begins the render scene
-    /// (StudyRun::beginScene) as soon as its mesh is in memory.
+    /// (StudyRun::beginSurfaceArrays) as soon as its mesh is in memory.
     bool renderWanted = false;
     /// Whether this run computes the segment stage from the CT: the ingest stage then begins
     /// segmentLumen beside its writing of ct.vdb (speculative_mesh.h).
@@ -91,7 +103,7 @@ struct StudyState {
 class StudyRun {
 public:
     explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir), start(std::chrono::steady_clock::now()) {}
-    /// Waits for a scene begun by beginScene() (stage_render.cpp: the scene's type is known there).
+    /// Waits for the arrays begun by beginSurfaceArrays() (defined in stage_render.cpp).
     ~StudyRun();
 
     std::string path(const std::string& name) const { return (dir / name).string(); }
@@ -102,18 +114,28 @@ public:
 
     /// The scene, centerline and frame radii of the render steps: from memory when mesh and
     /// centerline ran in this run, else from surface.ply and centerline.json. Built once, by
-    /// the first step that asks (the others wait, or help build it: no TBB deadlock).
+    /// the first step that asks (the others wait, or help build it: no TBB deadlock). Takes the
+    /// arrays of surfaceArrays() (which is empty afterwards).
     const RenderInputs& renderInputs();
+    /// Whether renderInputs() has been built.
+    bool renderInputsBuilt() const { return bool(mRender); }
 
-    /// Begins building the render scene from state.mesh on a thread of its own (the mesh
-    /// stage calls it once its mesh is in memory, before writing and hashing surface.ply); the
-    /// render steps' renderInputs() takes it. Nobody changes state.mesh afterwards. Building
-    /// the scene renders nothing: a frames step reused from the cache leaves it unused.
-    void beginScene();
+    /// The surface's arrays and normals (once): the ones begun by beginSurfaceArrays(), or from
+    /// the mesh in memory, or from surface.ply. The frames step builds the first pair's scenes
+    /// from them before renderInputs() takes them. Not thread-safe against renderInputs().
+    SurfaceArrays& surfaceArrays();
+    /// The centerline of the render steps: from memory, else read from centerline.json (once).
+    const Centerline& renderCenterline();
+
+    /// Begins preparing surfaceArrays() from state.mesh on a thread of its own (the mesh stage
+    /// calls it once its mesh is in memory, before writing and hashing surface.ply). Nobody
+    /// changes state.mesh afterwards. It renders nothing: a frames step reused from the cache
+    /// builds the scene from it.
+    void beginSurfaceArrays();
 
     /// Work that should not compete with the first pair (the mesh checks made behind, the
     /// fsyncs, renames and records of the write-behind) waits here until the frames step has
-    /// announced it, or is reused from the cache, or the stage graph has ended (frames not run
+    /// announced it and built the whole scene after it, or is reused from the cache, or the stage graph has ended (frames not run
     /// or failed): runPipeline opens the gate then, before it joins the write-behind.
     void waitForFirstPair() { mFirstPairGate.wait(); }
     void openFirstPairGate() { std::call_once(mGateOnce, [this] { mFirstPair.set_value(); }); }
@@ -130,9 +152,12 @@ private:
     std::mutex mLoadMutex;
     tbb::collaborative_once_flag mRenderOnce;
     std::unique_ptr<RenderInputs> mRender;
-    /// The scene begun by beginScene(), and how long it took to build (seconds). Last: its
-    /// destructor waits for the build, which reads state.mesh.
-    std::future<std::pair<std::unique_ptr<RayScene>, double>> mScene;
+    std::mutex mSurfaceMutex;
+    std::unique_ptr<SurfaceArrays> mSurface;
+    double mReadCenterlineSeconds = 0;
+    /// The arrays begun by beginSurfaceArrays(). Last: its destructor waits for the work, which
+    /// reads state.mesh.
+    std::future<std::unique_ptr<SurfaceArrays>> mSurfaceBegun;
 };
 
 inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }

@@ -114,9 +114,9 @@ json runMesh(StudyRun& run, Progress* progress)
     if (speculative) reportProgress(progress, 0.0, "waiting for the mesh made beside the contact cut");
     run.state.mesh = speculative ? speculative->take(r)
                                  : makeLumenSurface(*sdf, params, &r, progress, true, behind != nullptr);
-    // The render scene (the first pair's) from the mesh in memory at once, beside the writing
+    // The render scenes' arrays and normals from the mesh in memory at once, beside the writing
     // and hashing of surface.ply and the frames step's cache lookup (not with --threads 1).
-    if (run.state.renderWanted && threadsThatMayRun() > 1) run.beginScene();
+    if (run.state.renderWanted && threadsThatMayRun() > 1) run.beginSurfaceArrays();
     writeMesh(run.path("surface.ply"), *run.state.mesh);
     const bool besideCut = bool(speculative);
     if (r.finalChecksPending && !behind) checkLumenSurface(*run.state.mesh, *sdf, r);

@@ -31,6 +31,7 @@
 #include <tbb/parallel_pipeline.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -45,6 +46,8 @@
 #include <functional>
 #include <future>
 #include <mutex>
+#include <optional>
+#include <sstream>
 #include <condition_variable>
 #include <thread>
 #include <memory>
@@ -378,49 +381,84 @@ RenderInputs::~RenderInputs() = default;
 
 StudyRun::~StudyRun() = default;
 
-void StudyRun::beginScene()
+namespace {
+
+std::unique_ptr<SurfaceArrays> arraysOfMesh(const TriMesh& mesh)
 {
-    if (mScene.valid() || !state.mesh) return;
+    const auto t0 = Clock::now();
+    auto arrays = std::make_unique<SurfaceArrays>();
+    triMeshArrays(mesh, arrays->xyz, arrays->triangles);
+    arrays->normals = smoothVertexNormals(arrays->xyz, arrays->triangles);
+    arrays->prepareSeconds = secondsSince(t0);
+    return arrays;
+}
+
+} // namespace
+
+void StudyRun::beginSurfaceArrays()
+{
+    if (mSurfaceBegun.valid() || !state.mesh) return;
     const TriMesh* mesh = &*state.mesh;
-    mScene = std::async(std::launch::async, [mesh] {
-        const auto t0 = Clock::now();
-        auto scene = std::make_unique<RayScene>(*mesh);
-        return std::make_pair(std::move(scene), secondsSince(t0));
+    mSurfaceBegun = std::async(std::launch::async, [mesh] {
+        auto arrays = arraysOfMesh(*mesh);
+        arrays->begunByMeshStage = true;
+        return arrays;
     });
+}
+
+SurfaceArrays& StudyRun::surfaceArrays()
+{
+    const std::lock_guard<std::mutex> lock(mSurfaceMutex);
+    if (mSurface) return *mSurface;
+    // The arrays begun by the mesh stage, or straight from the mesh in memory, or from
+    // surface.ply's arrays (no topology).
+    if (mSurfaceBegun.valid()) {
+        mSurface = mSurfaceBegun.get();  // rethrows what preparing them threw
+    } else if (state.mesh) {
+        mSurface = arraysOfMesh(*state.mesh);
+    } else {
+        const auto t0 = Clock::now();
+        auto arrays = std::make_unique<SurfaceArrays>();
+        if (!readPlainPly(path("surface.ply"), arrays->xyz, arrays->triangles)) {
+            state.mesh = readMesh(path("surface.ply"));
+            triMeshArrays(*state.mesh, arrays->xyz, arrays->triangles);
+        }
+        arrays->readSurfaceSeconds = secondsSince(t0);
+        const auto t1 = Clock::now();
+        arrays->normals = smoothVertexNormals(arrays->xyz, arrays->triangles);
+        arrays->prepareSeconds = secondsSince(t1);
+        mSurface = std::move(arrays);
+    }
+    return *mSurface;
+}
+
+const Centerline& StudyRun::renderCenterline()
+{
+    const std::lock_guard<std::mutex> lock(mSurfaceMutex);
+    if (!state.centerline) {
+        const auto t0 = Clock::now();
+        state.centerline = centerlineFromJson(readJson(path("centerline.json")), path("centerline.json"));
+        mReadCenterlineSeconds = secondsSince(t0);
+    }
+    if (state.centerline->points.empty()) throw InputError(path("centerline.json") + ": the centerline is empty");
+    return *state.centerline;
 }
 
 const RenderInputs& StudyRun::renderInputs()
 {
     tbb::collaborative_call_once(mRenderOnce, [this] {
         auto in = std::make_unique<RenderInputs>();
-        const auto t0 = Clock::now();
-        // The scene begun by the mesh stage, or straight from the mesh in memory, or from
-        // surface.ply's arrays (no topology).
-        if (mScene.valid()) {
-            auto [scene, seconds] = mScene.get();  // rethrows what building it threw
-            in->scene = std::move(scene);
-            in->beganSceneSeconds = seconds;
-        } else if (state.mesh) {
-            in->scene = std::make_unique<RayScene>(*state.mesh);
-        } else {
-            std::vector<float> xyz;
-            std::vector<uint32_t> tris;
-            if (readPlainPly(path("surface.ply"), xyz, tris)) {
-                in->readSurfaceSeconds = secondsSince(t0);
-                in->scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
-            } else {
-                state.mesh = readMesh(path("surface.ply"));
-                in->readSurfaceSeconds = secondsSince(t0);
-                in->scene = std::make_unique<RayScene>(*state.mesh);
-            }
-        }
-        in->buildSceneSeconds = secondsSince(t0) - in->readSurfaceSeconds;
-        const auto tCenterline = Clock::now();
-        if (!state.centerline)
-            state.centerline = centerlineFromJson(readJson(path("centerline.json")), path("centerline.json"));
-        if (state.centerline->points.empty()) throw InputError(path("centerline.json") + ": the centerline is empty");
-        in->centerline = &*state.centerline;
-        in->readCenterlineSeconds = secondsSince(tCenterline);
+        SurfaceArrays& arrays = surfaceArrays();
+        in->readSurfaceSeconds = arrays.readSurfaceSeconds;
+        in->prepareSurfaceSeconds = arrays.prepareSeconds;
+        in->surfaceBegunByMeshStage = arrays.begunByMeshStage;
+        const auto tScene = Clock::now();
+        // The normals given are those the scene would compute (the same function): the same bits.
+        in->scene = std::make_unique<RayScene>(std::move(arrays.xyz), std::move(arrays.triangles), arrays.normals);
+        arrays = SurfaceArrays{};
+        in->buildSceneSeconds = secondsSince(tScene);
+        in->centerline = &renderCenterline();
+        in->readCenterlineSeconds = mReadCenterlineSeconds;
         const auto tRadii = Clock::now();
         in->frameRadii = flyoverFrameRadii(*in->scene, *in->centerline, flyoverParamsOf(opt.params.render));
         in->frameRadiiSeconds = secondsSince(tRadii);
@@ -429,36 +467,151 @@ const RenderInputs& StudyRun::renderInputs()
     return *mRender;
 }
 
+namespace {
+
+/// The first fly-over pair rendered from scenes of only the triangles it can meet (the full
+/// scene of the other pairs is built after it): R(p) of its centerline point from a scene of
+/// the triangles its fan rays (and those of its neighbours within reach) can hit, the same
+/// double as flyoverFrameRadii gives; then its two cameras' frustum cull.
+struct FirstPairFromSubset {
+    std::array<Camera, 2> cameras;
+    double frameRadiusMm = 0;
+    std::size_t radiusTriangles = 0, pairTriangles = 0, surfaceTriangles = 0;
+    double surfaceSeconds = 0, radiusSceneSeconds = 0, radiusSeconds = 0, pairSceneSeconds = 0;
+};
+
+FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const RenderOptions& ro, std::size_t index,
+                                   std::unique_ptr<RayScene>& pairScene)
+{
+    FirstPairFromSubset out;
+    auto t = Clock::now();
+    const SurfaceArrays& arrays = run.surfaceArrays();
+    out.surfaceTriangles = arrays.triangles.size() / 3;
+    out.surfaceSeconds = secondsSince(t);
+    const Centerline& cl = run.renderCenterline();
+    t = Clock::now();
+    std::vector<uint32_t> radiusTris = frameRadiusTriangles(arrays.xyz, arrays.triangles, cl, fp, index);
+    out.radiusTriangles = radiusTris.size() / 3;
+    // Scenes for a few thousand rays: a fast (Morton) BVH build, the same hits (tested).
+    SceneOptions fast;
+    fast.fastBuild = true;
+    const auto radiusScene = sceneOfTriangles(arrays.xyz, arrays.normals, radiusTris, fast);
+    out.radiusSceneSeconds = secondsSince(t);
+    t = Clock::now();
+    out.frameRadiusMm = flyoverFrameRadiusAt(*radiusScene, cl, fp, index);
+    out.radiusSeconds = secondsSince(t);
+    t = Clock::now();
+    out.cameras = flyoverCameras(cl.points[index], fp, out.frameRadiusMm);
+    std::vector<uint32_t> pairTris = frustumTriangles(arrays.xyz, arrays.triangles, {out.cameras[0], out.cameras[1]},
+                                                      ro.widthPx, ro.heightPx);
+    out.pairTriangles = pairTris.size() / 3;
+    pairScene = sceneOfTriangles(arrays.xyz, arrays.normals, pairTris, fast);
+    out.pairSceneSeconds = secondsSince(t);
+    return out;
+}
+
+/// Where the first pair's seconds went: with `first`, the wait for the surface's arrays (begun
+/// by the mesh stage), the frame radius's scene and the pair's cull and scene; else the whole
+/// scene and every frame radius (the frames step found them built).
+json firstPairBreakdown(const std::optional<FirstPairFromSubset>& first, const RenderInputs& in,
+                        double renderSeconds, double pngSeconds)
+{
+    if (first)
+        return json{{"wait_for_surface", first->surfaceSeconds},
+                    {"read_surface", in.readSurfaceSeconds},
+                    {"prepare_surface", in.prepareSurfaceSeconds},
+                    {"read_centerline", in.readCenterlineSeconds},
+                    {"frame_radius_scene", first->radiusSceneSeconds},
+                    {"frame_radius", first->radiusSeconds},
+                    {"pair_scene", first->pairSceneSeconds},
+                    {"render_pair", renderSeconds},
+                    {"write_png", pngSeconds}};
+    return json{{"read_surface", in.readSurfaceSeconds},
+                {"prepare_surface", in.prepareSurfaceSeconds},
+                {"build_scene", in.buildSceneSeconds},
+                {"read_centerline", in.readCenterlineSeconds},
+                {"frame_radii", in.frameRadiiSeconds},
+                {"render_pair", renderSeconds},
+                {"write_png", pngSeconds}};
+}
+
+/// Which scene the first pair was rendered from, and how many triangles each kept.
+json firstPairSceneJson(const std::optional<FirstPairFromSubset>& first)
+{
+    if (!first) return json{{"scene", "whole surface"}};
+    return json{{"scene", "frustum cull of the whole surface"},
+                {"surface_triangles", first->surfaceTriangles},
+                {"pair_triangles", first->pairTriangles},
+                {"frame_radius_triangles", first->radiusTriangles},
+                {"frame_radius_mm", first->frameRadiusMm}};
+}
+
+} // namespace
+
 json runFrames(StudyRun& run, Progress* progress)
 {
     const auto tStart = Clock::now();
     const RenderParams& rp = run.opt.params.render;
-    const RenderInputs& in = run.renderInputs();
-    const double inputsSeconds = secondsSince(tStart);
-    const RayScene& scene = *in.scene;
-    const Centerline& cl = *in.centerline;
-    const FlyoverSetup s = flyoverSetup(rp, cl);
-    const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
-
     StagedFolder frames(run.dir, "frames");
-    std::vector<json> poses(indices.size());
     double firstRenderSeconds = 0, firstPngSeconds = 0;
     // Pair images reused from pair to pair (no allocation per pair), each lent to one pair at a
     // time: a thread waiting for a pair's tiles may take up another pair meanwhile (ObjectPool).
     ObjectPool<RgbImage> buffers([] { return RgbImage{}; });
-    auto renderFramePair = [&](std::size_t f) {
+    auto renderFramePair = [&](const RayScene& scene, std::size_t f, const std::array<Camera, 2>& cams) {
         const auto t0 = Clock::now();
-        const CenterlinePoint& p = cl.points[indices[f]];
-        const auto cams = flyoverCameras(p, s.fp, in.frameRadii[indices[f]]);
         const auto lease = buffers.take();
         RgbImage& pair = *lease;
-        renderPair(scene, cams[0], cams[1], s.ro, pair);
+        renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), pair);
         const auto t1 = Clock::now();
         writePng(frames.path(pairName(f)), pair);
         if (f == 0) {
             firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
             firstPngSeconds = secondsSince(t1);
         }
+    };
+
+    // The first pair before anything else, in the study's frames/ at once, announced: when the
+    // scene of the whole surface is not built yet, from scenes of only the triangles its rays
+    // can meet (the same pixels: tested), the whole scene after it.
+    std::optional<FirstPairFromSubset> first;
+    if (!run.renderInputsBuilt()) {
+        const Centerline& cl = run.renderCenterline();
+        const std::size_t index0 = pathIndices(cl, rp.frameStepMm).front();
+        std::unique_ptr<RayScene> pairScene;
+        first = firstPairScene(run, flyoverParamsOf(rp), frameOptionsOf(rp), index0, pairScene);
+        renderFramePair(*pairScene, 0, first->cameras);
+    } else {
+        const RenderInputs& in = run.renderInputs();
+        const std::size_t index0 = pathIndices(*in.centerline, rp.frameStepMm).front();
+        renderFramePair(*in.scene, 0,
+                        flyoverCameras(in.centerline->points[index0], flyoverParamsOf(rp), in.frameRadii[index0]));
+    }
+    publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
+    const double firstPairSeconds = secondsSince(tStart);
+    const double firstPairSinceRunStart = secondsSince(run.start);
+    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+    crashPoint("frames:first-pair");
+
+    // The whole scene, before the work that waited for the first pair (the mesh checks, the
+    // write-behind's fsyncs) starts: the BVH build's temporaries and theirs would add up.
+    const auto tInputs = Clock::now();
+    const RenderInputs& in = run.renderInputs();
+    const double inputsSeconds = secondsSince(tInputs);
+    run.openFirstPairGate();
+    const RayScene& scene = *in.scene;
+    const Centerline& cl = *in.centerline;
+    const FlyoverSetup s = flyoverSetup(rp, cl);
+    const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
+    if (first && !(first->frameRadiusMm == in.frameRadii[indices[0]])) {
+        std::ostringstream msg;
+        msg << "frames: the first pair's frame radius from its scene of " << first->radiusTriangles
+            << " triangles is " << first->frameRadiusMm << " mm, the whole surface's " << in.frameRadii[indices[0]]
+            << " mm (they must be the same double)";
+        throw std::logic_error(msg.str());
+    }
+    std::vector<json> poses(indices.size());
+    auto poseOf = [&](std::size_t f, const std::array<Camera, 2>& cams) {
+        const CenterlinePoint& p = cl.points[indices[f]];
         poses[f] = json{{"frame", f},
                         {"file", pairName(f)},
                         {"centerline_index", indices[f]},
@@ -468,19 +621,14 @@ json runFrames(StudyRun& run, Progress* progress)
                         {"frame_radius_mm", in.frameRadii[indices[f]]},
                         {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
     };
-    // The first pair before anything else, in the study's frames/ at once, announced.
-    renderFramePair(0);
-    publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
-    const double firstPairSeconds = secondsSince(tStart);
-    const double firstPairSinceRunStart = secondsSince(run.start);
-    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
-    crashPoint("frames:first-pair");
-    run.openFirstPairGate();
+    poseOf(0, flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]));
 
     const auto tRest = Clock::now();
     std::atomic<std::size_t> done{1};
     tbb::parallel_for(std::size_t(1), indices.size(), [&](std::size_t f) {
-        renderFramePair(f);
+        const auto cams = flyoverCameras(cl.points[indices[f]], s.fp, in.frameRadii[indices[f]]);
+        renderFramePair(scene, f, cams);
+        poseOf(f, cams);
         reportProgress(progress, double(++done) / double(indices.size()), "fly-over frame pairs");
     });
     writeJson(frames.path("poses.json"),
@@ -502,15 +650,13 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"triangles", scene.triangleCount()},
                 {"first_pair_seconds", firstPairSeconds},
                 {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
-                {"first_pair_breakdown_seconds",
-                 {{"read_surface", in.readSurfaceSeconds},
-                  {"build_scene", in.buildSceneSeconds},
-                  {"scene_begun_by_mesh_stage", in.beganSceneSeconds},
-                  {"read_centerline", in.readCenterlineSeconds},
-                  {"frame_radii", in.frameRadiiSeconds},
-                  {"wait_for_inputs", inputsSeconds},
-                  {"render_pair", firstRenderSeconds},
-                  {"write_png", firstPngSeconds}}},
+                {"first_pair_breakdown_seconds", firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
+                {"first_pair_scene", firstPairSceneJson(first)},
+                {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
+                {"whole_scene_seconds",
+                 {{"wait_for_inputs", inputsSeconds},
+                  {"build_scene", first ? in.buildSceneSeconds : 0.0},
+                  {"frame_radii", first ? in.frameRadiiSeconds : 0.0}}},
                 {"other_pairs_seconds", secondsSince(tRest)}};
 }
 

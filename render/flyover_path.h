@@ -22,6 +22,8 @@
 #include "render/ray_scene.h"
 #include "volume/centerline_types.h"
 
+#include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace flyover {
@@ -37,5 +39,43 @@ struct FrameRadiusOptions {
 /// @throw ParameterError for a fov outside (0, 180) or bad options.
 std::vector<double> flyoverFrameRadii(const RayScene& scene, const Centerline& centerline,
                                       const FlyoverParams& params, const FrameRadiusOptions& options = {});
+
+/// R(p) of the one centerline point `index`: the very double flyoverFrameRadii()[index] gives
+/// (the same rays, maximum and Gaussian, summed in the same order), from the points within
+/// frameRadiusReach() only, so that `scene` need hold only frameRadiusTriangles().
+/// @throw ParameterError as flyoverFrameRadii, or for an index past the centerline.
+double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
+                            std::size_t index, const FrameRadiusOptions& options = {});
+
+/// The first and last centerline index (inclusive) whose fan of rays R(index) depends on: the
+/// running maximum's window plus the Gaussian's reach (3 sigma) on either side.
+/// @throw ParameterError for an index past the centerline.
+std::pair<std::size_t, std::size_t> frameRadiusReach(const Centerline& centerline, std::size_t index,
+                                                     const FrameRadiusOptions& options = {});
+
+/// The triangles (three vertex indices each, as in `triangleIndices`, in their order) that a ray
+/// of flyoverFrameRadiusAt(index) can meet: those that reach within `marginMm` of the cross-
+/// section plane of a point within frameRadiusReach() and of the ball its rays span (radius
+/// 4 * cap). Conservative: a triangle is dropped only when all three vertices lie beyond the
+/// plane by more than the margin on one side, or when it lies farther from the point than the
+/// rays go plus the margin. The margin must cover the rays' float rounding (about 1e-4 mm); a
+/// negative one drops triangles that cross the planes (tests show that R then changes).
+std::vector<uint32_t> frameRadiusTriangles(const std::vector<float>& verticesXyz,
+                                           const std::vector<uint32_t>& triangleIndices,
+                                           const Centerline& centerline, const FlyoverParams& params,
+                                           std::size_t index, const FrameRadiusOptions& options = {},
+                                           double marginMm = 0.05);
+
+/// The triangles (three vertex indices each, in their order) that a primary ray of one of the
+/// `cameras` (widthPx x heightPx images, any sub-pixel offset, rays from the near plane on) can
+/// meet: a frustum cull. A triangle is dropped only when, for every camera, all three vertices
+/// lie outside one of the four side planes or the near plane, each plane moved outwards by
+/// `marginMm` (and the sides widened by 0.1% of their slope): the margin covers the rays'
+/// float rounding; a negative margin moves the planes inwards (tests show that it then drops
+/// what a camera sees).
+std::vector<uint32_t> frustumTriangles(const std::vector<float>& verticesXyz,
+                                       const std::vector<uint32_t>& triangleIndices,
+                                       const std::vector<Camera>& cameras, int widthPx, int heightPx,
+                                       double marginMm = 0.25);
 
 } // namespace flyover

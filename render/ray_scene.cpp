@@ -128,19 +128,10 @@ std::vector<uint32_t> meshTriangles(const TriMesh& mesh)
     return tris;
 }
 
-} // namespace
-
-RayScene::RayScene(const TriMesh& mesh, const SceneOptions& options)
-    : RayScene(meshVertices(mesh), meshTriangles(mesh), options)
+/// Throws InputError unless the arrays come in threes, fit 32-bit indices and every index names
+/// a vertex.
+void checkArrays(const std::vector<float>& verticesXyz, const std::vector<uint32_t>& triangleIndices)
 {
-}
-
-RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices, const SceneOptions& options)
-    : mImpl(std::make_unique<Impl>())
-{
-    Impl& im = *mImpl;
-    const DenormalsFlushed flushed;
-
     if (verticesXyz.size() % 3 != 0 || triangleIndices.size() % 3 != 0)
         throw InputError("RayScene: vertex coordinates and triangle indices must come in threes");
     const std::size_t nv = verticesXyz.size() / 3;
@@ -153,6 +144,130 @@ RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangl
             msg << "RayScene: triangle vertex index " << i << " out of range (" << nv << " vertices)";
             throw InputError(msg.str());
         }
+}
+
+/// Vertex normals: sum of the unnormalised face normals (twice the face area times the unit
+/// normal) of the incident faces, then normalised; the orientation is the faces' own. Face
+/// normals in parallel; the scatter to vertices in order (deterministic sums). Arrays checked.
+std::vector<float> normalsOf(const std::vector<float>& xyz, const std::vector<uint32_t>& indices)
+{
+    using Vertex = RayScene::Impl::Vertex;
+    const std::size_t nv = xyz.size() / 3;
+    const auto triangles = uint32_t(indices.size() / 3);
+    auto at = [&](uint32_t i) {
+        const float* p = &xyz[3 * std::size_t(i)];
+        return Vertex{p[0], p[1], p[2]};
+    };
+    std::vector<Vertex> faceNormals(triangles);
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, triangles, 8192), [&](const auto& range) {
+        for (uint32_t f = range.begin(); f != range.end(); ++f) {
+            const uint32_t* t = &indices[3 * std::size_t(f)];
+            const Vertex a = at(t[0]), b = at(t[1]), c = at(t[2]);
+            const float ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+            const float vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
+            faceNormals[f] = {uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};
+        }
+    });
+    std::vector<float> normals(3 * nv, 0.f);
+    for (uint32_t f = 0; f < triangles; ++f) {
+        const Vertex& n = faceNormals[f];
+        for (int k = 0; k < 3; ++k) {
+            float* acc = &normals[3 * std::size_t(indices[3 * std::size_t(f) + std::size_t(k)])];
+            acc[0] += n.x;
+            acc[1] += n.y;
+            acc[2] += n.z;
+        }
+    }
+    for (std::size_t i = 0; i < nv; ++i) {
+        float* n = &normals[3 * i];
+        const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (len > 0.f) {
+            n[0] /= len;
+            n[1] /= len;
+            n[2] /= len;
+        } else {
+            n[0] = n[1] = n[2] = 0.f;
+        }
+    }
+    return normals;
+}
+
+} // namespace
+
+void triMeshArrays(const TriMesh& mesh, std::vector<float>& verticesXyz, std::vector<uint32_t>& triangleIndices)
+{
+    triangleIndices = meshTriangles(mesh);
+    verticesXyz = meshVertices(mesh);
+}
+
+std::vector<float> smoothVertexNormals(const std::vector<float>& verticesXyz,
+                                       const std::vector<uint32_t>& triangleIndices)
+{
+    checkArrays(verticesXyz, triangleIndices);
+    const DenormalsFlushed flushed;  // as in the scene's constructor: the same bits
+    return normalsOf(verticesXyz, triangleIndices);
+}
+
+std::unique_ptr<RayScene> sceneOfTriangles(const std::vector<float>& verticesXyz,
+                                           const std::vector<float>& vertexNormalsXyz,
+                                           const std::vector<uint32_t>& triangleIndices, const SceneOptions& options)
+{
+    checkArrays(verticesXyz, triangleIndices);
+    if (vertexNormalsXyz.size() != verticesXyz.size()) {
+        std::ostringstream msg;
+        msg << "RayScene: " << vertexNormalsXyz.size() << " vertex normal coordinates for " << verticesXyz.size()
+            << " vertex coordinates";
+        throw InputError(msg.str());
+    }
+    constexpr uint32_t UNUSED = std::numeric_limits<uint32_t>::max();
+    std::vector<uint32_t> newIndex(verticesXyz.size() / 3, UNUSED), indices(triangleIndices.size());
+    std::vector<float> xyz, normals;
+    for (std::size_t k = 0; k < triangleIndices.size(); ++k) {
+        const uint32_t old = triangleIndices[k];
+        if (newIndex[old] == UNUSED) {
+            newIndex[old] = uint32_t(xyz.size() / 3);
+            xyz.insert(xyz.end(), verticesXyz.begin() + long(3 * std::size_t(old)),
+                       verticesXyz.begin() + long(3 * std::size_t(old) + 3));
+            normals.insert(normals.end(), vertexNormalsXyz.begin() + long(3 * std::size_t(old)),
+                           vertexNormalsXyz.begin() + long(3 * std::size_t(old) + 3));
+        }
+        indices[k] = newIndex[old];
+    }
+    return std::make_unique<RayScene>(std::move(xyz), std::move(indices), normals, options);
+}
+
+RayScene::RayScene(const TriMesh& mesh, const SceneOptions& options)
+    : RayScene(meshVertices(mesh), meshTriangles(mesh), options)
+{
+}
+
+RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices, const SceneOptions& options)
+    : mImpl(std::make_unique<Impl>())
+{
+    build(std::move(verticesXyz), std::move(triangleIndices), nullptr, options);
+}
+
+RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices,
+                   const std::vector<float>& vertexNormalsXyz, const SceneOptions& options)
+    : mImpl(std::make_unique<Impl>())
+{
+    if (vertexNormalsXyz.size() != verticesXyz.size()) {
+        std::ostringstream msg;
+        msg << "RayScene: " << vertexNormalsXyz.size() << " vertex normal coordinates for "
+            << verticesXyz.size() << " vertex coordinates";
+        throw InputError(msg.str());
+    }
+    build(std::move(verticesXyz), std::move(triangleIndices), &vertexNormalsXyz, options);
+}
+
+void RayScene::build(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices,
+                     const std::vector<float>* vertexNormalsXyz, const SceneOptions& options)
+{
+    Impl& im = *mImpl;
+    const DenormalsFlushed flushed;
+
+    checkArrays(verticesXyz, triangleIndices);
+    const std::size_t nv = verticesXyz.size() / 3;
 
     im.device = rtcNewDevice(nullptr);
     if (!im.device) {
@@ -171,7 +286,8 @@ RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangl
     int flags = RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION;
     if (options.robust) flags |= RTC_SCENE_FLAG_ROBUST;
     rtcSetSceneFlags(im.scene, RTCSceneFlags(flags));
-    rtcSetSceneBuildQuality(im.scene, RTC_BUILD_QUALITY_MEDIUM);
+    const RTCBuildQuality quality = options.fastBuild ? RTC_BUILD_QUALITY_LOW : RTC_BUILD_QUALITY_MEDIUM;
+    rtcSetSceneBuildQuality(im.scene, quality);
     im.throwIfError("scene setup");
 
     // Buffers we own and share with Embree (they live as long as the scene); one padding vertex.
@@ -189,45 +305,20 @@ RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangl
     if (nv == 0) lo = hi = Vec3d{};
     im.boundsMin = lo;
     im.boundsMax = hi;
-    verticesXyz = {};
     im.indices = std::move(triangleIndices);
     im.triangles = uint32_t(im.indices.size() / 3);
 
-    // Vertex normals: sum of the unnormalised face normals (twice the face area times the unit
-    // normal) of the incident faces, then normalised; the orientation is the faces' own. Face
-    // normals in parallel; the scatter to vertices in order (deterministic sums).
-    std::vector<Impl::Vertex> faceNormals(im.triangles);
-    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, im.triangles, 8192), [&](const auto& range) {
-        for (uint32_t f = range.begin(); f != range.end(); ++f) {
-            const uint32_t* t = &im.indices[3 * std::size_t(f)];
-            const Impl::Vertex& a = im.vertices[t[0]];
-            const Impl::Vertex& b = im.vertices[t[1]];
-            const Impl::Vertex& c = im.vertices[t[2]];
-            const float ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
-            const float vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
-            faceNormals[f] = {uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};
-        }
-    });
+    // Vertex normals (normalsOf), or those given: the padding vertex's is zero.
+    const std::vector<float> computed = vertexNormalsXyz ? std::vector<float>{} : normalsOf(verticesXyz, im.indices);
+    const std::vector<float>& normals = vertexNormalsXyz ? *vertexNormalsXyz : computed;
     im.vertexNormals.assign(nv + 1, Impl::Vertex{0.f, 0.f, 0.f});
-    for (uint32_t f = 0; f < im.triangles; ++f) {
-        const Impl::Vertex& n = faceNormals[f];
-        for (int k = 0; k < 3; ++k) {
-            Impl::Vertex& acc = im.vertexNormals[im.indices[3 * std::size_t(f) + std::size_t(k)]];
-            acc.x += n.x;
-            acc.y += n.y;
-            acc.z += n.z;
-        }
-    }
-    for (std::size_t i = 0; i < nv; ++i) {
-        Impl::Vertex& n = im.vertexNormals[i];
-        const float len = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
-        n = len > 0.f ? Impl::Vertex{n.x / len, n.y / len, n.z / len} : Impl::Vertex{0.f, 0.f, 0.f};
-    }
+    for (std::size_t i = 0; i < nv; ++i) im.vertexNormals[i] = {normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]};
+    verticesXyz = {};
 
     if (im.triangles > 0) {
         RTCGeometry geom = rtcNewGeometry(im.device, RTC_GEOMETRY_TYPE_TRIANGLE);
         im.throwIfError("rtcNewGeometry");
-        rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_MEDIUM);
+        rtcSetGeometryBuildQuality(geom, quality);
         // itemCount excludes the padding vertex; it is only there to be readable.
         rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, im.vertices.data(),
                                    0, sizeof(Impl::Vertex), nv);

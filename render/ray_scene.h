@@ -27,7 +27,33 @@ struct SceneOptions {
     /// slip between triangles (a leak shows as a background speckle under OST). Costs about
     /// 10% of tracing speed (bench/render_bench measures it); keep it on for images.
     bool robust = true;
+    /// Embree's LOW build quality (a Morton BVH) instead of MEDIUM: faster to build, slower to
+    /// trace; for a scene that few rays will meet (the first pair's). The hits are the same.
+    bool fastBuild = false;
 };
+
+/// The arrays RayScene's second constructor takes, from a mesh: x, y, z per vertex and three
+/// vertex indices per face (in the order of the face-vertex circulator, as RayScene(mesh) uses).
+/// @throw InputError for deleted faces, faces that are not triangles or a mesh too large.
+void triMeshArrays(const TriMesh& mesh, std::vector<float>& verticesXyz, std::vector<uint32_t>& triangleIndices);
+
+/// The smooth-shading normals RayScene computes for its vertices (x, y, z per vertex): the sum of
+/// the unnormalised normals of the incident triangles, normalised (zero where that sum is zero).
+/// @throw InputError for an index out of range or coordinates not in threes.
+std::vector<float> smoothVertexNormals(const std::vector<float>& verticesXyz,
+                                       const std::vector<uint32_t>& triangleIndices);
+
+class RayScene;
+
+/// A scene of some of a surface's triangles (`triangleIndices`, indices into `verticesXyz`) that
+/// holds only the vertices they use and shades them with the surface's `vertexNormalsXyz`: the
+/// same hits, barycentrics and shading as the scene of the whole surface gives on them (the
+/// triangles are numbered in the order given, the vertices in the order of first use).
+/// @throw InputError as RayScene's constructors.
+std::unique_ptr<RayScene> sceneOfTriangles(const std::vector<float>& verticesXyz,
+                                           const std::vector<float>& vertexNormalsXyz,
+                                           const std::vector<uint32_t>& triangleIndices,
+                                           const SceneOptions& options = {});
 
 class RayScene {
 public:
@@ -41,6 +67,12 @@ public:
     /// as the mesh's faces): for callers that read a mesh file without building its topology.
     /// @throw InputError for an index out of range or a non-finite vertex.
     RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices, const SceneOptions& options = {});
+    /// The same with the vertex normals given (x, y, z per vertex, as smoothVertexNormals()
+    /// returns them): a scene of some of a surface's triangles (a cull) that shades exactly as
+    /// the scene of the whole surface, whose normals these are.
+    /// @throw InputError when there are not three normal coordinates per vertex.
+    RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices,
+             const std::vector<float>& vertexNormalsXyz, const SceneOptions& options = {});
     ~RayScene();
     RayScene(const RayScene&) = delete;
     RayScene& operator=(const RayScene&) = delete;
@@ -65,6 +97,10 @@ public:
     const Impl& impl() const { return *mImpl; }
 
 private:
+    /// Both array constructors: `vertexNormalsXyz` null computes the normals.
+    void build(std::vector<float> verticesXyz, std::vector<uint32_t> triangleIndices,
+               const std::vector<float>* vertexNormalsXyz, const SceneOptions& options);
+
     std::unique_ptr<Impl> mImpl;
 };
 

@@ -273,10 +273,11 @@ TEST_F(StudyTest, FirstPairIsWrittenAndAnnouncedBeforeTheOtherRenderSteps)
     EXPECT_EQ(out2.str().find("first_pair"), std::string::npos) << out2.str();
 }
 
-// The mesh stage begins the render scene from its mesh in memory as soon as it has it, beside
-// its writing and hashing of surface.ply (issue 15); the frames step takes that scene. The frames
-// are those of a scene built by the frames step itself: from the mesh with one thread (nothing
-// begun beside), from surface.ply when the mesh stage is reused.
+// The mesh stage begins the render scene's arrays and normals from its mesh in memory as soon
+// as it has it, beside its writing and hashing of surface.ply (issue 15); the frames step renders
+// the first pair from a scene of only the triangles its rays can meet, then builds the whole
+// scene. The frames (pair_0000.png first) are those of the frames step run from surface.ply
+// (the mesh stage reused) and with one thread (nothing begun beside).
 TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
 {
     auto framesReport = [](const nlohmann::json& manifest) {
@@ -286,19 +287,37 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
         return nlohmann::json();
     };
     auto begun = [&](const nlohmann::json& manifest) {
-        return framesReport(manifest).at("first_pair_breakdown_seconds").at("scene_begun_by_mesh_stage").get<double>();
+        return framesReport(manifest).at("surface_prepared_by_mesh_stage").get<bool>();
+    };
+    // The first pair came from a frustum cull that dropped triangles.
+    auto expectCulled = [&](const nlohmann::json& manifest, const std::string& what) {
+        const nlohmann::json scene = framesReport(manifest).at("first_pair_scene");
+        EXPECT_EQ(scene.at("scene"), "frustum cull of the whole surface") << what;
+        EXPECT_LT(scene.value("pair_triangles", 0u), scene.value("surface_triangles", 0u)) << what;
+        EXPECT_LT(scene.value("frame_radius_triangles", 0u), scene.value("surface_triangles", 0u)) << what;
+    };
+    auto readBytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
     };
     RunOptions o = options("scenebegun");
     o.untilStage = "frames";
     const nlohmann::json early = runPipeline(o);
-    EXPECT_GT(begun(early), 0.0) << "the frames step did not take a scene begun by the mesh stage";
+    EXPECT_TRUE(begun(early)) << "the frames step did not take the arrays begun by the mesh stage";
+    expectCulled(early, "mesh in memory");
+    const std::string firstPair = readBytes(o.studyDir + "/frames/pair_0000.png");
+    ASSERT_FALSE(firstPair.empty());
 
-    // Reused mesh: the scene from surface.ply.
+    // Reused mesh: the arrays from surface.ply.
+    fs::remove_all(o.studyDir + "/frames");
     o.forceStage = "frames";
     const nlohmann::json fromFile = runPipeline(o);
     EXPECT_FALSE(computedStages(fromFile).at("mesh"));
     EXPECT_TRUE(computedStages(fromFile).at("frames"));
-    EXPECT_EQ(begun(fromFile), 0.0) << "a scene begun although the mesh stage was reused";
+    EXPECT_FALSE(begun(fromFile)) << "arrays begun although the mesh stage was reused";
+    expectCulled(fromFile, "surface.ply");
+    EXPECT_EQ(readBytes(o.studyDir + "/frames/pair_0000.png"), firstPair)
+        << "pair_0000.png from surface.ply differs from the one from the mesh in memory";
     EXPECT_EQ(outputDigests(fromFile).at("frames"), outputDigests(early).at("frames"));
 
     // One thread: nothing begun beside, the same frames.
@@ -309,7 +328,7 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
         oneThread = runPipeline(one);
     }
-    EXPECT_EQ(begun(oneThread), 0.0) << "a scene begun beside with --threads 1";
+    EXPECT_FALSE(begun(oneThread)) << "arrays begun beside with --threads 1";
     EXPECT_EQ(outputDigests(oneThread).at("mesh"), outputDigests(early).at("mesh"));
     EXPECT_EQ(outputDigests(oneThread).at("frames"), outputDigests(early).at("frames"));
 }

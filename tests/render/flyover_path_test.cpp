@@ -152,6 +152,34 @@ TEST(FlyoverFrameRadii, SmoothAlongThePathAndNeverBelowWhatAPointNeeds)
     EXPECT_LT(maxStep, 1.0) << "largest change of R between 1 mm steps (mm)";
 }
 
+// One point's R from the points within its reach only (the first pair's, issue 15): the same
+// double as the whole function's, with and without the Gaussian, at every point.
+TEST(FlyoverFrameRadii, OnePointsRadiusIsTheSameDoubleAsTheWholeFunctions)
+{
+    // A lumen whose lateral semi-axis grows along z, so that R varies from point to point.
+    TriMesh mesh = ellipticTube(10.0);
+    for (const auto v : mesh.vertices()) {
+        TriMesh::Point p = mesh.point(v);
+        p[1] *= float(1.0 + 0.01 * p[2]);
+        mesh.set_point(v, p);
+    }
+    const RayScene scene(mesh);
+    const Centerline cl = axisCenterline();
+    FlyoverParams fp;
+    for (const double smoothMm : {4.0, 0.0}) {
+        FrameRadiusOptions o;
+        o.smoothMm = smoothMm;
+        const std::vector<double> R = flyoverFrameRadii(scene, cl, fp, o);
+        for (std::size_t i = 0; i < cl.points.size(); ++i)
+            EXPECT_EQ(flyoverFrameRadiusAt(scene, cl, fp, i, o), R[i]) << "index " << i << ", smoothing " << smoothMm;
+        const auto [first, last] = frameRadiusReach(cl, 0, o);
+        EXPECT_EQ(first, 0u);
+        EXPECT_EQ(last, smoothMm > 0 ? 8u + 12u : 8u) << "the window (8 mm) plus 3 sigma of the Gaussian, 1 mm steps";
+    }
+    EXPECT_GT(flyoverFrameRadii(scene, cl, fp).back(), flyoverFrameRadii(scene, cl, fp).front() + 1.0)
+        << "R should grow with the lumen";
+}
+
 TEST(FlyoverFrameRadii, RejectsBadParameters)
 {
     const RayScene scene(ellipticTube(12.0));
