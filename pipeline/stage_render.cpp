@@ -35,6 +35,7 @@
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cstdlib>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -502,12 +503,28 @@ FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const
     out.radiusSeconds = secondsSince(t);
     t = Clock::now();
     out.cameras = flyoverCameras(cl.points[index], fp, out.frameRadiusMm);
-    std::vector<uint32_t> pairTris = frustumTriangles(arrays.xyz, arrays.triangles, {out.cameras[0], out.cameras[1]},
-                                                      ro.widthPx, ro.heightPx);
+    // Test hook (tests/pipeline): FLYOVER_TEST_FIRST_PAIR_CULL_MM moves the frustum's planes
+    // (negative: inwards, dropping what the cameras see) to exercise the confirmation below.
+    const char* testMargin = std::getenv("FLYOVER_TEST_FIRST_PAIR_CULL_MM");
+    const std::vector<Camera> cameras{out.cameras[0], out.cameras[1]};
+    std::vector<uint32_t> pairTris =
+        testMargin ? frustumTriangles(arrays.xyz, arrays.triangles, cameras, ro.widthPx, ro.heightPx, std::atof(testMargin))
+                   : frustumTriangles(arrays.xyz, arrays.triangles, cameras, ro.widthPx, ro.heightPx);
     out.pairTriangles = pairTris.size() / 3;
     pairScene = sceneOfTriangles(arrays.xyz, arrays.normals, pairTris, fast);
     out.pairSceneSeconds = secondsSince(t);
     return out;
+}
+
+/// Pixels (RGB triples) that differ between two images; every pixel when the sizes differ.
+std::size_t differingPixels(const RgbImage& a, const RgbImage& b)
+{
+    if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size())
+        return std::size_t(std::max(a.width * a.height, b.width * b.height));
+    std::size_t n = 0;
+    for (std::size_t i = 0; i + 2 < a.rgb.size(); i += 3)
+        n += (a.rgb[i] != b.rgb[i] || a.rgb[i + 1] != b.rgb[i + 1] || a.rgb[i + 2] != b.rgb[i + 2]) ? 1 : 0;
+    return n;
 }
 
 /// Where the first pair's seconds went: with `first`, the wait for the surface's arrays (begun
@@ -557,6 +574,7 @@ json runFrames(StudyRun& run, Progress* progress)
     // Pair images reused from pair to pair (no allocation per pair), each lent to one pair at a
     // time: a thread waiting for a pair's tiles may take up another pair meanwhile (ObjectPool).
     ObjectPool<RgbImage> buffers([] { return RgbImage{}; });
+    RgbImage firstShown;  // pair 0 as rendered from its own scenes, for the confirmation below
     auto renderFramePair = [&](const RayScene& scene, std::size_t f, const std::array<Camera, 2>& cams) {
         const auto t0 = Clock::now();
         const auto lease = buffers.take();
@@ -567,6 +585,7 @@ json runFrames(StudyRun& run, Progress* progress)
         if (f == 0) {
             firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
             firstPngSeconds = secondsSince(t1);
+            firstShown = pair;
         }
     };
 
@@ -602,12 +621,32 @@ json runFrames(StudyRun& run, Progress* progress)
     const Centerline& cl = *in.centerline;
     const FlyoverSetup s = flyoverSetup(rp, cl);
     const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
-    if (first && !(first->frameRadiusMm == in.frameRadii[indices[0]])) {
-        std::ostringstream msg;
-        msg << "frames: the first pair's frame radius from its scene of " << first->radiusTriangles
-            << " triangles is " << first->frameRadiusMm << " mm, the whole surface's " << in.frameRadii[indices[0]]
-            << " mm (they must be the same double)";
-        throw std::logic_error(msg.str());
+    // The first pair shown came from scenes of a cull (the same pixels in every test): it is
+    // confirmed on the whole scene (one pair, ~0.01 s) and, should it differ, replaced, so that
+    // frames/ is always the whole scene's rendering; the log and the report say so.
+    json firstConfirmed = json{{"confirmed_on_whole_scene", false}};
+    if (first) {
+        const auto cams = flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]);
+        const auto lease = buffers.take();
+        RgbImage& whole = *lease;
+        renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), whole);
+        const std::size_t differing = differingPixels(firstShown, whole);
+        const bool sameRadius = first->frameRadiusMm == in.frameRadii[indices[0]];
+        firstConfirmed = json{{"confirmed_on_whole_scene", true},
+                              {"same_frame_radius", sameRadius},
+                              {"differing_pixels", differing},
+                              {"replaced", differing > 0}};
+        if (differing > 0) {
+            writePng(frames.path(pairName(0)), whole);
+            if (run.opt.log) {
+                std::ostringstream msg;
+                msg << "frames: the first pair shown (from its scene of " << first->pairTriangles << " of "
+                    << first->surfaceTriangles << " triangles) differed from the whole scene's in " << differing
+                    << " pixels" << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
+                    << " is now the whole scene's";
+                run.opt.log->message(msg.str());
+            }
+        }
     }
     std::vector<json> poses(indices.size());
     auto poseOf = [&](std::size_t f, const std::array<Camera, 2>& cams) {
@@ -652,6 +691,7 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
                 {"first_pair_breakdown_seconds", firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
                 {"first_pair_scene", firstPairSceneJson(first)},
+                {"first_pair_check", firstConfirmed},
                 {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
                 {"whole_scene_seconds",
                  {{"wait_for_inputs", inputsSeconds},

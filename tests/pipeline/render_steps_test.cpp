@@ -331,6 +331,33 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
     EXPECT_FALSE(begun(oneThread)) << "arrays begun beside with --threads 1";
     EXPECT_EQ(outputDigests(oneThread).at("mesh"), outputDigests(early).at("mesh"));
     EXPECT_EQ(outputDigests(oneThread).at("frames"), outputDigests(early).at("frames"));
+
+    // The first pair is confirmed on the whole scene: the same pixels here ...
+    const nlohmann::json check = framesReport(early).at("first_pair_check");
+    EXPECT_TRUE(check.at("confirmed_on_whole_scene").get<bool>());
+    EXPECT_EQ(check.at("differing_pixels").get<std::size_t>(), 0u);
+    EXPECT_FALSE(check.at("replaced").get<bool>());
+    // ... and a cull that drops what the cameras see (its planes 3 mm inwards, through the test
+    // hook) shows a different first pair, which the frames step then replaces by the whole
+    // scene's: frames/ ends the same as without the hook.
+    RunOptions bad = options("scenebegun-badcull");
+    bad.untilStage = "frames";
+    ::setenv("FLYOVER_TEST_FIRST_PAIR_CULL_MM", "-3", 1);
+    nlohmann::json badCull;
+    try {
+        badCull = runPipeline(bad);
+    } catch (...) {
+        ::unsetenv("FLYOVER_TEST_FIRST_PAIR_CULL_MM");
+        throw;
+    }
+    ::unsetenv("FLYOVER_TEST_FIRST_PAIR_CULL_MM");
+    const nlohmann::json badCheck = framesReport(badCull).at("first_pair_check");
+    EXPECT_GT(badCheck.at("differing_pixels").get<std::size_t>(), 0u)
+        << "a cull 3 mm inside the frustum left the first pair unchanged: the confirmation saw nothing";
+    EXPECT_TRUE(badCheck.at("replaced").get<bool>());
+    EXPECT_EQ(readBytes(bad.studyDir + "/frames/pair_0000.png"), firstPair)
+        << "the replaced pair_0000.png is not the whole scene's";
+    EXPECT_EQ(outputDigests(badCull).at("frames"), outputDigests(early).at("frames"));
 }
 
 // The video, the longest render step, starts first of the steps after the frames (then
