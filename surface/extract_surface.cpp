@@ -69,40 +69,36 @@ public:
     float wsSample(const openvdb::Vec3d& world) const { return isSample(worldToIndex(world)); }
 
     /// The central-difference gradient of classifyTriangle: per axis a,
-    /// (wsSample(c + h e_a) - wsSample(c - h e_a)) / 2h. When the six samples' corners lie in
-    /// one leaf, that leaf is looked up once and its values read directly.
+    /// (wsSample(c + h e_a) - wsSample(c - h e_a)) / 2h. A sample whose corners lie in one
+    /// leaf reads them from that leaf's values; the six samples lie in one or two leaves
+    /// mostly, each looked up once (the last one is kept here).
     openvdb::Vec3d gradient(const openvdb::Vec3d& c, double h) const
     {
-        openvdb::Vec3d index[6];
-        openvdb::Vec3i floor[6];
-        for (int a = 0; a < 3; ++a) {
-            openvdb::Vec3d e(0.0);
-            e[a] = h;
-            index[2 * a] = worldToIndex(c + e);
-            index[2 * a + 1] = worldToIndex(c - e);
-        }
-        openvdb::Vec3i lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
-        for (int s = 0; s < 6; ++s) {
-            floor[s] = openvdb::tools::local_util::floorVec3(index[s]);
-            lo = openvdb::math::minComponent(lo, floor[s]);
-            hi = openvdb::math::maxComponent(hi, floor[s]);
-        }
-        // One leaf holds every corner when the lowest and the highest corner (hi + 1) do.
-        const LeafT* leaf = nullptr;
-        if ((lo.x() & ~7) == ((hi.x() + 1) & ~7) && (lo.y() & ~7) == ((hi.y() + 1) & ~7) &&
-            (lo.z() & ~7) == ((hi.z() + 1) & ~7))
-            leaf = mAccessor->probeConstLeaf(openvdb::Coord(lo));
-        const float* values = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
         float sample[6];
+        openvdb::Coord cachedOrigin(std::numeric_limits<openvdb::Int32>::max());
+        const float* cachedValues = nullptr;
         for (int s = 0; s < 6; ++s) {
-            if (!values) {
-                sample[s] = isSample(index[s]);
-                continue;
-            }
-            const openvdb::Vec3R uvw = index[s] - floor[s];
-            const openvdb::Index o = LeafT::coordToOffset(openvdb::Coord(floor[s]));
+            openvdb::Vec3d e(0.0);
+            e[s / 2] = h;
+            const openvdb::Vec3d index = worldToIndex((s & 1) ? c - e : c + e);
+            const openvdb::Vec3i floor = openvdb::tools::local_util::floorVec3(index);
+            const openvdb::Vec3R uvw = index - floor;
+            const openvdb::Coord ijk(floor);
             float data[2][2][2];
-            readLeafCorners(values, o, data);
+            if ((ijk.x() & 7) != 7 && (ijk.y() & 7) != 7 && (ijk.z() & 7) != 7) {
+                const openvdb::Coord origin(ijk.x() & ~7, ijk.y() & ~7, ijk.z() & ~7);
+                if (origin != cachedOrigin) {
+                    cachedOrigin = origin;
+                    const LeafT* leaf = mAccessor->probeConstLeaf(ijk);
+                    cachedValues = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
+                }
+                if (cachedValues)
+                    readLeafCorners(cachedValues, LeafT::coordToOffset(ijk), data);
+                else
+                    cornersAcrossLeaves(ijk, data);
+            } else {
+                cornersAcrossLeaves(ijk, data);
+            }
             sample[s] = openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
         }
         openvdb::Vec3d grad;
@@ -148,17 +144,22 @@ private:
     void cornersAcrossLeaves(const openvdb::Coord& ijk, float (&data)[2][2][2]) const
     {
         const int cross[3] = {(ijk.x() & 7) == 7, (ijk.y() & 7) == 7, (ijk.z() & 7) == 7};
-        const LeafT* leaves[2][2][2] = {};
+        // Each leaf's values; null where there is no leaf or it has no values (a corner there is
+        // read through the accessor: the tile's or the background's value, or the empty
+        // leaf's own, as before).
+        const float* values[2][2][2] = {};
         for (int i = 0; i <= cross[0]; ++i)
             for (int j = 0; j <= cross[1]; ++j)
-                for (int k = 0; k <= cross[2]; ++k)
-                    leaves[i][j][k] = mAccessor->probeConstLeaf(ijk.offsetBy(i, j, k));
+                for (int k = 0; k <= cross[2]; ++k) {
+                    const LeafT* leaf = mAccessor->probeConstLeaf(ijk.offsetBy(i, j, k));
+                    values[i][j][k] = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
+                }
         for (int i = 0; i < 2; ++i)
             for (int j = 0; j < 2; ++j)
                 for (int k = 0; k < 2; ++k) {
                     const openvdb::Coord c = ijk.offsetBy(i, j, k);
-                    const LeafT* leaf = leaves[i & cross[0]][j & cross[1]][k & cross[2]];
-                    data[i][j][k] = leaf ? leaf->getValue(LeafT::coordToOffset(c)) : mAccessor->getValue(c);
+                    const float* v = values[i & cross[0]][j & cross[1]][k & cross[2]];
+                    data[i][j][k] = v ? v[LeafT::coordToOffset(c)] : mAccessor->getValue(c);
                 }
     }
 
