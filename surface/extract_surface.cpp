@@ -69,14 +69,12 @@ public:
     float wsSample(const openvdb::Vec3d& world) const { return isSample(worldToIndex(world)); }
 
     /// The central-difference gradient of classifyTriangle: per axis a,
-    /// (wsSample(c + h e_a) - wsSample(c - h e_a)) / 2h. A sample whose corners lie in one
-    /// leaf reads them from that leaf's values; the six samples lie in one or two leaves
-    /// mostly, each looked up once (the last one is kept here).
+    /// (wsSample(c + h e_a) - wsSample(c - h e_a)) / 2h. Each corner is read from its leaf's
+    /// value array; the few leaves the six samples touch are each looked up once.
     openvdb::Vec3d gradient(const openvdb::Vec3d& c, double h) const
     {
+        LeafValues leaves(*mAccessor);
         float sample[6];
-        openvdb::Coord cachedOrigin(std::numeric_limits<openvdb::Int32>::max());
-        const float* cachedValues = nullptr;
         for (int s = 0; s < 6; ++s) {
             openvdb::Vec3d e(0.0);
             e[s / 2] = h;
@@ -86,18 +84,19 @@ public:
             const openvdb::Coord ijk(floor);
             float data[2][2][2];
             if ((ijk.x() & 7) != 7 && (ijk.y() & 7) != 7 && (ijk.z() & 7) != 7) {
-                const openvdb::Coord origin(ijk.x() & ~7, ijk.y() & ~7, ijk.z() & ~7);
-                if (origin != cachedOrigin) {
-                    cachedOrigin = origin;
-                    const LeafT* leaf = mAccessor->probeConstLeaf(ijk);
-                    cachedValues = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
-                }
-                if (cachedValues)
-                    readLeafCorners(cachedValues, LeafT::coordToOffset(ijk), data);
+                if (const float* values = leaves.of(ijk))
+                    readLeafCorners(values, LeafT::coordToOffset(ijk), data);
                 else
                     cornersAcrossLeaves(ijk, data);
             } else {
-                cornersAcrossLeaves(ijk, data);
+                for (int i = 0; i < 2; ++i)
+                    for (int j = 0; j < 2; ++j)
+                        for (int k = 0; k < 2; ++k) {
+                            const openvdb::Coord corner = ijk.offsetBy(i, j, k);
+                            const float* values = leaves.of(corner);
+                            data[i][j][k] =
+                                values ? values[LeafT::coordToOffset(corner)] : mAccessor->getValue(corner);
+                        }
             }
             sample[s] = openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
         }
@@ -108,6 +107,32 @@ public:
     }
 
 private:
+    /// The value arrays of the leaves looked up so far (by origin; at most eight kept): null
+    /// where there is no leaf or it has no values (such a corner is read through the
+    /// accessor: the tile's or background's value, or the empty leaf's own, as before).
+    class LeafValues {
+    public:
+        explicit LeafValues(const openvdb::FloatGrid::ConstAccessor& accessor) : mAccessor(accessor) {}
+        const float* of(const openvdb::Coord& ijk)
+        {
+            const openvdb::Coord origin(ijk.x() & ~7, ijk.y() & ~7, ijk.z() & ~7);
+            for (int i = 0; i < mCount; ++i)
+                if (mOrigin[i] == origin) return mValues[i];
+            const LeafT* leaf = mAccessor.probeConstLeaf(ijk);
+            const float* values = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
+            const int slot = mCount < 8 ? mCount++ : 7;
+            mOrigin[slot] = origin;
+            mValues[slot] = values;
+            return values;
+        }
+
+    private:
+        const openvdb::FloatGrid::ConstAccessor& mAccessor;
+        openvdb::Coord mOrigin[8];
+        const float* mValues[8];
+        int mCount = 0;
+    };
+
     /// Offsets within a leaf: x * 64 + y * 8 + z (LeafNode::coordToOffset).
     static void readLeafCorners(const float* v, openvdb::Index o, float (&data)[2][2][2])
     {
