@@ -39,6 +39,11 @@ using Tri = TriangleSoup::value_type;
 /// transform's worldToIndex, BoxSampler's floor and fraction, its trilinearInterpolation), but
 /// the eight corners are read from their leaf when they share one (7^3 / 8^3 of the samples)
 /// instead of by eight tree look-ups: the same values, bit for bit.
+///
+/// worldToIndex is inlined for the maps OpenVDB gives axis-aligned grids (ScaleTranslateMap
+/// and its UniformScaleTranslateMap, whose applyInverseMap is ScaleTranslateMap's final one:
+/// (x - translation) * inverse scale per axis, the same operations here); any other map goes
+/// through the transform's virtual call.
 class Sampler {
 public:
     using LeafT = openvdb::FloatTree::LeafNodeType;
@@ -46,35 +51,117 @@ public:
     Sampler(const openvdb::FloatGrid::ConstAccessor& accessor, const openvdb::math::Transform& transform)
         : mAccessor(&accessor), mTransform(&transform)
     {
+        if (const auto* map = dynamic_cast<const openvdb::math::ScaleTranslateMap*>(transform.baseMap().get())) {
+            mScaleTranslate = true;
+            mTranslation = map->getTranslation();
+            mInverseScale = map->getInvScale();
+        }
     }
 
-    float wsSample(const openvdb::Vec3d& world) const
+    openvdb::Vec3d worldToIndex(const openvdb::Vec3d& world) const
     {
-        const openvdb::Vec3d index = mTransform->worldToIndex(world);
+        if (!mScaleTranslate) return mTransform->worldToIndex(world);
+        return openvdb::Vec3d((world.x() - mTranslation.x()) * mInverseScale.x(),
+                              (world.y() - mTranslation.y()) * mInverseScale.y(),
+                              (world.z() - mTranslation.z()) * mInverseScale.z());
+    }
+
+    float wsSample(const openvdb::Vec3d& world) const { return isSample(worldToIndex(world)); }
+
+    /// The central-difference gradient of classifyTriangle: per axis a,
+    /// (wsSample(c + h e_a) - wsSample(c - h e_a)) / 2h. Each corner is read from its leaf's
+    /// value array; the few leaves the six samples touch are each looked up once.
+    openvdb::Vec3d gradient(const openvdb::Vec3d& c, double h) const
+    {
+        LeafValues leaves(*mAccessor);
+        float sample[6];
+        for (int s = 0; s < 6; ++s) {
+            openvdb::Vec3d e(0.0);
+            e[s / 2] = h;
+            const openvdb::Vec3d index = worldToIndex((s & 1) ? c - e : c + e);
+            const openvdb::Vec3i floor = openvdb::tools::local_util::floorVec3(index);
+            const openvdb::Vec3R uvw = index - floor;
+            const openvdb::Coord ijk(floor);
+            float data[2][2][2];
+            if ((ijk.x() & 7) != 7 && (ijk.y() & 7) != 7 && (ijk.z() & 7) != 7) {
+                if (const float* values = leaves.of(ijk))
+                    readLeafCorners(values, LeafT::coordToOffset(ijk), data);
+                else
+                    cornersAcrossLeaves(ijk, data);
+            } else {
+                for (int i = 0; i < 2; ++i)
+                    for (int j = 0; j < 2; ++j)
+                        for (int k = 0; k < 2; ++k) {
+                            const openvdb::Coord corner = ijk.offsetBy(i, j, k);
+                            const float* values = leaves.of(corner);
+                            data[i][j][k] =
+                                values ? values[LeafT::coordToOffset(corner)] : mAccessor->getValue(corner);
+                        }
+            }
+            sample[s] = openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
+        }
+        openvdb::Vec3d grad;
+        for (int a = 0; a < 3; ++a)
+            grad[a] = (double(sample[2 * a]) - double(sample[2 * a + 1])) / (2.0 * h);
+        return grad;
+    }
+
+private:
+    /// The value arrays of the leaves looked up so far (by origin; at most eight kept): null
+    /// where there is no leaf or it has no values (such a corner is read through the
+    /// accessor: the tile's or background's value, or the empty leaf's own, as before).
+    class LeafValues {
+    public:
+        explicit LeafValues(const openvdb::FloatGrid::ConstAccessor& accessor) : mAccessor(accessor) {}
+        const float* of(const openvdb::Coord& ijk)
+        {
+            const openvdb::Coord origin(ijk.x() & ~7, ijk.y() & ~7, ijk.z() & ~7);
+            for (int i = 0; i < mCount; ++i)
+                if (mOrigin[i] == origin) return mValues[i];
+            const LeafT* leaf = mAccessor.probeConstLeaf(ijk);
+            const float* values = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
+            const int slot = mCount < 8 ? mCount++ : 7;
+            mOrigin[slot] = origin;
+            mValues[slot] = values;
+            return values;
+        }
+
+    private:
+        const openvdb::FloatGrid::ConstAccessor& mAccessor;
+        openvdb::Coord mOrigin[8];
+        const float* mValues[8];
+        int mCount = 0;
+    };
+
+    /// Offsets within a leaf: x * 64 + y * 8 + z (LeafNode::coordToOffset).
+    static void readLeafCorners(const float* v, openvdb::Index o, float (&data)[2][2][2])
+    {
+        data[0][0][0] = v[o];
+        data[0][0][1] = v[o + 1];
+        data[0][1][0] = v[o + 8];
+        data[0][1][1] = v[o + 9];
+        data[1][0][0] = v[o + 64];
+        data[1][0][1] = v[o + 65];
+        data[1][1][0] = v[o + 72];
+        data[1][1][1] = v[o + 73];
+    }
+
+    float isSample(const openvdb::Vec3d& index) const
+    {
         const openvdb::Vec3i floor = openvdb::tools::local_util::floorVec3(index);
         const openvdb::Vec3R uvw = index - floor;
         const openvdb::Coord ijk(floor);
         float data[2][2][2];
         const LeafT* leaf = nullptr;
         if ((ijk.x() & 7) != 7 && (ijk.y() & 7) != 7 && (ijk.z() & 7) != 7) leaf = mAccessor->probeConstLeaf(ijk);
-        if (leaf) {
-            // Offsets within a leaf: x * 64 + y * 8 + z (LeafNode::coordToOffset).
-            const openvdb::Index o = LeafT::coordToOffset(ijk);
-            data[0][0][0] = leaf->getValue(o);
-            data[0][0][1] = leaf->getValue(o + 1);
-            data[0][1][0] = leaf->getValue(o + 8);
-            data[0][1][1] = leaf->getValue(o + 9);
-            data[1][0][0] = leaf->getValue(o + 64);
-            data[1][0][1] = leaf->getValue(o + 65);
-            data[1][1][0] = leaf->getValue(o + 72);
-            data[1][1][1] = leaf->getValue(o + 73);
+        if (leaf && !leaf->buffer().empty()) {
+            readLeafCorners(leaf->buffer().data(), LeafT::coordToOffset(ijk), data);
         } else {
             cornersAcrossLeaves(ijk, data);
         }
         return openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw);
     }
 
-private:
     /// BoxSampler::probeValues' values (each corner's value, active or not) when the corners
     /// lie in several leaves or in none: each leaf they touch is looked up once (the accessor's
     /// one-leaf cache would otherwise alternate between them, corner after corner), a corner
@@ -82,45 +169,47 @@ private:
     void cornersAcrossLeaves(const openvdb::Coord& ijk, float (&data)[2][2][2]) const
     {
         const int cross[3] = {(ijk.x() & 7) == 7, (ijk.y() & 7) == 7, (ijk.z() & 7) == 7};
-        const LeafT* leaves[2][2][2] = {};
+        // Each leaf's values; null where there is no leaf or it has no values (a corner there is
+        // read through the accessor: the tile's or the background's value, or the empty
+        // leaf's own, as before).
+        const float* values[2][2][2] = {};
         for (int i = 0; i <= cross[0]; ++i)
             for (int j = 0; j <= cross[1]; ++j)
-                for (int k = 0; k <= cross[2]; ++k)
-                    leaves[i][j][k] = mAccessor->probeConstLeaf(ijk.offsetBy(i, j, k));
+                for (int k = 0; k <= cross[2]; ++k) {
+                    const LeafT* leaf = mAccessor->probeConstLeaf(ijk.offsetBy(i, j, k));
+                    values[i][j][k] = leaf && !leaf->buffer().empty() ? leaf->buffer().data() : nullptr;
+                }
         for (int i = 0; i < 2; ++i)
             for (int j = 0; j < 2; ++j)
                 for (int k = 0; k < 2; ++k) {
                     const openvdb::Coord c = ijk.offsetBy(i, j, k);
-                    const LeafT* leaf = leaves[i & cross[0]][j & cross[1]][k & cross[2]];
-                    data[i][j][k] = leaf ? leaf->getValue(LeafT::coordToOffset(c)) : mAccessor->getValue(c);
+                    const float* v = values[i & cross[0]][j & cross[1]][k & cross[2]];
+                    data[i][j][k] = v ? v[LeafT::coordToOffset(c)] : mAccessor->getValue(c);
                 }
     }
 
     const openvdb::FloatGrid::ConstAccessor* mAccessor;
     const openvdb::math::Transform* mTransform;
+    bool mScaleTranslate = false;
+    openvdb::Vec3d mTranslation, mInverseScale;
 };
-
-enum class Side { Inward, Outward, Degenerate, NoGradient };
 
 /// Which way triangle p points relative to the level set: its normal (p1 - p0) x (p2 - p0)
 /// against -grad(sdf) at its centroid. The gradient is a central difference over one voxel
 /// (h, the smallest voxel edge) of trilinear world-space samples: valid for any affine (even
 /// rotated or anisotropic) grid transform, unlike an index-space stencil.
-Side classifyTriangle(const Sampler& sampler, double h, const std::array<openvdb::Vec3d, 3>& p)
+FaceSide classifyTriangle(const Sampler& sampler, double h, const std::array<openvdb::Vec3d, 3>& p,
+                          openvdb::Vec3d* gradientOut = nullptr)
 {
     const openvdb::Vec3d n = (p[1] - p[0]).cross(p[2] - p[0]);
     const double longest2 =
         std::max({(p[1] - p[0]).lengthSqr(), (p[2] - p[1]).lengthSqr(), (p[0] - p[2]).lengthSqr()});
-    if (isDegenerateTriangle(n.length(), longest2)) return Side::Degenerate;
+    if (isDegenerateTriangle(n.length(), longest2)) return FaceSide::Degenerate;
     const openvdb::Vec3d c = (p[0] + p[1] + p[2]) / 3.0;
-    openvdb::Vec3d grad;
-    for (int a = 0; a < 3; ++a) {
-        openvdb::Vec3d e(0.0);
-        e[a] = h;
-        grad[a] = (double(sampler.wsSample(c + e)) - double(sampler.wsSample(c - e))) / (2.0 * h);
-    }
-    if (!(grad.lengthSqr() > 0.0)) return Side::NoGradient;
-    return -n.dot(grad) > 0.0 ? Side::Inward : Side::Outward;
+    const openvdb::Vec3d grad = sampler.gradient(c, h);
+    if (gradientOut) *gradientOut = grad;
+    if (!(grad.lengthSqr() > 0.0)) return FaceSide::NoGradient;
+    return -n.dot(grad) > 0.0 ? FaceSide::Inward : FaceSide::Outward;
 }
 
 double gradientStepMm(const openvdb::FloatGrid& sdf)
@@ -134,6 +223,7 @@ double gradientStepMm(const openvdb::FloatGrid& sdf)
 struct OrientationTally {
     FaceOrientation count;
     std::vector<std::size_t> notInward;
+    std::vector<FaceSide> notInwardSide;  ///< the class of each of notInward
 };
 
 /// Classifies every `stride`-th face (see classifyTriangle). `corners(i, p)` writes the
@@ -152,14 +242,12 @@ OrientationTally tallyOrientation(const openvdb::FloatGrid& sdf, std::size_t fac
             std::array<openvdb::Vec3d, 3> p;
             for (std::size_t s = range.begin(); s != range.end(); ++s) {
                 corners(s * stride, p);
-                const Side side = classifyTriangle(sampler, h, p);
-                switch (side) {
-                case Side::Inward: ++acc.count.inward; break;
-                case Side::Outward: ++acc.count.outward; break;
-                case Side::Degenerate: ++acc.count.degenerate; break;
-                case Side::NoGradient: ++acc.count.noGradient; break;
+                const FaceSide side = classifyTriangle(sampler, h, p);
+                acc.count.add(side);
+                if (side != FaceSide::Inward) {
+                    acc.notInward.push_back(s * stride);
+                    acc.notInwardSide.push_back(side);
                 }
-                if (side != Side::Inward) acc.notInward.push_back(s * stride);
             }
             return acc;
         },
@@ -170,6 +258,7 @@ OrientationTally tallyOrientation(const openvdb::FloatGrid& sdf, std::size_t fac
             a.count.noGradient += b.count.noGradient;
             // Joins are of adjacent ranges, left then right: the order stays ascending.
             a.notInward.insert(a.notInward.end(), b.notInward.begin(), b.notInward.end());
+            a.notInwardSide.insert(a.notInwardSide.end(), b.notInwardSide.begin(), b.notInwardSide.end());
             return a;
         });
 }
@@ -467,13 +556,15 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params, 
 }
 
 FaceOrientation checkFaceOrientation(const TriMesh& mesh, const openvdb::FloatGrid& sdf,
-                                     std::vector<TriMesh::FaceHandle>* notInward)
+                                     std::vector<TriMesh::FaceHandle>* notInward,
+                                     std::vector<FaceSide>* notInwardSides)
 {
     OrientationTally tally = tallyMeshOrientation(mesh, sdf);
     if (notInward) {
         notInward->clear();
         for (const std::size_t i : tally.notInward) notInward->push_back(TriMesh::FaceHandle(int(i)));
     }
+    if (notInwardSides) *notInwardSides = std::move(tally.notInwardSide);
     return tally.count;
 }
 
@@ -494,7 +585,18 @@ bool LumenSideTest::isInward(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b,
 {
     const std::array<openvdb::Vec3d, 3> p{openvdb::Vec3d(a[0], a[1], a[2]), openvdb::Vec3d(b[0], b[1], b[2]),
                                           openvdb::Vec3d(c[0], c[1], c[2])};
-    return classifyTriangle(mImpl->sampler, mImpl->h, p) == Side::Inward;
+    return classifyTriangle(mImpl->sampler, mImpl->h, p) == FaceSide::Inward;
+}
+
+FaceSide LumenSideTest::classify(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c,
+                                 OpenMesh::Vec3d* gradient) const
+{
+    const std::array<openvdb::Vec3d, 3> p{openvdb::Vec3d(a[0], a[1], a[2]), openvdb::Vec3d(b[0], b[1], b[2]),
+                                          openvdb::Vec3d(c[0], c[1], c[2])};
+    openvdb::Vec3d g(0.0);
+    const FaceSide side = classifyTriangle(mImpl->sampler, mImpl->h, p, &g);
+    if (gradient) *gradient = OpenMesh::Vec3d(g[0], g[1], g[2]);
+    return side;
 }
 
 float LumenSideTest::valueAt(const OpenMesh::Vec3d& world) const

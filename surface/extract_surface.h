@@ -57,12 +57,27 @@ struct MeshStats {
                                     ///< decreasing SDF
 };
 
+/// One face's class against a level set (see FaceOrientation).
+enum class FaceSide { Inward, Outward, Degenerate, NoGradient };
+
 /// Per-face orientation against a level set, counted by checkFaceOrientation.
 struct FaceOrientation {
     int64_t inward = 0;      ///< normal . -grad(sdf) > 0 at the centroid: into the lumen
     int64_t outward = 0;     ///< normal . -grad(sdf) <= 0
     int64_t degenerate = 0;  ///< no usable normal (isDegenerateTriangle)
     int64_t noGradient = 0;  ///< zero gradient (outside the narrow band): orientation unknown
+
+    int64_t& of(FaceSide side)
+    {
+        switch (side) {
+        case FaceSide::Outward: return outward;
+        case FaceSide::Degenerate: return degenerate;
+        case FaceSide::NoGradient: return noGradient;
+        case FaceSide::Inward: break;
+        }
+        return inward;
+    }
+    void add(FaceSide side) { ++of(side); }
 
     /// inward / (faces - degenerate); 0 without oriented faces.
     double inwardFraction() const
@@ -97,8 +112,10 @@ TriMesh extractSurface(const openvdb::FloatGrid& sdf, const MeshParams& params,
 /// Classifies every face of `mesh` by whether its normal agrees with -grad(sdf) at its
 /// centroid (central differences over one voxel, trilinear samples in world space).
 /// @param notInward  if given, receives the faces that are not inward (any other class)
+/// @param notInwardSides  if given, receives the class of each of those faces
 FaceOrientation checkFaceOrientation(const TriMesh& mesh, const openvdb::FloatGrid& sdf,
-                                     std::vector<TriMesh::FaceHandle>* notInward = nullptr);
+                                     std::vector<TriMesh::FaceHandle>* notInward = nullptr,
+                                     std::vector<FaceSide>* notInwardSides = nullptr);
 
 /// The same test for one triangle at a time (for guards inside smoothing and decimation).
 /// Keeps a grid accessor: use one instance per thread. The grid must outlive it.
@@ -112,6 +129,11 @@ public:
     /// True when the triangle's normal (b - a) x (c - a) points to decreasing SDF at its
     /// centroid; false for an outward, degenerate or gradient-free triangle.
     bool isInward(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c) const;
+
+    /// The triangle's class (as checkFaceOrientation counts it); `gradient`, if given, receives
+    /// the central-difference gradient it used (unchanged for a degenerate triangle).
+    FaceSide classify(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c,
+                      OpenMesh::Vec3d* gradient = nullptr) const;
 
     /// The level set at a world point (mm) as the test reads it: trilinear, exactly the value
     /// of OpenVDB's GridSampler<ConstAccessor, BoxSampler>::wsSample (corners read from their

@@ -49,11 +49,17 @@ Progress* ptr(std::optional<SubProgress>& p) { return p ? &*p : nullptr; }
 } // namespace
 
 int64_t restoreNonInwardFaces(TriMesh& mesh, const std::vector<TriMesh::Point>& extracted,
-                              const openvdb::FloatGrid& sdf)
+                              const openvdb::FloatGrid& sdf, FaceOrientation* orientation)
 {
     std::vector<TriMesh::FaceHandle> bad;
-    checkFaceOrientation(mesh, sdf, &bad);
+    std::vector<FaceSide> badSides;
+    FaceOrientation count = checkFaceOrientation(mesh, sdf, &bad, &badSides);
+    if (orientation) *orientation = count;
     if (bad.empty()) return 0;
+    // Each face's class while faces change (kept up to date in `count`): the first pass
+    // classified the faces not listed as inward.
+    std::vector<FaceSide> side(mesh.n_faces(), FaceSide::Inward);
+    for (std::size_t i = 0; i < bad.size(); ++i) side[std::size_t(bad[i].idx())] = badSides[i];
     const LumenSideTest inward(sdf);
     int64_t restored = 0;
     std::vector<TriMesh::VertexHandle> moved;
@@ -78,11 +84,17 @@ int64_t restoreNonInwardFaces(TriMesh& mesh, const std::vector<TriMesh::Point>& 
                 std::array<OpenMesh::Vec3d, 3> p;
                 int k = 0;
                 for (const auto w : mesh.fv_range(f)) p[std::size_t(k++)] = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(w));
-                if (!inward.isInward(p[0], p[1], p[2])) bad.push_back(f);
+                const FaceSide now = inward.classify(p[0], p[1], p[2]);
+                FaceSide& was = side[std::size_t(f.idx())];
+                --count.of(was);
+                ++count.of(now);
+                was = now;
+                if (now != FaceSide::Inward) bad.push_back(f);
             }
         for (const TriMesh::VertexHandle v : moved)
             for (const auto f : mesh.vf_range(v)) queued[std::size_t(f.idx())] = 0;
     }
+    if (orientation) *orientation = count;
     return restored;
 }
 
@@ -157,7 +169,8 @@ void checkLumenSurface(const TriMesh& mesh, const openvdb::FloatGrid& sdf, Lumen
     rep.smoothedVolumeMm3 = rep.rawVolumeMm3;
     rep.smoothedRoughnessDeg = rep.rawRoughnessDeg;
     if (rep.smoothed) measureSmoothed(mesh, rep.check, rep);
-    rep.orientation = checkFaceOrientation(mesh, sdf);
+    if (!rep.orientationCounted) rep.orientation = checkFaceOrientation(mesh, sdf);
+    rep.orientationCounted = false;
     rep.checkSeconds += secondsSince(t0);
     rep.finalChecksPending = false;
 }
@@ -222,7 +235,8 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
         auto extracted = std::make_shared<std::vector<TriMesh::Point>>(mesh.n_vertices());
         for (const auto v : mesh.vertices()) (*extracted)[std::size_t(v.idx())] = mesh.point(v);
         smoothMeshTaubin(mesh, taubin, &rep.smoothing, ptr(smoothProgress));
-        rep.smoothingRestoredVertices = restoreNonInwardFaces(mesh, *extracted, sdf);
+        rep.smoothingRestoredVertices = restoreNonInwardFaces(mesh, *extracted, sdf, &rep.orientation);
+        rep.orientationCounted = true;
         if (later) rep.extractedPoints = std::move(extracted);
         rep.smoothSeconds = secondsSince(t0);
         if (!later) {
@@ -235,6 +249,7 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
 
     rep.decimation.facesBefore = rep.decimation.facesAfter = int64_t(mesh.n_faces());
     if (decimating) {
+        rep.orientationCounted = false;  // decimation changes the faces
         t0 = Clock::now();
         std::optional<TriMesh> before;
         if (measureDecimationError) before = mesh;
@@ -265,7 +280,8 @@ TriMesh makeLumenSurface(const openvdb::FloatGrid& sdf, const MeshParams& params
         t0 = Clock::now();
         reportProgress(progress, 0.85, "mesh checks");
         rep.check = rep.decimation.collapses > 0 ? checkMesh(mesh) : std::move(current);
-        rep.orientation = checkFaceOrientation(mesh, sdf);
+        if (!rep.orientationCounted) rep.orientation = checkFaceOrientation(mesh, sdf);
+        rep.orientationCounted = false;
         rep.checkSeconds += secondsSince(t0);
     }
     reportProgress(progress, 1.0, "mesh done");

@@ -74,6 +74,9 @@ struct LumenSurfaceReport {
     /// The checks of the final mesh (check, orientation, the smoothed measures) are still to
     /// be made by checkLumenSurface(): makeLumenSurface() was asked to leave them.
     bool finalChecksPending = false;
+    /// While the final checks are pending: `orientation` is already that of the final mesh
+    /// (counted by the smoothing guard, restoreNonInwardFaces), so checkLumenSurface() keeps it.
+    bool orientationCounted = false;
     /// While the final checks are pending after smoothing: the extracted vertex positions
     /// (indexed by vertex), for the raw measures (rawAreaMm2, rawVolumeMm3, rawRoughnessDeg),
     /// which are then pending too. Released by checkLumenSurface().
@@ -125,9 +128,12 @@ void checkLumenSurface(const TriMesh& mesh, const openvdb::FloatGrid& sdf, Lumen
 /// sliver a smoother tilted past the surface's tangent plane) gets its corners back at their
 /// `extracted` positions (indexed by vertex); the faces around them are checked again, until
 /// every face is inward or nothing is left to restore (the extracted mesh is the fixed point).
+/// @param orientation  if given, receives checkFaceOrientation(mesh, sdf) of the mesh as it is
+///        left (the first pass's counts, updated for every face checked again): the same
+///        numbers, without a second pass over every face
 /// @return the number of vertices restored
 int64_t restoreNonInwardFaces(TriMesh& mesh, const std::vector<TriMesh::Point>& extracted,
-                              const openvdb::FloatGrid& sdf);
+                              const openvdb::FloatGrid& sdf, FaceOrientation* orientation = nullptr);
 
 /// Checks MeshParams' ranges. @throw ParameterError naming the field and the value
 void validateMeshParams(const MeshParams& params);

@@ -5,8 +5,12 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
+#include "data/phantom.h"
+#include "surface/mesh_checks.h"
 #include "surface_test_shapes.h"
 #include "volume/error.h"
+#include "volume/ingest.h"
+#include "volume/segment.h"
 
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -14,10 +18,12 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <random>
 #include <algorithm>
 #include <functional>
+#include <iomanip>
 #include <limits>
 #include <vector>
 #include <sstream>
@@ -222,6 +228,161 @@ TEST(LumenSideTest, ReadsTheLevelSetExactlyAsOpenVdbsBoxSampler)
             }
     EXPECT_GT(inLeafCorners, checked / 10) << "few samples read their corners from one leaf";
     EXPECT_LT(inLeafCorners, checked) << "no sample needed the tree look-ups";
+}
+
+/// The orientation test as it was written before issue 15's faster classification (kept here
+/// as the reference): the normal against a central difference of six
+/// GridSampler<ConstAccessor, BoxSampler>::wsSample values (the transform's virtual
+/// worldToIndex, eight tree look-ups each).
+FaceSide referenceSide(const openvdb::FloatGrid& sdf, const std::array<openvdb::Vec3d, 3>& p, openvdb::Vec3d* gradient)
+{
+    const openvdb::FloatGrid::ConstAccessor accessor = sdf.getConstAccessor();
+    const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
+        accessor, sdf.transform());
+    const openvdb::Vec3d voxel = sdf.voxelSize();
+    const double h = std::min({voxel[0], voxel[1], voxel[2]});
+    const openvdb::Vec3d n = (p[1] - p[0]).cross(p[2] - p[0]);
+    const double longest2 =
+        std::max({(p[1] - p[0]).lengthSqr(), (p[2] - p[1]).lengthSqr(), (p[0] - p[2]).lengthSqr()});
+    if (isDegenerateTriangle(n.length(), longest2)) return FaceSide::Degenerate;
+    const openvdb::Vec3d c = (p[0] + p[1] + p[2]) / 3.0;
+    openvdb::Vec3d grad;
+    for (int a = 0; a < 3; ++a) {
+        openvdb::Vec3d e(0.0);
+        e[a] = h;
+        grad[a] = (double(sampler.wsSample(c + e)) - double(sampler.wsSample(c - e))) / (2.0 * h);
+    }
+    *gradient = grad;
+    if (!(grad.lengthSqr() > 0.0)) return FaceSide::NoGradient;
+    return -n.dot(grad) > 0.0 ? FaceSide::Inward : FaceSide::Outward;
+}
+
+/// Compares LumenSideTest::classify (side and gradient, bit for bit) with referenceSide on
+/// every face of `mesh` and on `randomTriangles` random small triangles around its vertices.
+/// @return how many triangles were compared
+int64_t expectSameSidesAsReference(const openvdb::FloatGrid& sdf, const TriMesh& mesh, int randomTriangles,
+                                   unsigned seed)
+{
+    const LumenSideTest side(sdf);
+    int64_t compared = 0, failures = 0;
+    auto compare = [&](const std::array<openvdb::Vec3d, 3>& p, const char* what) {
+        openvdb::Vec3d expectedGradient(0.0);
+        const FaceSide expected = referenceSide(sdf, p, &expectedGradient);
+        OpenMesh::Vec3d got(0.0);
+        const FaceSide seen = side.classify(OpenMesh::Vec3d(p[0][0], p[0][1], p[0][2]),
+                                            OpenMesh::Vec3d(p[1][0], p[1][1], p[1][2]),
+                                            OpenMesh::Vec3d(p[2][0], p[2][1], p[2][2]), &got);
+        ++compared;
+        const bool same = seen == expected &&
+                          (expected == FaceSide::Degenerate ||
+                           (got[0] == expectedGradient[0] && got[1] == expectedGradient[1] && got[2] == expectedGradient[2]));
+        if (!same && ++failures <= 5)
+            ADD_FAILURE() << std::setprecision(17) << what << " (" << p[0] << ", " << p[1] << ", " << p[2] << "): expected side "
+                          << int(expected) << " gradient " << expectedGradient << " (reference), saw side "
+                          << int(seen) << " gradient (" << got[0] << ", " << got[1] << ", " << got[2] << ")";
+    };
+    for (const auto f : mesh.faces()) {
+        std::array<openvdb::Vec3d, 3> p;
+        int k = 0;
+        for (const auto v : mesh.fv_range(f)) {
+            const TriMesh::Point& q = mesh.point(v);
+            p[std::size_t(k++)] = openvdb::Vec3d(q[0], q[1], q[2]);
+        }
+        compare(p, "face");
+    }
+    std::mt19937 random(seed);
+    const double voxel = sdf.voxelSize()[0];
+    std::uniform_real_distribution<double> offset(-2.0 * voxel, 2.0 * voxel);
+    std::uniform_int_distribution<int> vertex(0, int(mesh.n_vertices()) - 1);
+    for (int n = 0; n < randomTriangles; ++n) {
+        const TriMesh::Point& q = mesh.point(TriMesh::VertexHandle(vertex(random)));
+        const openvdb::Vec3d base(q[0], q[1], q[2]);
+        std::array<openvdb::Vec3d, 3> p;
+        for (auto& corner : p) corner = base + openvdb::Vec3d(offset(random), offset(random), offset(random));
+        compare(p, "random triangle");
+    }
+    EXPECT_EQ(failures, 0) << "of " << compared << " triangles";
+    return compared;
+}
+
+TEST(LumenSideTest, ClassifiesAsTheReferenceOnThePhantomsLumen)
+{
+    // Issue 15: the classification reads the six samples of its gradient through an inlined
+    // ScaleTranslateMap and from one leaf when they share it; side and gradient must be those
+    // of the plain GridSampler code, bit for bit, on a real lumen (the small phantom through
+    // ingest and segmentation): every face of its mesh and random triangles around it.
+    PhantomParams pp;
+    pp.size = PhantomSize::Small;
+    pp.seed = 3;
+    const Phantom phantom = makePhantom(pp);
+    Image3<float> image;
+    image.geometry = phantom.ct.geometry;
+    image.voxels.assign(phantom.ct.voxels.begin(), phantom.ct.voxels.end());
+    const openvdb::FloatGrid::Ptr sdf = segmentLumen(*ingestImage(image, IngestParams{}), SegmentParams{}).sdf;
+    ASSERT_TRUE(dynamic_cast<const openvdb::math::ScaleTranslateMap*>(sdf->transform().baseMap().get()))
+        << "expected the lumen's transform to be a ScaleTranslateMap (the inlined path), saw "
+        << sdf->transform().mapType();
+    const TriMesh mesh = extractSurface(*sdf, MeshParams{});
+    ASSERT_GT(mesh.n_faces(), 1000u);
+    EXPECT_GT(expectSameSidesAsReference(*sdf, mesh, 200000, 11), int64_t(mesh.n_faces()));
+}
+
+TEST(LumenSideTest, ClassifiesAsTheReferenceUnderEveryTransform)
+{
+    // The same comparison on a sphere's level set under a uniform scale-translate, an
+    // anisotropic scale-translate (the inlined path), and a rotated and a sheared affine map
+    // (the transform's own worldToIndex).
+    struct Case {
+        const char* name;
+        std::function<openvdb::math::Transform::Ptr()> make;
+        bool inlined;
+    };
+    const std::vector<Case> cases = {
+        {"uniform scale + translation",
+         [] {
+             auto t = openvdb::math::Transform::createLinearTransform(0.4);
+             t->postTranslate(openvdb::Vec3d(0.13, -0.21, 0.05));
+             return t;
+         },
+         true},
+        {"anisotropic scale + translation",
+         [] {
+             auto t = openvdb::math::Transform::createLinearTransform(1.0);
+             t->postScale(openvdb::Vec3d(0.35, 0.42, 0.6));
+             t->postTranslate(openvdb::Vec3d(-1.7, 0.3, 2.25));
+             return t;
+         },
+         true},
+        {"rotated, anisotropic",
+         [] {
+             auto t = openvdb::math::Transform::createLinearTransform(1.0);
+             t->postScale(openvdb::Vec3d(0.35, 0.42, 0.6));
+             t->postRotate(0.4, openvdb::math::Z_AXIS);
+             t->postRotate(-0.3, openvdb::math::X_AXIS);
+             t->postTranslate(openvdb::Vec3d(0.5, -0.25, 1.0));
+             return t;
+         },
+         false},
+        {"sheared",
+         [] {
+             auto t = openvdb::math::Transform::createLinearTransform(0.45);
+             t->postShear(0.2, openvdb::math::X_AXIS, openvdb::math::Y_AXIS);
+             return t;
+         },
+         false},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        // A sphere of radius 12 voxels in index space, then given the case's transform.
+        const openvdb::FloatGrid::Ptr sdf =
+            openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(12.0f, openvdb::Vec3f(0.4f, -0.3f, 0.2f), 1.0f, 3.0f);
+        sdf->setTransform(c.make());
+        const bool inlined = dynamic_cast<const openvdb::math::ScaleTranslateMap*>(sdf->transform().baseMap().get());
+        ASSERT_EQ(inlined, c.inlined) << "map type " << sdf->transform().mapType();
+        const TriMesh mesh = extractSurface(*sdf, MeshParams{});
+        ASSERT_GT(mesh.n_faces(), 100u);
+        expectSameSidesAsReference(*sdf, mesh, 20000, 5);
+    }
 }
 
 TEST(InwardFaceFraction, FlippedMeshScoresZero)

@@ -270,6 +270,14 @@ TEST(LumenSurface, DecimationToHalfKeepsEverythingElse)
 namespace {
 
 /// The counts of a report that the final checks fill in.
+std::string orientationCounts(const FaceOrientation& o)
+{
+    std::ostringstream out;
+    out << "inward " << o.inward << " outward " << o.outward << " degenerate " << o.degenerate << " no gradient "
+        << o.noGradient;
+    return out.str();
+}
+
 std::string finalCheckCounts(const LumenSurfaceReport& r)
 {
     std::ostringstream out;
@@ -330,6 +338,9 @@ TEST(LumenSurface, FinalChecksMadeLaterGiveTheSameReport)
         ASSERT_EQ(a.n_vertices(), b.n_vertices());
         ASSERT_EQ(a.n_faces(), b.n_faces());
         for (const auto v : a.vertices()) ASSERT_EQ(a.point(v), b.point(v)) << "vertex " << v.idx();
+        // After smoothing, the guard's pass over every face has counted the final mesh's
+        // orientation: the deferred checks keep those counts instead of a second pass.
+        EXPECT_EQ(later.orientationCounted, smooth) << "the guard's orientation counts were not handed on";
         checkLumenSurface(b, *grid, later);
         EXPECT_FALSE(later.finalChecksPending);
         EXPECT_FALSE(later.extractedPoints) << "the extracted positions are kept after the checks";
@@ -338,6 +349,10 @@ TEST(LumenSurface, FinalChecksMadeLaterGiveTheSameReport)
         EXPECT_EQ(later.extraction.orientationConflicts, now.extraction.orientationConflicts);
         EXPECT_GT(later.rawAreaMm2, 0.0);
         EXPECT_EQ(finalCheckCounts(later), finalCheckCounts(now));
+        EXPECT_EQ(orientationCounts(later.orientation), orientationCounts(checkFaceOrientation(b, *grid)))
+            << "expected the counts of a fresh pass over the final mesh";
+        EXPECT_EQ(orientationCounts(now.orientation), orientationCounts(checkFaceOrientation(a, *grid)))
+            << "expected the counts of a fresh pass over the final mesh";
         expectSameMeasures(later, now);
         EXPECT_GT(later.check.faces, 0);
         expectSound(later);
@@ -368,17 +383,24 @@ TEST(LumenSurface, GuardRestoresFacesTurnedAwayFromTheLumen)
     mesh.set_point(pushed, p + tangent * 1.f);
     const TriMesh::VertexHandle other(100);
     mesh.set_point(other, mesh.point(other) * 1.01f);  // moved, but its faces still point inward
-    ASSERT_GT(checkFaceOrientation(mesh, *grid).outward, 0);
+    const FaceOrientation before = checkFaceOrientation(mesh, *grid);
+    ASSERT_GT(before.outward, 0);
 
-    const int64_t restored = restoreNonInwardFaces(mesh, extracted, *grid);
+    FaceOrientation counted;
+    const int64_t restored = restoreNonInwardFaces(mesh, extracted, *grid, &counted);
     EXPECT_GE(restored, 1);
     EXPECT_EQ(mesh.point(pushed), extracted[17]);
     EXPECT_NE(mesh.point(other), extracted[100]);  // untouched: only faces that failed are restored
     const FaceOrientation after = checkFaceOrientation(mesh, *grid);
     EXPECT_EQ(after.outward, 0);
     EXPECT_EQ(after.inward, int64_t(mesh.n_faces()));
-    // Nothing left to restore: a second call is a no-op.
-    EXPECT_EQ(restoreNonInwardFaces(mesh, extracted, *grid), 0);
+    // The guard's own counts (its first pass, updated for the faces it checked again) are
+    // those of a fresh pass over the mesh it leaves (issue 15: handed to the final checks).
+    EXPECT_EQ(orientationCounts(counted), orientationCounts(after)) << "expected a fresh pass's counts";
+    // Nothing left to restore: a second call is a no-op, and counts the same.
+    FaceOrientation again;
+    EXPECT_EQ(restoreNonInwardFaces(mesh, extracted, *grid, &again), 0);
+    EXPECT_EQ(orientationCounts(again), orientationCounts(after));
 }
 
 TEST(LumenSurface, RejectsBadParameters)
