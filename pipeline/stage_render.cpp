@@ -516,17 +516,6 @@ FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const
     return out;
 }
 
-/// Pixels (RGB triples) that differ between two images; every pixel when the sizes differ.
-std::size_t differingPixels(const RgbImage& a, const RgbImage& b)
-{
-    if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size())
-        return std::size_t(std::max(a.width * a.height, b.width * b.height));
-    std::size_t n = 0;
-    for (std::size_t i = 0; i + 2 < a.rgb.size(); i += 3)
-        n += (a.rgb[i] != b.rgb[i] || a.rgb[i + 1] != b.rgb[i + 1] || a.rgb[i + 2] != b.rgb[i + 2]) ? 1 : 0;
-    return n;
-}
-
 /// Where the first pair's seconds went: with `first`, the wait for the surface's arrays (begun
 /// by the mesh stage), the frame radius's scene and the pair's cull and scene; else the whole
 /// scene and every frame radius (the frames step found them built).

@@ -413,6 +413,16 @@ void renderView(const RayScene& scene, const Camera& camera, const RenderOptions
     renderInto(scene, camera, options, image.rgb.data(), std::size_t(image.width), hits);
 }
 
+std::size_t differingPixels(const RgbImage& a, const RgbImage& b)
+{
+    if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size())
+        return std::size_t(std::max(a.width * a.height, b.width * b.height));
+    std::size_t n = 0;
+    for (std::size_t i = 0; i + 2 < a.rgb.size(); i += 3)
+        n += (a.rgb[i] != b.rgb[i] || a.rgb[i + 1] != b.rgb[i + 1] || a.rgb[i + 2] != b.rgb[i + 2]) ? 1 : 0;
+    return n;
+}
+
 void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
                 RgbImage& pair, int gapPx)
 {

@@ -70,6 +70,10 @@ void renderView(const RayScene& scene, const Camera& camera, const RenderOptions
 /// Width of the dark separator between the two views of a pair image (pixels).
 constexpr int PAIR_GAP_PX = 4;
 
+/// Pixels (RGB triples) that differ between two images; every pixel of the larger when their
+/// sizes differ.
+std::size_t differingPixels(const RgbImage& a, const RgbImage& b);
+
 /// The pair image of two views, `left` | a `gapPx` dark separator | `right`, rendered in place:
 /// the same pixels as sideBySide(renderView(left), renderView(right), gapPx) without the two
 /// view images and their copy. Reuses `pair`'s buffer (no allocation when the size is unchanged).

@@ -16,8 +16,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <memory>
 #include <string>
 #pragma GCC diagnostic pop
@@ -95,13 +97,30 @@ SceneOptions fastBuild()
     return o;
 }
 
-int differingPixels(const RgbImage& a, const RgbImage& b)
+/// The fly-over pair at centerline index i rendered from the whole scene and from the scene of
+/// its cameras' frustum cull (planes moved by marginMm; the default when NaN).
+struct CulledPair {
+    RgbImage whole, culled;
+    std::size_t keptTriangles = 0, keptVertices = 0;
+};
+
+CulledPair culledPair(const PhantomArrays& s, const RayScene& whole, const std::vector<double>& radii, std::size_t i,
+                      double marginMm = std::numeric_limits<double>::quiet_NaN())
 {
-    if (a.width != b.width || a.height != b.height) return -1;
-    int n = 0;
-    for (std::size_t p = 0; p + 2 < a.rgb.size(); p += 3)
-        n += (a.rgb[p] != b.rgb[p] || a.rgb[p + 1] != b.rgb[p + 1] || a.rgb[p + 2] != b.rgb[p + 2]) ? 1 : 0;
-    return n;
+    const RenderParams rp;
+    const RenderOptions ro = frameOptionsOf(rp);
+    const auto cams = flyoverCameras(s.centerline.points[i], flyoverParamsOf(rp), radii[i]);
+    const std::vector<Camera> both{cams[0], cams[1]};
+    const std::vector<uint32_t> sub = std::isnan(marginMm)
+                                          ? frustumTriangles(s.xyz, s.tris, both, ro.widthPx, ro.heightPx)
+                                          : frustumTriangles(s.xyz, s.tris, both, ro.widthPx, ro.heightPx, marginMm);
+    const auto subset = sceneOfTriangles(s.xyz, s.normals, sub, fastBuild());
+    CulledPair out;
+    out.keptTriangles = sub.size() / 3;
+    out.keptVertices = subset->vertexCount();
+    renderPair(whole, cams[0], cams[1], ro, out.whole);
+    renderPair(*subset, cams[0], cams[1], ro, out.culled);
+    return out;
 }
 
 TEST(FirstPairScene, FrameRadiusFromItsTrianglesIsTheWholeFunctionsDouble)
@@ -142,27 +161,21 @@ TEST(FirstPairScene, FrameRadiusFromTooFewTrianglesDiffers)
 
 TEST(FirstPairScene, PairFromTheFrustumCullIsPixelIdenticalToTheWholeScene)
 {
-    const RenderParams rp;
-    const FlyoverParams fp = flyoverParamsOf(rp);
-    const RenderOptions ro = frameOptionsOf(rp);
+    const FlyoverParams fp = flyoverParamsOf(RenderParams{});
     for (const auto& s : phantoms()) {
         const RayScene whole(s->xyz, s->tris);
         const std::vector<double> radii = flyoverFrameRadii(whole, s->centerline, fp);
         for (const std::size_t i : positions(s->centerline, PAIR_POSITIONS)) {
-            const auto cams = flyoverCameras(s->centerline.points[i], fp, radii[i]);
-            std::vector<uint32_t> sub = frustumTriangles(s->xyz, s->tris, {cams[0], cams[1]}, ro.widthPx, ro.heightPx);
-            const std::size_t kept = sub.size() / 3;
+            const CulledPair pair = culledPair(*s, whole, radii, i);
+            const std::size_t kept = pair.keptTriangles;
             EXPECT_LT(kept, s->tris.size() / 3) << s->name << " index " << i << ": the cull dropped nothing";
-            const auto subset = sceneOfTriangles(s->xyz, s->normals, sub, fastBuild());
-            EXPECT_LT(subset->vertexCount(), whole.vertexCount()) << "the scene of the cull keeps only its vertices";
-            RgbImage a, b;
-            renderPair(whole, cams[0], cams[1], ro, a);
-            renderPair(*subset, cams[0], cams[1], ro, b);
+            EXPECT_LT(pair.keptVertices, whole.vertexCount()) << "the scene of the cull keeps only its vertices";
+            const RgbImage &a = pair.whole, &b = pair.culled;
             // Exact: a closest hit (and its barycentrics) depends on the triangle alone, not on
             // the BVH around it (MEDIUM here, LOW there); only an exact tie in t between two triangles could be broken
             // the other way by another BVH (none seen: 27 pairs here, 300 with
             // FLYOVER_FIRST_PAIR_POSITIONS=100).
-            EXPECT_EQ(differingPixels(a, b), 0) << s->name << " index " << i << ": the pair from " << kept << " of "
+            EXPECT_EQ(differingPixels(a, b), 0u) << s->name << " index " << i << ": the pair from " << kept << " of "
                                                 << s->tris.size() / 3 << " triangles differs";
             std::printf("%s index %zu: %zu of %zu triangles in the pair's cull\n", s->name.c_str(), i, kept,
                         s->tris.size() / 3);
@@ -174,21 +187,13 @@ TEST(FirstPairScene, ACullThatDropsAVisibleTriangleChangesThePair)
 {
     // The planes moved 2 mm inwards: triangles at the images' borders (and just beyond the near
     // plane) are dropped, and the comparison above must see it.
-    const RenderParams rp;
-    const FlyoverParams fp = flyoverParamsOf(rp);
-    const RenderOptions ro = frameOptionsOf(rp);
+    const FlyoverParams fp = flyoverParamsOf(RenderParams{});
     for (const auto& s : phantoms()) {
         const RayScene whole(s->xyz, s->tris);
         const std::vector<double> radii = flyoverFrameRadii(whole, s->centerline, fp);
-        const std::size_t i = s->centerline.points.size() / 2;
-        const auto cams = flyoverCameras(s->centerline.points[i], fp, radii[i]);
-        const auto subset = sceneOfTriangles(
-            s->xyz, s->normals, frustumTriangles(s->xyz, s->tris, {cams[0], cams[1]}, ro.widthPx, ro.heightPx, -2.0),
-            fastBuild());
-        RgbImage a, b;
-        renderPair(whole, cams[0], cams[1], ro, a);
-        renderPair(*subset, cams[0], cams[1], ro, b);
-        EXPECT_GT(differingPixels(a, b), 0) << s->name << ": a cull 2 mm inside the frusta left the pair unchanged";
+        const CulledPair pair = culledPair(*s, whole, radii, s->centerline.points.size() / 2, -2.0);
+        EXPECT_GT(differingPixels(pair.whole, pair.culled), 0u)
+            << s->name << ": a cull 2 mm inside the frusta left the pair unchanged";
     }
 }
 
