@@ -123,19 +123,6 @@ std::vector<uint32_t> gather(const std::vector<uint32_t>& triangleIndices, const
     return out;
 }
 
-void checkArrays(const std::vector<float>& verticesXyz, const std::vector<uint32_t>& triangleIndices, const char* where)
-{
-    const std::size_t nv = verticesXyz.size() / 3;
-    bool ok = verticesXyz.size() % 3 == 0 && triangleIndices.size() % 3 == 0;
-    for (std::size_t i = 0; ok && i < triangleIndices.size(); ++i) ok = triangleIndices[i] < nv;
-    if (!ok) {
-        std::ostringstream msg;
-        msg << where << ": vertex coordinates and triangle indices must come in threes, every index naming one of the "
-            << nv << " vertices";
-        throw InputError(msg.str());
-    }
-}
-
 } // namespace
 
 std::vector<double> flyoverFrameRadii(const RayScene& scene, const Centerline& centerline,
@@ -180,7 +167,7 @@ std::vector<uint32_t> frameRadiusTriangles(const std::vector<float>& verticesXyz
 {
     checkedTanHalf(params, options);
     checkIndex(centerline, index, "frameRadiusTriangles");
-    checkArrays(verticesXyz, triangleIndices, "frameRadiusTriangles");
+    checkTriangleArrays(verticesXyz, triangleIndices, "frameRadiusTriangles");
     if (!std::isfinite(marginMm)) throw ParameterError("frameRadiusTriangles: marginMm must be finite");
     const auto [first, last] = reachOf(centerline, index, Smoothing(centerline, options));
     // The cross-section planes of the points that cast rays (bridged points cast none).
@@ -249,7 +236,7 @@ std::vector<uint32_t> frustumTriangles(const std::vector<float>& verticesXyz,
                                        const std::vector<Camera>& cameras, int widthPx, int heightPx,
                                        double marginMm)
 {
-    checkArrays(verticesXyz, triangleIndices, "frustumTriangles");
+    checkTriangleArrays(verticesXyz, triangleIndices, "frustumTriangles");
     if (cameras.empty() || cameras.size() > 3)
         throw ParameterError("frustumTriangles: one to three cameras needed");
     if (!(widthPx > 0 && heightPx > 0)) throw ParameterError("frustumTriangles: widthPx and heightPx must be > 0");

@@ -128,22 +128,15 @@ std::vector<uint32_t> meshTriangles(const TriMesh& mesh)
     return tris;
 }
 
-/// Throws InputError unless the arrays come in threes, fit 32-bit indices and every index names
-/// a vertex.
-void checkArrays(const std::vector<float>& verticesXyz, const std::vector<uint32_t>& triangleIndices)
+/// Throws InputError unless there are three normal coordinates per vertex.
+void checkNormals(const std::vector<float>& vertexNormalsXyz, const std::vector<float>& verticesXyz)
 {
-    if (verticesXyz.size() % 3 != 0 || triangleIndices.size() % 3 != 0)
-        throw InputError("RayScene: vertex coordinates and triangle indices must come in threes");
-    const std::size_t nv = verticesXyz.size() / 3;
-    if (triangleIndices.size() / 3 > std::size_t(std::numeric_limits<uint32_t>::max() / 3) ||
-        nv >= std::size_t(std::numeric_limits<uint32_t>::max()))
-        throw InputError("RayScene: mesh too large for 32-bit Embree indices");
-    for (const uint32_t i : triangleIndices)
-        if (i >= nv) {
-            std::ostringstream msg;
-            msg << "RayScene: triangle vertex index " << i << " out of range (" << nv << " vertices)";
-            throw InputError(msg.str());
-        }
+    if (vertexNormalsXyz.size() != verticesXyz.size()) {
+        std::ostringstream msg;
+        msg << "RayScene: " << vertexNormalsXyz.size() << " vertex normal coordinates for " << verticesXyz.size()
+            << " vertex coordinates";
+        throw InputError(msg.str());
+    }
 }
 
 /// Vertex normals: sum of the unnormalised face normals (twice the face area times the unit
@@ -194,6 +187,23 @@ std::vector<float> normalsOf(const std::vector<float>& xyz, const std::vector<ui
 
 } // namespace
 
+void checkTriangleArrays(const std::vector<float>& verticesXyz, const std::vector<uint32_t>& triangleIndices,
+                         const std::string& where)
+{
+    if (verticesXyz.size() % 3 != 0 || triangleIndices.size() % 3 != 0)
+        throw InputError(where + ": vertex coordinates and triangle indices must come in threes");
+    const std::size_t nv = verticesXyz.size() / 3;
+    if (triangleIndices.size() / 3 > std::size_t(std::numeric_limits<uint32_t>::max() / 3) ||
+        nv >= std::size_t(std::numeric_limits<uint32_t>::max()))
+        throw InputError(where + ": mesh too large for 32-bit Embree indices");
+    for (const uint32_t i : triangleIndices)
+        if (i >= nv) {
+            std::ostringstream msg;
+            msg << where << ": triangle vertex index " << i << " out of range (" << nv << " vertices)";
+            throw InputError(msg.str());
+        }
+}
+
 void triMeshArrays(const TriMesh& mesh, std::vector<float>& verticesXyz, std::vector<uint32_t>& triangleIndices)
 {
     triangleIndices = meshTriangles(mesh);
@@ -203,7 +213,7 @@ void triMeshArrays(const TriMesh& mesh, std::vector<float>& verticesXyz, std::ve
 std::vector<float> smoothVertexNormals(const std::vector<float>& verticesXyz,
                                        const std::vector<uint32_t>& triangleIndices)
 {
-    checkArrays(verticesXyz, triangleIndices);
+    checkTriangleArrays(verticesXyz, triangleIndices, "RayScene");
     const DenormalsFlushed flushed;  // as in the scene's constructor: the same bits
     return normalsOf(verticesXyz, triangleIndices);
 }
@@ -212,13 +222,8 @@ std::unique_ptr<RayScene> sceneOfTriangles(const std::vector<float>& verticesXyz
                                            const std::vector<float>& vertexNormalsXyz,
                                            const std::vector<uint32_t>& triangleIndices, const SceneOptions& options)
 {
-    checkArrays(verticesXyz, triangleIndices);
-    if (vertexNormalsXyz.size() != verticesXyz.size()) {
-        std::ostringstream msg;
-        msg << "RayScene: " << vertexNormalsXyz.size() << " vertex normal coordinates for " << verticesXyz.size()
-            << " vertex coordinates";
-        throw InputError(msg.str());
-    }
+    checkTriangleArrays(verticesXyz, triangleIndices, "RayScene");
+    checkNormals(vertexNormalsXyz, verticesXyz);
     constexpr uint32_t UNUSED = std::numeric_limits<uint32_t>::max();
     std::vector<uint32_t> newIndex(verticesXyz.size() / 3, UNUSED), indices(triangleIndices.size());
     std::vector<float> xyz, normals;
@@ -251,12 +256,7 @@ RayScene::RayScene(std::vector<float> verticesXyz, std::vector<uint32_t> triangl
                    const std::vector<float>& vertexNormalsXyz, const SceneOptions& options)
     : mImpl(std::make_unique<Impl>())
 {
-    if (vertexNormalsXyz.size() != verticesXyz.size()) {
-        std::ostringstream msg;
-        msg << "RayScene: " << vertexNormalsXyz.size() << " vertex normal coordinates for "
-            << verticesXyz.size() << " vertex coordinates";
-        throw InputError(msg.str());
-    }
+    checkNormals(vertexNormalsXyz, verticesXyz);
     build(std::move(verticesXyz), std::move(triangleIndices), &vertexNormalsXyz, options);
 }
 
@@ -266,7 +266,7 @@ void RayScene::build(std::vector<float> verticesXyz, std::vector<uint32_t> trian
     Impl& im = *mImpl;
     const DenormalsFlushed flushed;
 
-    checkArrays(verticesXyz, triangleIndices);
+    checkTriangleArrays(verticesXyz, triangleIndices, "RayScene");
     const std::size_t nv = verticesXyz.size() / 3;
 
     im.device = rtcNewDevice(nullptr);

@@ -10,6 +10,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace flyover {
@@ -31,6 +32,11 @@ struct SceneOptions {
     /// trace; for a scene that few rays will meet (the first pair's). The hits are the same.
     bool fastBuild = false;
 };
+
+/// The checks RayScene's array constructors make: coordinates and indices in threes, sizes that
+/// fit Embree's 32-bit indices, every index naming a vertex. @throw InputError starting "where: ".
+void checkTriangleArrays(const std::vector<float>& verticesXyz, const std::vector<uint32_t>& triangleIndices,
+                         const std::string& where);
 
 /// The arrays RayScene's second constructor takes, from a mesh: x, y, z per vertex and three
 /// vertex indices per face (in the order of the face-vertex circulator, as RayScene(mesh) uses).

@@ -583,9 +583,7 @@ LumenSideTest::~LumenSideTest() = default;
 
 bool LumenSideTest::isInward(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c) const
 {
-    const std::array<openvdb::Vec3d, 3> p{openvdb::Vec3d(a[0], a[1], a[2]), openvdb::Vec3d(b[0], b[1], b[2]),
-                                          openvdb::Vec3d(c[0], c[1], c[2])};
-    return classifyTriangle(mImpl->sampler, mImpl->h, p) == FaceSide::Inward;
+    return classify(a, b, c) == FaceSide::Inward;
 }
 
 FaceSide LumenSideTest::classify(const OpenMesh::Vec3d& a, const OpenMesh::Vec3d& b, const OpenMesh::Vec3d& c,
