@@ -1,6 +1,6 @@
 // render_bench: the fly-over renderer measured on a phantom.
 //
-//   render_bench [--mode speed|coverage|sweep|quads] [--study DIR [--truth FILE]] [--size full|medium|small]
+//   render_bench [--mode speed|coverage|sweep|quads|marker] [--study DIR [--truth FILE]] [--size full|medium|small]
 //                [--seed N] [--px 512] [--threads 2] [--runs 5] [--positions 60]
 //                [--pairing coplanar|compact] [--embree-config STRING]
 //
@@ -11,6 +11,12 @@
 //           (the frames step itself, through the pipeline, on a copy of the study: the
 //           study is never written).
 // coverage  coverage fractions against the coverage rays' resolution and step (convergence).
+// marker    the coverage step's marking (ViewMarker, the render stage's coverage_px and OST) on
+//           --positions centerline points, evenly spread, four views each (both fly-over
+//           cameras, the fly-through both ways): process CPU seconds of the views traced with
+//           hits only and with the footprint walk, alternated run by run, the walk's share
+//           (their difference) per ray, and a digest of the flagged triangles, the same for
+//           two builds when they mark the same triangles. Use --threads 1 for the clearest figures.
 // sweep     the clip offset sweep: coverage, polyp visibility (also on the cutting line) and
 //           occlusion by other loops of colon for each offset (needs the truth polyps).
 // quads     Embree's traversal of the surface as triangles (RTC_GEOMETRY_TYPE_TRIANGLE, what
@@ -141,8 +147,8 @@ Args parseArgs(int argc, char** argv)
         else if (k == "--embree-config") a.embreeConfig = value();
         else throw std::runtime_error("unknown option " + k + " (see the comment at the top of render_bench.cpp)");
     }
-    if (a.mode != "speed" && a.mode != "coverage" && a.mode != "sweep" && a.mode != "quads")
-        throw std::runtime_error("--mode must be speed, coverage, sweep or quads");
+    if (a.mode != "speed" && a.mode != "coverage" && a.mode != "sweep" && a.mode != "quads" && a.mode != "marker")
+        throw std::runtime_error("--mode must be speed, coverage, sweep, quads or marker");
     if (a.pairing != "coplanar" && a.pairing != "compact")
         throw std::runtime_error("--pairing must be coplanar or compact");
     if (!(a.runs >= 1 && a.threads >= 1 && a.px >= 8 && a.positions >= 1))
@@ -385,6 +391,59 @@ void benchCoverage(const Subject& s)
                         100 * c.flythroughBackward.fraction, 100 * c.flythroughTwoWay.fraction, double(c.rays) * 1e-6,
                         t.wall);
         }
+}
+
+// ----------------------------------------------------------------------------------- marker
+
+void benchMarker(const Args& a, const Subject& s)
+{
+    const RayScene scene(s.mesh);
+    const RenderParams rp;
+    FlyoverParams fp;
+    fp.fovDeg = rp.fovDeg;
+    fp.rollDeg = rp.rollDeg;
+    fp.clipOffsetFraction = rp.clipOffsetFraction;
+    fp.clipOffsetMm = rp.clipOffsetMm;
+    const Centerline& cl = s.centerline;
+    const std::vector<double> frame = flyoverFrameRadii(scene, cl, fp);
+    std::vector<Camera> cams;
+    const std::size_t n = std::min(cl.points.size(), std::size_t(a.positions));
+    for (std::size_t k = 0; k < n; ++k) {
+        const std::size_t i = n > 1 ? k * (cl.points.size() - 1) / (n - 1) : 0;
+        for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) cams.push_back(c);
+        cams.push_back(flythroughCamera(cl.points[i], true, rp.flythroughFovDeg));
+        cams.push_back(flythroughCamera(cl.points[i], false, rp.flythroughFovDeg));
+    }
+    ViewMarker hitsOnly(scene, rp.coveragePx, false), walk(scene, rp.coveragePx, true);
+    std::vector<uint8_t> seen(scene.triangleCount(), 0);
+    uint64_t rays = 0;
+    auto markAll = [&](ViewMarker& m) {
+        const double c0 = processCpuSeconds();
+        rays = 0;
+        for (const Camera& c : cams) rays += m.mark(c, rp.ost, seen.data());
+        return processCpuSeconds() - c0;
+    };
+    std::vector<double> hitsCpu, walkCpu;
+    markAll(walk);  // warm-up (first touch of the scene and the marker's buffers)
+    for (int r = 0; r < a.runs; ++r) {
+        hitsCpu.push_back(markAll(hitsOnly));
+        walkCpu.push_back(markAll(walk));
+    }
+    uint64_t digest = 1469598103934665603ull, flagged = 0;  // FNV-1a over the flags
+    std::fill(seen.begin(), seen.end(), uint8_t(0));
+    markAll(walk);
+    for (const uint8_t f : seen) {
+        digest = (digest ^ f) * 1099511628211ull;
+        flagged += f;
+    }
+    const double hits = median(hitsCpu), both = median(walkCpu);
+    std::printf("\ncoverage marking: %zu views (%zu centerline points), %d px, OST %s, %.2f M rays per run\n",
+                cams.size(), n, rp.coveragePx, rp.ost ? "on" : "off", double(rays) * 1e-6);
+    std::printf("  hits only      %7.3f CPU s (median of %d)\n", hits, a.runs);
+    std::printf("  with footprint %7.3f CPU s\n", both);
+    std::printf("  footprint walk %7.3f CPU s, %.0f ns per ray\n", both - hits, (both - hits) / double(rays) * 1e9);
+    std::printf("  flagged %llu of %u triangles, digest %016llx\n", static_cast<unsigned long long>(flagged),
+                scene.triangleCount(), static_cast<unsigned long long>(digest));
 }
 
 // ------------------------------------------------------------------------------------ sweep
@@ -747,6 +806,8 @@ int main(int argc, char** argv)
             benchQuads(a, s);
         } else if (a.mode == "coverage") {
             benchCoverage(s);
+        } else if (a.mode == "marker") {
+            benchMarker(a, s);
         } else {
             benchSweep(a, s);
         }

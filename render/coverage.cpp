@@ -19,8 +19,8 @@
 namespace flyover {
 
 /// Triangles around each vertex (compressed rows), for the edge neighbours of a triangle; and,
-/// for the footprint walk, each triangle's edge neighbours (compressed rows) and its
-/// unnormalised normal, computed once per mesh instead of once per ray.
+/// for the footprint walk, each triangle's edge neighbours (compressed rows), built once per
+/// mesh instead of once per ray.
 struct ViewMarker::Topology {
     std::vector<uint32_t> start;  ///< triangles of vertex v: list[start[v] .. start[v + 1])
     std::vector<uint32_t> list;
@@ -30,7 +30,8 @@ struct ViewMarker::Topology {
     std::vector<uint32_t> neighbourStart;
     std::vector<uint32_t> neighbours;
 
-    explicit Topology(const RayScene::Impl& im)
+    /// `withRows` false: only the triangles around each vertex (what summarise needs).
+    explicit Topology(const RayScene::Impl& im, bool withRows = true)
     {
         const std::size_t nv = im.vertices.size() - 1;
         start.assign(nv + 1, 0);
@@ -40,6 +41,7 @@ struct ViewMarker::Topology {
         std::vector<uint32_t> fill(start.begin(), start.end() - 1);
         for (std::size_t k = 0; k < im.indices.size(); ++k) list[fill[im.indices[k]]++] = uint32_t(k / 3);
 
+        if (!withRows) return;
         const std::size_t nf = im.triangles;
         // Edge neighbours of f, sorted and unique, into `found`.
         auto neighboursOf = [&](std::size_t f, std::vector<uint32_t>& found) {
@@ -380,7 +382,7 @@ void summariseCoverage(MethodCoverage& m, const RayScene& scene, const Centerlin
     const TriangleGeometry geo = triangleGeometry(scene);
     double total = 0;
     for (const double a : geo.areaMm2) total += a;
-    const VertexTriangles vt(scene.impl());
+    const VertexTriangles vt(scene.impl(), false);  // summarise walks vertex rows only
     const CenterlineLocator locator(centerline);
     summarise(m, scene.impl(), vt, geo, total, centerline, locator, minRegionMm2, regionTriangles);
 }

@@ -205,6 +205,102 @@ TEST(Coverage, FootprintWalkMatchesThePlainRuleOnAFineMesh)
     EXPECT_GE(views, 30u);
 }
 
+TEST(Coverage, FootprintWalkMatchesThePlainRuleWithRepeatedCorners)
+{
+    // A triangle with a repeated corner, (a, a, b) on an edge (a, b) of the mesh, has every
+    // triangle around a as an edge neighbour (they hold both ends of its edge (a, a)), and
+    // those share one corner with it, not two: a walk that tested only a neighbour's corner
+    // off the shared edge would miss their third corner. Without OST such a triangle passes
+    // the facing test, so the walk goes through it.
+    const FoldedTube tube;
+    const TriMesh mesh = tube.mesh(0.2, 192);
+    std::vector<float> xyz;
+    std::vector<uint32_t> tris;
+    for (const auto v : mesh.vertices())
+        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
+    for (const auto f : mesh.faces())
+        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    const std::size_t meshTriangles = tris.size() / 3;
+    for (std::size_t f = 0; f < meshTriangles; f += 7) tris.insert(tris.end(), {tris[3 * f], tris[3 * f], tris[3 * f + 1]});
+    const RayScene scene(std::move(xyz), std::move(tris));
+    const Centerline line = tube.centerline();
+    FlyoverParams fp;
+    ViewMarker marker(scene, 48, true);
+    const auto around = test::trianglesAroundVertices(scene);
+    std::size_t views = 0, withRepeated = 0;
+    for (std::size_t i = 0; i < line.points.size(); i += 8) {
+        std::vector<Camera> cams;
+        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
+        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
+        for (std::size_t c = 0; c < cams.size(); ++c)
+            for (const bool ost : {false, true}) {
+                std::vector<uint32_t> got;
+                marker.mark(cams[c], ost, got);
+                std::sort(got.begin(), got.end());
+                got.erase(std::unique(got.begin(), got.end()), got.end());
+                const auto want = test::referenceMark(scene, around, cams[c], 48, ost, true);
+                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
+                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
+                withRepeated += std::any_of(want.begin(), want.end(), [&](uint32_t f) { return f >= meshTriangles; });
+                ++views;
+            }
+    }
+    EXPECT_GE(views, 60u);
+    EXPECT_GT(withRepeated, 10u) << "the walk should pass through the triangles with a repeated corner";
+}
+
+TEST(Coverage, FootprintWalkMatchesThePlainRuleAtWideNonManifoldEdges)
+{
+    // Edges held by a dozen triangles (non-manifold fins): rows of more than eight edge
+    // neighbours, each reached from several triangles; the walk must mark each once and
+    // miss none.
+    const FoldedTube tube;
+    const TriMesh mesh = tube.mesh(0.2, 192);
+    std::vector<float> xyz;
+    std::vector<uint32_t> tris;
+    for (const auto v : mesh.vertices())
+        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
+    for (const auto f : mesh.faces())
+        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    const std::size_t meshTriangles = tris.size() / 3;
+    for (std::size_t f = 0; f < meshTriangles; f += 97) {
+        const uint32_t a = tris[3 * f], b = tris[3 * f + 1], c = tris[3 * f + 2];
+        for (int i = 1; i <= 10; ++i) {
+            // Fins around the edge (a, b), between it and the third corner, pointing both ways.
+            const uint32_t d = uint32_t(xyz.size() / 3);
+            const float s = 0.08f * float(i), lift = (i % 2 ? 0.05f : -0.05f) * float(i);
+            for (int k = 0; k < 3; ++k)
+                xyz.push_back(0.5f * (xyz[3 * a + k] + xyz[3 * b + k]) + s * (xyz[3 * c + k] - xyz[3 * a + k]) + lift);
+            tris.insert(tris.end(), {i % 2 ? a : b, i % 2 ? b : a, d});
+        }
+    }
+    const RayScene scene(std::move(xyz), std::move(tris));
+    const Centerline line = tube.centerline();
+    FlyoverParams fp;
+    ViewMarker marker(scene, 48, true);
+    const auto around = test::trianglesAroundVertices(scene);
+    std::size_t views = 0, withFins = 0;
+    for (std::size_t i = 0; i < line.points.size(); i += 8) {
+        std::vector<Camera> cams;
+        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
+        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
+        for (std::size_t c = 0; c < cams.size(); ++c)
+            for (const bool ost : {false, true}) {
+                std::vector<uint32_t> got;
+                marker.mark(cams[c], ost, got);
+                std::sort(got.begin(), got.end());
+                got.erase(std::unique(got.begin(), got.end()), got.end());
+                const auto want = test::referenceMark(scene, around, cams[c], 48, ost, true);
+                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
+                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
+                withFins += std::any_of(want.begin(), want.end(), [&](uint32_t f) { return f >= meshTriangles; });
+                ++views;
+            }
+    }
+    EXPECT_GE(views, 60u);
+    EXPECT_GT(withFins, 10u) << "the walk should reach the fins";
+}
+
 TEST(Coverage, FlagsFromMarkAreTheTrianglesItLists)
 {
     // computeCoverage has mark() flag the triangles in its per-method byte arrays; they must be

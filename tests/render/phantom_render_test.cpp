@@ -159,6 +159,60 @@ TEST_F(SmallPhantom, CoverageMarksTheSameTrianglesAsThePlainRule)
     EXPECT_GT(marked, views * 100) << "the views should show many triangles";
 }
 
+TEST_F(SmallPhantom, MarkerMatchesThePlainRuleWithAndWithoutOst)
+{
+    // The coverage rule (reference_marker.h: each ray's hit triangle and the edge-connected,
+    // camera-facing triangles with a corner within the footprint radius) against ViewMarker on
+    // the phantom's mesh, for fly-over and fly-through cameras, with OST on and off and the
+    // footprint on and off; both of mark()'s forms (listed, flagged) must give its triangles.
+    const RenderParams rp;
+    const Centerline& cl = data->centerline;
+    const FlyoverParams fp = defaultFlyoverParams();
+    const std::vector<double> frame = flyoverFrameRadii(*data->scene, cl, fp);
+    const auto around = test::trianglesAroundVertices(*data->scene);
+    const uint32_t nf = data->scene->triangleCount();
+    ViewMarker withFootprint(*data->scene, rp.coveragePx, true);
+    ViewMarker hitsOnly(*data->scene, rp.coveragePx, false);
+    std::size_t views = 0, ostChanged = 0;
+    for (std::size_t i = 0; i < cl.points.size(); i += std::max<std::size_t>(1, cl.points.size() / 10)) {
+        std::vector<Camera> cams;
+        for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) cams.push_back(c);
+        cams.push_back(flythroughCamera(cl.points[i], true, rp.flythroughFovDeg));
+        cams.push_back(flythroughCamera(cl.points[i], false, rp.flythroughFovDeg));
+        for (std::size_t c = 0; c < cams.size(); ++c)
+            for (const bool footprint : {true, false}) {
+                std::vector<uint32_t> byOst[2];
+                for (const bool ost : {true, false}) {
+                    ViewMarker& marker = footprint ? withFootprint : hitsOnly;
+                    std::vector<uint32_t> listed;
+                    marker.mark(cams[c], ost, listed);
+                    std::sort(listed.begin(), listed.end());
+                    listed.erase(std::unique(listed.begin(), listed.end()), listed.end());
+                    std::vector<uint8_t> flags(nf, 0);
+                    marker.mark(cams[c], ost, flags.data());
+                    std::vector<uint32_t> flagged;
+                    for (uint32_t f = 0; f < nf; ++f)
+                        if (flags[f]) flagged.push_back(f);
+                    const auto want = test::referenceMark(*data->scene, around, cams[c], rp.coveragePx, ost, footprint);
+                    const std::string where = "centerline point " + std::to_string(i) + ", camera " + std::to_string(c) +
+                                              (c < 2 ? " (fly-over)" : " (fly-through)") + ", OST " +
+                                              (ost ? "on" : "off") + ", footprint " + (footprint ? "on" : "off");
+                    EXPECT_EQ(listed, want) << where << ": " << listed.size()
+                                            << " triangles listed, the plain rule marks " << want.size();
+                    EXPECT_EQ(flagged, want) << where << ": " << flagged.size()
+                                             << " triangles flagged, the plain rule marks " << want.size();
+                    byOst[ost ? 0 : 1] = want;
+                    ++views;
+                }
+                ostChanged += byOst[0] != byOst[1];
+            }
+    }
+    EXPECT_GE(views, 160u);
+    // The fly-over cameras look through the near wall only with OST: the two settings must
+    // mark different triangles in some views, or the OST-off half tested nothing new.
+    EXPECT_GT(ostChanged, 0u) << "OST on and off marked the same triangles in every view";
+}
+
 TEST_F(SmallPhantom, EveryPolypIsSeenInAFlyoverFrame)
 {
     const Centerline& cl = data->centerline;
