@@ -40,6 +40,7 @@
 #include "data/phantom.h"
 #include "pipeline/artifact_io.h"
 #include "pipeline/phantom_io.h"
+#include "pipeline/render_settings.h"
 #include "pipeline/study.h"
 #include "render/camera.h"
 #include "render/coverage.h"
@@ -399,11 +400,7 @@ void benchMarker(const Args& a, const Subject& s)
 {
     const RayScene scene(s.mesh);
     const RenderParams rp;
-    FlyoverParams fp;
-    fp.fovDeg = rp.fovDeg;
-    fp.rollDeg = rp.rollDeg;
-    fp.clipOffsetFraction = rp.clipOffsetFraction;
-    fp.clipOffsetMm = rp.clipOffsetMm;
+    const FlyoverParams fp = flyoverParamsOf(rp);
     const Centerline& cl = s.centerline;
     const std::vector<double> frame = flyoverFrameRadii(scene, cl, fp);
     std::vector<Camera> cams;

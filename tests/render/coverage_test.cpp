@@ -12,6 +12,7 @@
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -158,19 +159,67 @@ TEST(Coverage, FootprintConvergesFasterThanHitTrianglesAlone)
     EXPECT_LT(coarseHit, fine);
 }
 
-TEST(Coverage, FootprintWalkMatchesThePlainRuleOnAFineMesh)
-{
-    // A fine mesh (long footprint walks, grazing views at the fold) and a non-manifold piece:
-    // ViewMarker's rows of edge neighbours must give what scanning the triangles around each
-    // vertex gives (reference_marker.h), with and without OST.
-    const FoldedTube tube;
-    const TriMesh mesh = tube.mesh(0.2, 192);
+/// The folded tube's fine mesh (long footprint walks, grazing views at the fold) as the arrays
+/// RayScene takes, for the footprint-walk tests to extend; triangles from `meshTriangles` on
+/// are the ones a test added.
+struct FineTubeArrays {
+    FoldedTube tube;
     std::vector<float> xyz;
     std::vector<uint32_t> tris;
-    for (const auto v : mesh.vertices())
-        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
-    for (const auto f : mesh.faces())
-        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+    uint32_t meshTriangles = 0;
+
+    FineTubeArrays()
+    {
+        const TriMesh mesh = tube.mesh(0.2, 192);
+        for (const auto v : mesh.vertices())
+            for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
+        for (const auto f : mesh.faces())
+            for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
+        meshTriangles = uint32_t(tris.size() / 3);
+    }
+};
+
+/// ViewMarker (viewPx rays a side, footprint on) against the plain rule (reference_marker.h:
+/// scanning the triangles around each vertex) at every `every`-th point of `line`: both
+/// fly-over cameras and the forward fly-through, OST on and off. Returns the views compared;
+/// `reachingExtra` counts those whose plain-rule triangles include one of index >= firstExtra
+/// (the triangles a test added to the tube).
+std::size_t expectWalkMatchesPlainRule(const RayScene& scene, const Centerline& line, int viewPx, std::size_t every,
+                                       uint32_t firstExtra, std::size_t& reachingExtra)
+{
+    const FlyoverParams fp;
+    ViewMarker marker(scene, viewPx, true);
+    const auto around = test::trianglesAroundVertices(scene);
+    std::size_t views = 0;
+    reachingExtra = 0;
+    for (std::size_t i = 0; i < line.points.size(); i += every) {
+        std::vector<Camera> cams;
+        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
+        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
+        for (std::size_t c = 0; c < cams.size(); ++c)
+            for (const bool ost : {true, false}) {
+                std::vector<uint32_t> got;
+                marker.mark(cams[c], ost, got);
+                std::sort(got.begin(), got.end());
+                got.erase(std::unique(got.begin(), got.end()), got.end());
+                const auto want = test::referenceMark(scene, around, cams[c], viewPx, ost, true);
+                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
+                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
+                reachingExtra += std::any_of(want.begin(), want.end(), [&](uint32_t f) { return f >= firstExtra; });
+                ++views;
+            }
+    }
+    return views;
+}
+
+TEST(Coverage, FootprintWalkMatchesThePlainRuleOnAFineMesh)
+{
+    // A fine mesh and a non-manifold piece: ViewMarker's rows of edge neighbours must give what
+    // scanning the triangles around each vertex gives, with and without OST.
+    FineTubeArrays t;
+    auto& xyz = t.xyz;
+    auto& tris = t.tris;
+    const uint32_t meshTriangles = t.meshTriangles;
     {
         // Two extra triangles on the first triangle's first edge make it non-manifold.
         const uint32_t a = tris[0], b = tris[1];
@@ -181,28 +230,8 @@ TEST(Coverage, FootprintWalkMatchesThePlainRuleOnAFineMesh)
         }
     }
     const RayScene scene(std::move(xyz), std::move(tris));
-    const Centerline line = tube.centerline();
-    FlyoverParams fp;
-    ViewMarker marker(scene, 64, true);
-    const auto around = test::trianglesAroundVertices(scene);
-    std::size_t views = 0;
-    for (std::size_t i = 0; i < line.points.size(); i += 10) {
-        std::vector<Camera> cams;
-        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
-        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
-        for (std::size_t c = 0; c < cams.size(); ++c)
-            for (const bool ost : {true, false}) {
-                std::vector<uint32_t> got;
-                marker.mark(cams[c], ost, got);
-                std::sort(got.begin(), got.end());
-                got.erase(std::unique(got.begin(), got.end()), got.end());
-                const auto want = test::referenceMark(scene, around, cams[c], 64, ost, true);
-                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
-                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
-                ++views;
-            }
-    }
-    EXPECT_GE(views, 30u);
+    std::size_t reachingExtra = 0;
+    EXPECT_GE(expectWalkMatchesPlainRule(scene, t.tube.centerline(), 64, 10, meshTriangles, reachingExtra), 30u);
 }
 
 TEST(Coverage, FootprintWalkMatchesThePlainRuleWithRepeatedCorners)
@@ -212,40 +241,14 @@ TEST(Coverage, FootprintWalkMatchesThePlainRuleWithRepeatedCorners)
     // those share one corner with it, not two: a walk that tested only a neighbour's corner
     // off the shared edge would miss their third corner. Without OST such a triangle passes
     // the facing test, so the walk goes through it.
-    const FoldedTube tube;
-    const TriMesh mesh = tube.mesh(0.2, 192);
-    std::vector<float> xyz;
-    std::vector<uint32_t> tris;
-    for (const auto v : mesh.vertices())
-        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
-    for (const auto f : mesh.faces())
-        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
-    const std::size_t meshTriangles = tris.size() / 3;
+    FineTubeArrays t;
+    auto& xyz = t.xyz;
+    auto& tris = t.tris;
+    const uint32_t meshTriangles = t.meshTriangles;
     for (std::size_t f = 0; f < meshTriangles; f += 7) tris.insert(tris.end(), {tris[3 * f], tris[3 * f], tris[3 * f + 1]});
     const RayScene scene(std::move(xyz), std::move(tris));
-    const Centerline line = tube.centerline();
-    FlyoverParams fp;
-    ViewMarker marker(scene, 48, true);
-    const auto around = test::trianglesAroundVertices(scene);
-    std::size_t views = 0, withRepeated = 0;
-    for (std::size_t i = 0; i < line.points.size(); i += 8) {
-        std::vector<Camera> cams;
-        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
-        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
-        for (std::size_t c = 0; c < cams.size(); ++c)
-            for (const bool ost : {false, true}) {
-                std::vector<uint32_t> got;
-                marker.mark(cams[c], ost, got);
-                std::sort(got.begin(), got.end());
-                got.erase(std::unique(got.begin(), got.end()), got.end());
-                const auto want = test::referenceMark(scene, around, cams[c], 48, ost, true);
-                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
-                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
-                withRepeated += std::any_of(want.begin(), want.end(), [&](uint32_t f) { return f >= meshTriangles; });
-                ++views;
-            }
-    }
-    EXPECT_GE(views, 60u);
+    std::size_t withRepeated = 0;
+    EXPECT_GE(expectWalkMatchesPlainRule(scene, t.tube.centerline(), 48, 8, meshTriangles, withRepeated), 60u);
     EXPECT_GT(withRepeated, 10u) << "the walk should pass through the triangles with a repeated corner";
 }
 
@@ -254,15 +257,10 @@ TEST(Coverage, FootprintWalkMatchesThePlainRuleAtWideNonManifoldEdges)
     // Edges held by a dozen triangles (non-manifold fins): rows of more than eight edge
     // neighbours, each reached from several triangles; the walk must mark each once and
     // miss none.
-    const FoldedTube tube;
-    const TriMesh mesh = tube.mesh(0.2, 192);
-    std::vector<float> xyz;
-    std::vector<uint32_t> tris;
-    for (const auto v : mesh.vertices())
-        for (int k = 0; k < 3; ++k) xyz.push_back(mesh.point(v)[k]);
-    for (const auto f : mesh.faces())
-        for (const auto v : mesh.fv_range(f)) tris.push_back(uint32_t(v.idx()));
-    const std::size_t meshTriangles = tris.size() / 3;
+    FineTubeArrays t;
+    auto& xyz = t.xyz;
+    auto& tris = t.tris;
+    const uint32_t meshTriangles = t.meshTriangles;
     for (std::size_t f = 0; f < meshTriangles; f += 97) {
         const uint32_t a = tris[3 * f], b = tris[3 * f + 1], c = tris[3 * f + 2];
         for (int i = 1; i <= 10; ++i) {
@@ -275,29 +273,8 @@ TEST(Coverage, FootprintWalkMatchesThePlainRuleAtWideNonManifoldEdges)
         }
     }
     const RayScene scene(std::move(xyz), std::move(tris));
-    const Centerline line = tube.centerline();
-    FlyoverParams fp;
-    ViewMarker marker(scene, 48, true);
-    const auto around = test::trianglesAroundVertices(scene);
-    std::size_t views = 0, withFins = 0;
-    for (std::size_t i = 0; i < line.points.size(); i += 8) {
-        std::vector<Camera> cams;
-        for (const Camera& c : flyoverCameras(line.points[i], fp, 1.2 * line.points[i].radiusMm)) cams.push_back(c);
-        cams.push_back(flythroughCamera(line.points[i], true, 90.0));
-        for (std::size_t c = 0; c < cams.size(); ++c)
-            for (const bool ost : {false, true}) {
-                std::vector<uint32_t> got;
-                marker.mark(cams[c], ost, got);
-                std::sort(got.begin(), got.end());
-                got.erase(std::unique(got.begin(), got.end()), got.end());
-                const auto want = test::referenceMark(scene, around, cams[c], 48, ost, true);
-                EXPECT_EQ(got, want) << "centerline point " << i << ", camera " << c << ", ost " << ost << ": "
-                                     << got.size() << " triangles marked, the plain rule marks " << want.size();
-                withFins += std::any_of(want.begin(), want.end(), [&](uint32_t f) { return f >= meshTriangles; });
-                ++views;
-            }
-    }
-    EXPECT_GE(views, 60u);
+    std::size_t withFins = 0;
+    EXPECT_GE(expectWalkMatchesPlainRule(scene, t.tube.centerline(), 48, 8, meshTriangles, withFins), 60u);
     EXPECT_GT(withFins, 10u) << "the walk should reach the fins";
 }
 

@@ -5,6 +5,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "data/phantom.h"
 #include "pipeline/params.h"
+#include "pipeline/render_settings.h"
 #include "render/coverage.h"
 #include "render/flyover_path.h"
 #include "render/render_view.h"
@@ -55,16 +56,7 @@ std::unique_ptr<PhantomScene> phantomScene(PhantomSize size, uint64_t seed)
 }
 
 /// The fly-over cameras the render stage uses by default.
-FlyoverParams defaultFlyoverParams()
-{
-    const RenderParams rp;
-    FlyoverParams fp;
-    fp.fovDeg = rp.fovDeg;
-    fp.rollDeg = rp.rollDeg;
-    fp.clipOffsetFraction = rp.clipOffsetFraction;
-    fp.clipOffsetMm = rp.clipOffsetMm;
-    return fp;
-}
+FlyoverParams defaultFlyoverParams() { return flyoverParamsOf(RenderParams{}); }
 
 int polypPixels(const RayScene& scene, const Camera& cam, int px, const PhantomPolyp& polyp)
 {
