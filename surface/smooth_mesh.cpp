@@ -3,12 +3,15 @@
 #include "volume/error.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -60,24 +63,115 @@ Adjacency buildAdjacency(const TriMesh& mesh, int64_t& fixedVertices)
     return a;
 }
 
-/// One Jacobi step in + weight * L(in) -> out.
-void umbrellaStep(const Adjacency& a, const std::vector<Vec3d>& in, std::vector<Vec3d>& out, double weight)
+/// The umbrella update of vertex v (local indices into `in`): in + weight * (mean of the
+/// neighbours - in), the neighbours summed in their row's order; a vertex without a row stays.
+template <typename Offset>
+inline Vec3d umbrellaUpdate(const Offset* offsets, const int* neighbours, const Vec3d* in, std::size_t v, double weight)
 {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, in.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                          for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                              const std::size_t b = a.offsets[v], e = a.offsets[v + 1];
-                              if (b == e) {
-                                  out[v] = in[v];
-                                  continue;
-                              }
-                              Vec3d mean(0.0);
-                              for (std::size_t k = b; k != e; ++k) mean += in[std::size_t(a.neighbours[k])];
-                              mean /= double(e - b);
-                              out[v] = in[v] + weight * (mean - in[v]);
-                          }
-                      });
+    const std::size_t b = offsets[v], e = offsets[v + 1];
+    if (b == e) return in[v];
+    Vec3d mean(0.0);
+    for (std::size_t k = b; k != e; ++k) mean += in[std::size_t(neighbours[k])];
+    mean /= double(e - b);
+    return in[v] + weight * (mean - in[v]);
 }
+
+/// Jacobi steps in tiles (temporal blocking): the vertices in blocks of BLOCK consecutive
+/// indices, and per block the vertices within DEPTH rings of it over the adjacency (a fixed
+/// vertex has no row: it never moves, so the rings do not go through it). DEPTH steps are
+/// taken per block on a local copy that fits the cache: step s updates the rings 0 ..
+/// DEPTH - s, which read only rings up to DEPTH - s + 1, updated by step s - 1. After the last
+/// step the block's own vertices hold what DEPTH sweeps over the whole mesh would give, bit
+/// for bit (each update is umbrellaUpdate on the same values, its neighbours in the same
+/// order), and go to the output. A sweep per step over the whole mesh (~10 MB of positions,
+/// ~14 MB of rows on the full phantom) waits on memory; the tiles make ~26% more updates (the
+/// rings) on data that stays in L2: the mesh stage's CPU on the full phantom, one thread,
+/// 1.32 -> 1.16 s.
+class TiledSweeps {
+public:
+    static constexpr std::size_t BLOCK = 16384;
+    static constexpr int DEPTH = 4;
+
+    explicit TiledSweeps(const Adjacency& a)
+    {
+        const std::size_t n = a.offsets.size() - 1;
+        mBlocks.resize((n + BLOCK - 1) / BLOCK);
+        tbb::enumerable_thread_specific<std::vector<int>> localOf([n] { return std::vector<int>(n, -1); });
+        tbb::parallel_for(std::size_t(0), mBlocks.size(), [&](std::size_t bi) {
+            std::vector<int>& local = localOf.local();
+            Block& k = mBlocks[bi];
+            const std::size_t b0 = bi * BLOCK, b1 = std::min(n, b0 + BLOCK);
+            auto add = [&](int v) {
+                local[std::size_t(v)] = int(k.vertices.size());
+                k.vertices.push_back(v);
+            };
+            for (std::size_t v = b0; v < b1; ++v) add(int(v));
+            k.own = k.vertices.size();
+            k.ringEnd[0] = k.vertices.size();
+            std::size_t front = 0;
+            for (int r = 1; r <= DEPTH; ++r) {
+                const std::size_t end = k.vertices.size();
+                for (std::size_t i = front; i < end; ++i) {
+                    const std::size_t v = std::size_t(k.vertices[i]);
+                    for (std::size_t q = a.offsets[v]; q < a.offsets[v + 1]; ++q)
+                        if (local[std::size_t(a.neighbours[q])] < 0) add(a.neighbours[q]);
+                }
+                front = end;
+                k.ringEnd[std::size_t(r)] = k.vertices.size();
+            }
+            // Rows (in local indices) for the rings that are updated: 0 .. DEPTH - 1.
+            const std::size_t updated = k.ringEnd[DEPTH - 1];
+            k.offsets.assign(updated + 1, 0);
+            for (std::size_t i = 0; i < updated; ++i) {
+                const std::size_t v = std::size_t(k.vertices[i]);
+                k.offsets[i + 1] = k.offsets[i] + uint32_t(a.offsets[v + 1] - a.offsets[v]);
+            }
+            k.neighbours.resize(k.offsets[updated]);
+            for (std::size_t i = 0; i < updated; ++i) {
+                const std::size_t v = std::size_t(k.vertices[i]);
+                std::size_t o = k.offsets[i];
+                for (std::size_t q = a.offsets[v]; q < a.offsets[v + 1]; ++q)
+                    k.neighbours[o++] = local[std::size_t(a.neighbours[q])];
+            }
+            for (const int v : k.vertices) local[std::size_t(v)] = -1;
+        });
+    }
+
+    /// `steps` (<= DEPTH) Jacobi steps from `in` into `out`, step i with weights[i].
+    void run(const std::vector<Vec3d>& in, std::vector<Vec3d>& out, const double* weights, int steps) const
+    {
+        struct Scratch {
+            std::vector<Vec3d> current, next;
+        };
+        tbb::enumerable_thread_specific<Scratch> scratch;
+        tbb::parallel_for(std::size_t(0), mBlocks.size(), [&](std::size_t bi) {
+            const Block& k = mBlocks[bi];
+            Scratch& w = scratch.local();
+            const std::size_t size = k.vertices.size();
+            w.current.resize(size);
+            w.next.resize(size);
+            for (std::size_t i = 0; i < size; ++i) w.current[i] = in[std::size_t(k.vertices[i])];
+            for (int s = 1; s <= steps; ++s) {
+                const std::size_t updated = k.ringEnd[std::size_t(DEPTH - s)];
+                for (std::size_t v = 0; v < updated; ++v)
+                    w.next[v] = umbrellaUpdate(k.offsets.data(), k.neighbours.data(), w.current.data(), v,
+                                               weights[s - 1]);
+                w.current.swap(w.next);
+            }
+            for (std::size_t i = 0; i < k.own; ++i) out[std::size_t(k.vertices[i])] = w.current[i];
+        });
+    }
+
+private:
+    struct Block {
+        std::vector<int> vertices;  ///< local -> global: the block's own, then ring 1, 2, ...
+        std::size_t own = 0;
+        std::array<std::size_t, DEPTH + 1> ringEnd{};  ///< vertices [0, ringEnd[r]) lie within r rings
+        std::vector<uint32_t> offsets;  ///< local rows of rings 0 .. DEPTH - 1
+        std::vector<int> neighbours;    ///< local indices
+    };
+    std::vector<Block> mBlocks;
+};
 
 } // namespace
 
@@ -99,10 +193,16 @@ void smoothMeshTaubin(TriMesh& mesh, const TaubinParams& params, SmoothReport* r
     for (const auto v : mesh.vertices()) original[std::size_t(v.idx())] = OpenMesh::vector_cast<Vec3d>(mesh.point(v));
     std::vector<Vec3d> p = original, tmp(p.size());
     const double mu = params.mu();
-    for (int i = 0; i < params.iterations; ++i) {
-        reportProgress(progress, double(i) / double(params.iterations), "Taubin smoothing");
-        umbrellaStep(adjacency, p, tmp, params.lambda);
-        umbrellaStep(adjacency, tmp, p, mu);
+    // 2 * iterations steps, lambda then mu, TiledSweeps::DEPTH at a time.
+    const int steps = 2 * params.iterations;
+    const std::optional<TiledSweeps> tiles = steps > 0 ? std::optional<TiledSweeps>(adjacency) : std::nullopt;
+    for (int done = 0; done < steps; done += TiledSweeps::DEPTH) {
+        reportProgress(progress, double(done) / double(steps), "Taubin smoothing");
+        const int now = std::min(TiledSweeps::DEPTH, steps - done);
+        double weights[TiledSweeps::DEPTH];
+        for (int i = 0; i < now; ++i) weights[i] = (done + i) % 2 == 0 ? params.lambda : mu;
+        tiles->run(p, tmp, weights, now);
+        p.swap(tmp);
     }
 
     struct Moved {

@@ -33,8 +33,9 @@ struct SmoothReport {
     int64_t fixedVertices = 0;   ///< boundary and non-manifold vertices, left in place
 };
 
-/// Smooths `mesh` in place. Parallel over vertices (Jacobi updates: the result does not
-/// depend on the thread count).
+/// Smooths `mesh` in place. Jacobi updates, parallel over tiles of vertices a few steps at a
+/// time (each vertex's arithmetic is the plain rule's: the result is the same bit for bit and
+/// does not depend on the thread count).
 /// @throw ParameterError for iterations < 0, passBand outside (0, 1), lambda outside (0, 1)
 void smoothMeshTaubin(TriMesh& mesh, const TaubinParams& params, SmoothReport* report = nullptr,
                       Progress* progress = nullptr);

@@ -104,18 +104,21 @@ TEST(TaubinSmoothing, IsThePlainUmbrellaRuleBitForBit)
     // The neighbour lists are built in parallel over the vertices: each interior vertex must
     // still average its own neighbours in circulation order, boundary vertices stay. Reference:
     // the rule written plainly on OpenMesh's circulators, the same arithmetic in the same order.
-    // A plane big enough for several parallel chunks (4096 vertices each), with a hole (a
-    // second boundary inside) so that fixed and movable vertices alternate along the rows.
-    TriMesh mesh = noisyPlane(90, 0.3, 11);
+    // A plane big enough for several parallel chunks (4096 vertices each) and for three of the
+    // smoothing's tiles (16384 vertices each, 4 steps per tile), with a hole (a second boundary
+    // inside) across the first tiles' border, so that fixed and movable vertices alternate
+    // along the rows. 5 iterations: 10 steps, the last tile round takes 2.
+    TriMesh mesh = noisyPlane(200, 0.3, 11);
     mesh.request_face_status();
     mesh.request_edge_status();
     mesh.request_vertex_status();
-    for (int j = 40; j < 44; ++j)
-        for (int i = 40; i < 44; ++i) mesh.delete_face(TriMesh::FaceHandle(2 * (j * 90 + i)), true);
+    for (int j = 79; j < 84; ++j)
+        for (int i = 40; i < 44; ++i) mesh.delete_face(TriMesh::FaceHandle(2 * (j * 200 + i)), true);
     mesh.garbage_collection();
+    ASSERT_GT(mesh.n_vertices(), 2u * 16384u);
     TriMesh expected = mesh;
     TaubinParams params;
-    params.iterations = 3;
+    params.iterations = 5;
     using Vec3d = OpenMesh::Vec3d;
     std::vector<Vec3d> p(expected.n_vertices()), tmp(p.size());
     for (const auto v : expected.vertices()) p[std::size_t(v.idx())] = OpenMesh::vector_cast<Vec3d>(expected.point(v));
@@ -142,7 +145,7 @@ TEST(TaubinSmoothing, IsThePlainUmbrellaRuleBitForBit)
     SmoothReport report;
     smoothMeshTaubin(mesh, params, &report);
     EXPECT_EQ(report.fixedVertices, fixed) << "boundary vertices (outer edge and the hole's rim) left in place";
-    EXPECT_GT(fixed, 4 * 90) << "the hole did not open a second boundary";
+    EXPECT_GT(fixed, 4 * 200) << "the hole did not open a second boundary";
     for (const auto v : mesh.vertices())
         ASSERT_EQ(mesh.point(v), OpenMesh::vector_cast<TriMesh::Point>(p[std::size_t(v.idx())]))
             << "vertex " << v.idx() << " is not at the plain rule's position";
