@@ -386,6 +386,11 @@ function setPlaying(on) {
   if (on) {
     lastTick = performance.now();
     requestAnimationFrame(tick);
+  } else {
+    // Paused where the frame on screen is: the unrounded arc of playback could otherwise round
+    // the other way once a step is added (29.496 shows 29; +5 and -5 gave 29.5, shown as 30).
+    S.arc = snapArc(S.arc);
+    updateReadout();
   }
 }
 

@@ -234,6 +234,10 @@ async function run() {
   check(pairMaxInFlight === 1, '/api/pair requests in flight at once', '1', pairMaxInFlight);
   const pose = JSON.parse(played.pose || 'null');
   check(pose && near(pose.arc_mm, played.arcMm, 0.01), 'X-Flyover-Pose arc_mm of the last frame', played.arcMm, pose && pose.arc_mm);
+  // Paused at the frame on screen: the arc readout is that frame's arc, not playback's
+  // unrounded one (from which a step forward and back could land on the next frame).
+  check(near(await page.inputValue('#arc-input'), played.arcMm, 1e-9), 'arc readout after pausing (the frame on screen)',
+    played.arcMm, await page.inputValue('#arc-input'));
   log(`played: arc ${before.arcMm} -> ${played.arcMm} mm, ${playedFrames} frames, at most ${pairMaxInFlight} /api/pair in flight`);
 
   // ---- Left: forward now runs towards the rectum
@@ -247,6 +251,8 @@ async function run() {
   await page.waitForFunction(() => document.querySelector('#views').dataset.loading === 'false');
   const leftPlayed = await viewsData();
   check(Number(leftPlayed.arcMm) < Number(left.arcMm) - 3, 'arc after playing 1.5 s with Left', `< ${Number(left.arcMm) - 3} mm`, `${leftPlayed.arcMm} mm`);
+  check(near(await page.inputValue('#arc-input'), leftPlayed.arcMm, 1e-9), 'arc readout after pausing with Left',
+    leftPlayed.arcMm, await page.inputValue('#arc-input'));
   await page.keyboard.press('d');
   await waitFrame('direction right (key D)', (d) => d.direction === 'right');
   log(`Left: arc ${left.arcMm} -> ${leftPlayed.arcMm} mm; back to Right with D`);
