@@ -65,8 +65,8 @@ Adjacency buildAdjacency(const TriMesh& mesh, int64_t& fixedVertices)
 
 /// The umbrella update of vertex v (local indices into `in`): in + weight * (mean of the
 /// neighbours - in), the neighbours summed in their row's order; a vertex without a row stays.
-template <typename Offset>
-inline Vec3d umbrellaUpdate(const Offset* offsets, const int* neighbours, const Vec3d* in, std::size_t v, double weight)
+inline Vec3d umbrellaUpdate(const uint32_t* offsets, const int* neighbours, const Vec3d* in, std::size_t v,
+                            double weight)
 {
     const std::size_t b = offsets[v], e = offsets[v + 1];
     if (b == e) return in[v];
