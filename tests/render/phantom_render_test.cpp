@@ -58,6 +58,18 @@ std::unique_ptr<PhantomScene> phantomScene(PhantomSize size, uint64_t seed)
 /// The fly-over cameras the render stage uses by default.
 FlyoverParams defaultFlyoverParams() { return flyoverParamsOf(RenderParams{}); }
 
+/// The four views coverage takes at a centerline point: both fly-over cameras, then the
+/// fly-through forward and backward.
+std::vector<Camera> coverageCameras(const CenterlinePoint& p, const FlyoverParams& fp, double frameRadiusMm,
+                                    double flythroughFovDeg)
+{
+    std::vector<Camera> cams;
+    for (const Camera& c : flyoverCameras(p, fp, frameRadiusMm)) cams.push_back(c);
+    cams.push_back(flythroughCamera(p, true, flythroughFovDeg));
+    cams.push_back(flythroughCamera(p, false, flythroughFovDeg));
+    return cams;
+}
+
 int polypPixels(const RayScene& scene, const Camera& cam, int px, const PhantomPolyp& polyp)
 {
     RenderOptions o;
@@ -128,10 +140,7 @@ TEST_F(SmallPhantom, CoverageMarksTheSameTrianglesAsThePlainRule)
     const auto around = test::trianglesAroundVertices(*data->scene);
     std::size_t views = 0, marked = 0;
     for (std::size_t i = 0; i < cl.points.size(); i += std::max<std::size_t>(1, cl.points.size() / 16)) {
-        std::vector<Camera> cams;
-        for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) cams.push_back(c);
-        cams.push_back(flythroughCamera(cl.points[i], true, rp.flythroughFovDeg));
-        cams.push_back(flythroughCamera(cl.points[i], false, rp.flythroughFovDeg));
+        const std::vector<Camera> cams = coverageCameras(cl.points[i], fp, frame[i], rp.flythroughFovDeg);
         for (std::size_t c = 0; c < cams.size(); ++c) {
             for (const bool footprint : {true, false}) {
                 std::vector<uint32_t> got;
@@ -167,10 +176,7 @@ TEST_F(SmallPhantom, MarkerMatchesThePlainRuleWithAndWithoutOst)
     ViewMarker hitsOnly(*data->scene, rp.coveragePx, false);
     std::size_t views = 0, ostChanged = 0;
     for (std::size_t i = 0; i < cl.points.size(); i += std::max<std::size_t>(1, cl.points.size() / 10)) {
-        std::vector<Camera> cams;
-        for (const Camera& c : flyoverCameras(cl.points[i], fp, frame[i])) cams.push_back(c);
-        cams.push_back(flythroughCamera(cl.points[i], true, rp.flythroughFovDeg));
-        cams.push_back(flythroughCamera(cl.points[i], false, rp.flythroughFovDeg));
+        const std::vector<Camera> cams = coverageCameras(cl.points[i], fp, frame[i], rp.flythroughFovDeg);
         for (std::size_t c = 0; c < cams.size(); ++c)
             for (const bool footprint : {true, false}) {
                 std::vector<uint32_t> byOst[2];
