@@ -93,14 +93,9 @@ json segmentationJson(const LumenSegmentation& seg)
 void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 {
     if (!run.opt.log || seg.pieces.size() < 2) return;
-    std::ostringstream msg;
-    msg << "segment: the lumen is in " << seg.pieces.size()
-        << " pieces (collapsed segments?), all kept, in order along the colon frame:" << std::fixed
-        << std::setprecision(1);
-    for (const auto& p : seg.pieces)
-        msg << (p.order ? "," : "") << " #" << p.order + 1 << " " << p.volumeMl << " mL at ("
-            << p.centroidMm.x << ", " << p.centroidMm.y << ", " << p.centroidMm.z << ") mm";
-    run.opt.log->message(msg.str());
+    const CenterlineParams& c = run.opt.params.centerline;
+    const std::string line = describeLumenPieces(seg.pieces, c.minPieceMl, c.minPieceFraction);
+    run.opt.log->message("segment: " + line);
 }
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)

@@ -659,4 +659,33 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     return result;
 }
 
+std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double minPieceMl, double minPieceFraction)
+{
+    double largest = 0;
+    for (const LumenPiece& p : pieces) largest = std::max(largest, p.volumeMl);
+    // The centerline's rule (CenterlineParams::minPieceMl, minPieceFraction).
+    auto flown = [&](const LumenPiece& p) {
+        return p.volumeMl == largest || (p.volumeMl >= minPieceMl && p.volumeMl >= minPieceFraction * largest);
+    };
+    std::ostringstream msg;
+    msg << std::fixed << std::setprecision(1) << "the lumen is in " << pieces.size()
+        << " pieces (collapsed segments?), all kept; in order along the colon frame, those large enough for the centerline:";
+    std::size_t listed = 0, small = 0;
+    double smallMl = 0;
+    for (const LumenPiece& p : pieces) {
+        if (!flown(p)) {
+            ++small;
+            smallMl += p.volumeMl;
+            continue;
+        }
+        msg << (listed++ ? "," : "") << " #" << p.order + 1 << " " << p.volumeMl << " mL at (" << p.centroidMm.x
+            << ", " << p.centroidMm.y << ", " << p.centroidMm.z << ") mm";
+    }
+    if (small > 0)
+        msg << "; and " << small << " smaller piece" << (small > 1 ? "s" : "") << " (under " << minPieceMl
+            << " mL or " << 100.0 * minPieceFraction << "% of the largest: " << std::setprecision(2) << smallMl
+            << " mL in all)";
+    return msg.str();
+}
+
 } // namespace flyover

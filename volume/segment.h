@@ -132,6 +132,13 @@ inline constexpr const char* RECTAL_TUBE_TIP_META = "rectal_tube_tip_mm";
 LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams& params,
                                Progress* progress = nullptr);
 
+/// The run log's line on a lumen in several pieces: their count, then each piece the
+/// centerline takes (at least minPieceMl and minPieceFraction of the largest; the largest
+/// always) in frame order with its volume and centroid, then how many smaller ones there are
+/// and their volume in all (a mask's stray voxels can be dozens of crumbs). Every piece stays
+/// in the lumen and its mesh whatever its size.
+std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double minPieceMl, double minPieceFraction);
+
 /// Checks every SegmentParams field. @throw ParameterError naming the field.
 void validateSegmentParams(const SegmentParams& params);
 

@@ -761,5 +761,40 @@ TEST(RasterizeLumen, HuLumenOnAnotherLattice)
     EXPECT_EQ(inside, seg.mask->activeVoxelCount());
 }
 
+TEST(LumenPieces, TheLogLineListsThePiecesTheCenterlineTakesAndCountsTheCrumbs)
+{
+    // Pieces as a real mask gives them (gca-colon-00020 has 29, most of them crumbs), in frame order.
+    std::vector<LumenPiece> pieces;
+    auto add = [&](double ml, double x) {
+        LumenPiece p;
+        p.order = int(pieces.size());
+        p.volumeMl = ml;
+        p.centroidMm = {x, -100.0, 200.0};
+        pieces.push_back(p);
+    };
+    add(0.02, -230);   // crumb
+    add(50.0, -207);   // a piece of its own (over 1% of the largest)
+    add(0.4, -205);    // under 0.5 mL
+    add(3609.9, -210); // the colon
+    add(30.0, -200);   // under 1% of the largest (36.1 mL)
+    add(0.01, -180);   // crumb
+    const std::string line = describeLumenPieces(pieces, 0.5, 0.01);
+    SCOPED_TRACE(line);
+    EXPECT_EQ(line.rfind("the lumen is in 6 pieces", 0), 0u);
+    EXPECT_NE(line.find(" #2 50.0 mL at (-207.0, -100.0, 200.0) mm, #4 3609.9 mL at (-210.0, -100.0, 200.0) mm;"),
+              std::string::npos);
+    for (const char* left : {"#1 ", "#3 ", "#5 ", "#6 "}) EXPECT_EQ(line.find(left), std::string::npos) << left;
+    EXPECT_NE(line.find("and 4 smaller pieces (under 0.5 mL or 1.0% of the largest: 30.43 mL in all)"),
+              std::string::npos);
+
+    // Every piece listed when all are large enough; the largest always, however small.
+    pieces.resize(2);
+    pieces[0].volumeMl = 0.1;
+    const std::string two = describeLumenPieces(pieces, 0.5, 0.01);
+    EXPECT_NE(two.find("#2 50.0 mL"), std::string::npos) << two;
+    EXPECT_NE(two.find("and 1 smaller piece (under"), std::string::npos) << two;
+    EXPECT_EQ(describeLumenPieces({pieces[0]}, 0.5, 0.01).find("smaller"), std::string::npos);
+}
+
 } // namespace
 } // namespace flyover
