@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Time to viewing (issue 15): cold runs of `flyover run` on a phantom, each in a fresh study.
-# Usage: bench/first_pair.sh [small|medium|full] [runs] [extra flyover run arguments...]
+# Usage: bench/first_pair.sh [small|medium|full|gca] [runs] [extra flyover run arguments...]
+# gca: the real colon mask of the shared data (gca-colon-00020, 3.6 L, 2.4 m of colon; no CT,
+# so no ingest and no ITK reference), run with --mask: how a real colon's length and shape
+# weigh on the path to the first pair, which the phantoms do not show.
 # Prints, as the median / min / max over the cold runs: CT -> first fly-over pair (the
 # "first_pair" event's seconds_since_start), the whole run, and the peak RSS (GNU time); then
 # the median of unchanged re-runs; the process CPU seconds (user + system) at the first pair and
@@ -17,8 +20,17 @@ shift $(( $# < 2 ? $# : 2 ))
 FLYOVER=${FLYOVER_BIN:-build/pipeline/flyover}
 WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-first-pair}
 mkdir -p "$WORK"
-CT="$WORK/phantom-$SIZE.nii.gz"
-[ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
+if [ "$SIZE" = gca ]; then
+  ROOT=$(pwd)
+  . bench/shared_data.sh
+  CT=""
+  INPUT=(--mask "$(shared_data)/real/gca-colon-00020/large_intestine.nii.gz")
+  [ -f "${INPUT[1]}" ] || { echo "no ${INPUT[1]}: the gca mode needs the shared real data"; exit 1; }
+else
+  CT="$WORK/phantom-$SIZE.nii.gz"
+  [ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
+  INPUT=("$CT")
+fi
 STUDY="$WORK/study-$SIZE"
 TIME=()
 [ -x /usr/bin/time ] && TIME=(/usr/bin/time -f "%M" -o "$WORK/rss")
@@ -38,7 +50,7 @@ for _ in $(seq "$RUNS"); do
   rm -rf "$STUDY"
   sync
   t0=$(now)
-  "${TIME[@]}" "$FLYOVER" run "$CT" --study "$STUDY" --log-json "$@" 2> "$WORK/log.jsonl" || {
+  "${TIME[@]}" "$FLYOVER" run "${INPUT[@]}" --study "$STUDY" --log-json "$@" 2> "$WORK/log.jsonl" || {
     echo "flyover run failed:"; tail -5 "$WORK/log.jsonl"; exit 1; }
   t1=$(now)
   whole+=("$(secs "$t0" "$t1")")
@@ -49,20 +61,22 @@ for _ in $(seq "$RUNS"); do
   cpuwhole+=("$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | tail -1)")
   [ -f "$WORK/rss" ] && rss+=("$(awk '/^[0-9]+$/ { printf "%.1f", $1 / 1024 }' "$WORK/rss" | tail -1)")
 done
-echo "flyover run, $SIZE phantom, cold (fresh study each run), extra arguments: ${*:-none}"
-stats "CT -> first fly-over pair" s "${first[@]}"
+echo "flyover run, $SIZE ${CT:+phantom}${CT:-real colon mask}, cold (fresh study each run), extra arguments: ${*:-none}"
+stats "${CT:+CT}${CT:-mask} -> first fly-over pair" s "${first[@]}"
 stats "whole run" s "${whole[@]}"
 [ ${#rss[@]} -gt 0 ] && stats "peak RSS" MB "${rss[@]}"
 stats "process CPU at the first pair" s "${cpufirst[@]}"
 stats "process CPU, whole run" s "${cpuwhole[@]}"
 rerun=()
 for _ in $(seq "$RUNS"); do
-  t0=$(now); "$FLYOVER" -q run "$CT" --study "$STUDY" "$@"; t1=$(now)
+  t0=$(now); "$FLYOVER" -q run "${INPUT[@]}" --study "$STUDY" "$@"; t1=$(now)
   rerun+=("$(secs "$t0" "$t1")")
 done
 stats "unchanged re-run" s "${rerun[@]}"
 REFERENCE=${ITK_REFERENCE_BIN:-build/bench/itk_reference}
-if [ -x "$REFERENCE" ]; then
+if [ -z "$CT" ]; then
+  echo "no CT: no ITK reference"
+elif [ -x "$REFERENCE" ]; then
   "$REFERENCE" "$CT" --runs "$RUNS" | tee "$WORK/reference.txt"
   ref=$(sed -n 's/^reference_seconds //p' "$WORK/reference.txt")
   fpm=$(printf '%s\n' "${first[@]}" | sort -g | awk '{ t[NR] = $1 } END { print (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2) }')
