@@ -23,13 +23,13 @@ mkdir -p "$WORK"
 if [ "$SIZE" = gca ]; then
   ROOT=$(pwd)
   . bench/shared_data.sh
-  CT=""
+  CT="" KIND="real colon mask" FROM=mask
   INPUT=(--mask "$(shared_data)/real/gca-colon-00020/large_intestine.nii.gz")
   [ -f "${INPUT[1]}" ] || { echo "no ${INPUT[1]}: the gca mode needs the shared real data"; exit 1; }
 else
   CT="$WORK/phantom-$SIZE.nii.gz"
   [ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
-  INPUT=("$CT")
+  INPUT=("$CT") KIND=phantom FROM=CT
 fi
 STUDY="$WORK/study-$SIZE"
 TIME=()
@@ -61,8 +61,8 @@ for _ in $(seq "$RUNS"); do
   cpuwhole+=("$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | tail -1)")
   [ -f "$WORK/rss" ] && rss+=("$(awk '/^[0-9]+$/ { printf "%.1f", $1 / 1024 }' "$WORK/rss" | tail -1)")
 done
-echo "flyover run, $SIZE ${CT:+phantom}${CT:-real colon mask}, cold (fresh study each run), extra arguments: ${*:-none}"
-stats "${CT:+CT}${CT:-mask} -> first fly-over pair" s "${first[@]}"
+echo "flyover run, $SIZE $KIND, cold (fresh study each run), extra arguments: ${*:-none}"
+stats "$FROM -> first fly-over pair" s "${first[@]}"
 stats "whole run" s "${whole[@]}"
 [ ${#rss[@]} -gt 0 ] && stats "peak RSS" MB "${rss[@]}"
 stats "process CPU at the first pair" s "${cpufirst[@]}"
