@@ -664,7 +664,7 @@ std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double mi
     double largest = 0;
     for (const LumenPiece& p : pieces) largest = std::max(largest, p.volumeMl);
     // The centerline's rule (CenterlineParams::minPieceMl, minPieceFraction).
-    auto flown = [&](const LumenPiece& p) {
+    auto largeEnough = [&](const LumenPiece& p) {
         return p.volumeMl == largest || (p.volumeMl >= minPieceMl && p.volumeMl >= minPieceFraction * largest);
     };
     std::ostringstream msg;
@@ -673,7 +673,7 @@ std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double mi
     std::size_t listed = 0, small = 0;
     double smallMl = 0;
     for (const LumenPiece& p : pieces) {
-        if (!flown(p)) {
+        if (!largeEnough(p)) {
             ++small;
             smallMl += p.volumeMl;
             continue;
