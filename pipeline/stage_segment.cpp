@@ -93,9 +93,7 @@ json segmentationJson(const LumenSegmentation& seg)
 void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 {
     if (!run.opt.log || seg.pieces.size() < 2) return;
-    const CenterlineParams& c = run.opt.params.centerline;
-    const std::string line = describeLumenPieces(seg.pieces, c.minPieceMl, c.minPieceFraction);
-    run.opt.log->message("segment: " + line);
+    run.opt.log->message("segment: " + describeLumenPieces(seg.pieces, run.opt.params.centerline));
 }
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)

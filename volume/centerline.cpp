@@ -875,8 +875,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                      [&](std::int32_t a, std::int32_t b) { return pieces.size[a] > pieces.size[b]; });
     std::vector<std::int32_t> used;
     for (std::size_t r = 0; r < bySize.size(); ++r)
-        if (r == 0 || (double(pieces.size[bySize[r]]) * voxelMl >= params.minPieceMl &&
-                       double(pieces.size[bySize[r]]) >= params.minPieceFraction * double(pieces.size[bySize[0]])))
+        if (r == 0 || pieceLargeEnough(double(pieces.size[bySize[r]]), double(pieces.size[bySize[0]]), voxelMl, params))
             used.push_back(bySize[r]);
 
     // With rectumMm: the lumen voxel nearest to it over the pieces used (the seed); its piece's

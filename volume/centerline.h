@@ -109,4 +109,12 @@ struct CenterlineReport {
 Centerline extractCenterline(const openvdb::FloatGrid& sdf, const CenterlineParams& params,
                              Progress* progress = nullptr, CenterlineReport* report = nullptr);
 
+/// Whether extractCenterline takes a lumen piece that is not the largest: `size` and
+/// `largestSize` in any one unit, `sizeToMl` converting it to mL (voxels: the voxel's volume;
+/// mL: 1). At least params.minPieceMl and params.minPieceFraction of the largest.
+inline bool pieceLargeEnough(double size, double largestSize, double sizeToMl, const CenterlineParams& params)
+{
+    return size * sizeToMl >= params.minPieceMl && size >= params.minPieceFraction * largestSize;
+}
+
 } // namespace flyover

@@ -659,13 +659,12 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     return result;
 }
 
-std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double minPieceMl, double minPieceFraction)
+std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, const CenterlineParams& centerline)
 {
     double largest = 0;
     for (const LumenPiece& p : pieces) largest = std::max(largest, p.volumeMl);
-    // The centerline's rule (CenterlineParams::minPieceMl, minPieceFraction).
     auto largeEnough = [&](const LumenPiece& p) {
-        return p.volumeMl == largest || (p.volumeMl >= minPieceMl && p.volumeMl >= minPieceFraction * largest);
+        return p.volumeMl == largest || pieceLargeEnough(p.volumeMl, largest, 1.0, centerline);
     };
     std::ostringstream msg;
     msg << std::fixed << std::setprecision(1) << "the lumen is in " << pieces.size()
@@ -682,8 +681,8 @@ std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double mi
             << ", " << p.centroidMm.y << ", " << p.centroidMm.z << ") mm";
     }
     if (small > 0)
-        msg << "; and " << small << " smaller piece" << (small > 1 ? "s" : "") << " (under " << minPieceMl
-            << " mL or " << 100.0 * minPieceFraction << "% of the largest: " << std::setprecision(2) << smallMl
+        msg << "; and " << small << " smaller piece" << (small > 1 ? "s" : "") << " (under " << centerline.minPieceMl
+            << " mL or " << 100.0 * centerline.minPieceFraction << "% of the largest: " << std::setprecision(2) << smallMl
             << " mL in all)";
     return msg.str();
 }

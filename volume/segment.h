@@ -26,6 +26,7 @@
 /// does not know the patient's orientation beyond what the air-fluid levels tell.
 #pragma once
 
+#include "volume/centerline.h"
 #include "volume/contacts.h"
 #include "volume/progress.h"
 #include "volume/rectal_tube.h"
@@ -133,11 +134,11 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
                                Progress* progress = nullptr);
 
 /// The run log's line on a lumen in several pieces: their count, then each piece the
-/// centerline takes (at least minPieceMl and minPieceFraction of the largest; the largest
-/// always) in frame order with its volume and centroid, then how many smaller ones there are
-/// and their volume in all (a mask's stray voxels can be dozens of crumbs). Every piece stays
-/// in the lumen and its mesh whatever its size.
-std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, double minPieceMl, double minPieceFraction);
+/// centerline takes (the largest, and those pieceLargeEnough with `centerline`) in frame order
+/// with its volume and centroid, then how many smaller ones there are and their volume in all
+/// (a mask's stray voxels can be dozens of crumbs). Every piece stays in the lumen and its mesh
+/// whatever its size.
+std::string describeLumenPieces(const std::vector<LumenPiece>& pieces, const CenterlineParams& centerline);
 
 /// Checks every SegmentParams field. @throw ParameterError naming the field.
 void validateSegmentParams(const SegmentParams& params);

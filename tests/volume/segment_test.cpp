@@ -778,7 +778,10 @@ TEST(LumenPieces, TheLogLineListsThePiecesTheCenterlineTakesAndCountsTheCrumbs)
     add(3609.9, -210); // the colon
     add(30.0, -200);   // under 1% of the largest (36.1 mL)
     add(0.01, -180);   // crumb
-    const std::string line = describeLumenPieces(pieces, 0.5, 0.01);
+    CenterlineParams rule;  // the defaults: 0.5 mL and 1% of the largest
+    ASSERT_EQ(rule.minPieceMl, 0.5);
+    ASSERT_EQ(rule.minPieceFraction, 0.01);
+    const std::string line = describeLumenPieces(pieces, rule);
     SCOPED_TRACE(line);
     EXPECT_EQ(line.rfind("the lumen is in 6 pieces", 0), 0u);
     EXPECT_NE(line.find(" #2 50.0 mL at (-207.0, -100.0, 200.0) mm, #4 3609.9 mL at (-210.0, -100.0, 200.0) mm;"),
@@ -790,10 +793,10 @@ TEST(LumenPieces, TheLogLineListsThePiecesTheCenterlineTakesAndCountsTheCrumbs)
     // Every piece listed when all are large enough; the largest always, however small.
     pieces.resize(2);
     pieces[0].volumeMl = 0.1;
-    const std::string two = describeLumenPieces(pieces, 0.5, 0.01);
+    const std::string two = describeLumenPieces(pieces, rule);
     EXPECT_NE(two.find("#2 50.0 mL"), std::string::npos) << two;
     EXPECT_NE(two.find("and 1 smaller piece (under"), std::string::npos) << two;
-    EXPECT_EQ(describeLumenPieces({pieces[0]}, 0.5, 0.01).find("smaller"), std::string::npos);
+    EXPECT_EQ(describeLumenPieces({pieces[0]}, rule).find("smaller"), std::string::npos);
 }
 
 } // namespace
