@@ -3,18 +3,21 @@
 //  2. 26-connected pieces by breadth-first search; the last voxel a search reaches is
 //     farthest from its seed in steps, so the labelling pass also yields one geodesic
 //     farthest end per piece, and a second search from it yields the other end;
-//  3. per piece, a minimal path under the cost D^-p per unit length (bucket-queue Dijkstra)
+//  3. per piece, a minimal path under the cost D^-p per unit length (route_search.h: bucket
+//     queues, searched from both ends at once)
 //     through the piece's core (voxels at least half as deep as the deepest nearby), which
 //     is all a path through the middle needs and a quarter of the voxels;
 //  4. per piece: end trimming, ridge of D, cross-section centroids, twiced Gaussian
 //     smoothing, straight extension into the blind ends;
 //  5. pieces ordered and bridged (centerline_bridge.h), uniform resampling, radii, frames.
-// Searches are serial and deterministic; per-point geometry runs in parallel over points.
+// Searches are deterministic (the two ends of a route search run side by side, each serial);
+// per-point geometry runs in parallel over points.
 #include "volume/centerline.h"
 
 #include "volume/centerline_bridge.h"
 #include "volume/error.h"
 #include "volume/lumen_index.h"
+#include "volume/route_search.h"
 
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tree/LeafManager.h>
@@ -28,7 +31,6 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
-#include <queue>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -42,6 +44,8 @@ namespace flyover {
 namespace {
 
 using namespace lumen_index;
+using route_search::RouteWorkspace;
+using route_search::shortestRoute;
 
 /// 26-connected lumen pieces: a label per slot, and per piece its voxel count and the voxel
 /// its breadth-first labelling search reached last (farthest in steps from the seed: for a
@@ -99,91 +103,6 @@ Slot stepsFrom(const LumenIndex& index, Slot source, std::vector<std::int32_t>& 
     }
     const Slot last = queue.back();
     return last;
-}
-
-/// Single-source Dijkstra over the 26-connected lumen voxels for which allowed[s] != 0.
-/// With STRIDE 2 the steps join voxels two apart (see LumenIndex::forEachNeighbour).
-/// edgeCost(from, to, stepIndex) must lie in [minEdge, maxEdge], minEdge > 0, or be +infinity
-/// (no edge). Stops once
-/// `target` is settled; returns whether it was reached. `prev` then leads back from it.
-///
-/// The queue is a ring of buckets of width just below minEdge (Dial's algorithm generalised to
-/// real weights): a relaxation from bucket k always lands in a later bucket, and every slot of
-/// bucket k is final when the bucket is reached, so processing bucket by bucket is exact while
-/// each push and pop is O(1). Where the weight range is too wide for a ring of reasonable size
-/// (a steep wallPenalty), a binary heap takes over. Both are serial and break ties by insertion
-/// order, so the result does not depend on the thread count.
-template<int STRIDE, typename EdgeCost>
-bool dijkstra(const LumenIndex& index, const std::vector<std::uint8_t>& allowed, Slot source,
-              Slot target, EdgeCost&& edgeCost, double minEdge, double maxEdge,
-              std::vector<double>& dist, std::vector<Slot>& prev, Progress* progress)
-{
-    dist.assign(index.slotCount(), std::numeric_limits<double>::infinity());
-    prev.assign(index.slotCount(), NO_SLOT);
-    dist[source] = 0.0;
-    std::size_t settled = 0;
-    auto tick = [&] {
-        if ((++settled & 0xfffff) == 0) checkCancelled(progress);
-    };
-
-    constexpr double MAX_RING = double(1 << 20);
-    const double width = 0.999 * minEdge;
-    if (width > 0 && maxEdge / width < MAX_RING) {
-        const std::size_t ring = static_cast<std::size_t>(std::ceil(maxEdge / width)) + 2;
-        std::vector<std::vector<Slot>> buckets(ring);
-        std::vector<std::uint8_t> done(index.slotCount(), 0);
-        buckets[0].push_back(source);
-        std::size_t pending = 1;
-        for (std::uint64_t current = 0; pending > 0; ++current) {
-            std::vector<Slot>& bucket = buckets[current % ring];
-            for (std::size_t i = 0; i < bucket.size(); ++i) {  // by index: see below
-                const Slot u = bucket[i];
-                --pending;
-                if (done[u]) continue;  // stale entry from before an improvement
-                done[u] = 1;
-                if (u == target) return true;
-                tick();
-                const double d = dist[u];
-                index.forEachNeighbour<STRIDE>(u, [&](Slot v, int k) {
-                    if (!allowed[v]) return;
-                    const double nd = d + edgeCost(u, v, k);
-                    if (nd < dist[v]) {
-                        dist[v] = nd;
-                        prev[v] = u;
-                        // Lands in a later bucket; should rounding ever put it in the current
-                        // one, the index loop above still visits it.
-                        const std::uint64_t b = std::max<std::uint64_t>(
-                            current, static_cast<std::uint64_t>(nd / width));
-                        buckets[b % ring].push_back(v);
-                        ++pending;
-                    }
-                });
-            }
-            bucket.clear();
-        }
-        return false;
-    }
-
-    using Entry = std::pair<double, Slot>;
-    std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> heap;
-    heap.push({0.0, source});
-    while (!heap.empty()) {
-        const auto [d, u] = heap.top();
-        heap.pop();
-        if (d > dist[u]) continue;  // stale entry
-        if (u == target) return true;
-        tick();
-        index.forEachNeighbour<STRIDE>(u, [&](Slot v, int k) {
-            if (!allowed[v]) return;
-            const double nd = d + edgeCost(u, v, k);
-            if (nd < dist[v]) {
-                dist[v] = nd;
-                prev[v] = u;
-                heap.push({nd, v});
-            }
-        });
-    }
-    return false;
 }
 
 Vec3d toVec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
@@ -970,8 +889,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     const double fineMm = std::min(0.25 * voxelMm, 0.5);
     std::vector<std::int32_t> steps(index.slotCount(), -1);
     std::vector<Slot> pieceSlots;
-    std::vector<double> dist;
-    std::vector<Slot> prev;
+    RouteWorkspace routeWork;
     std::vector<PiecePath> paths;
     // One piece's path; from the end of the tube nearest to `seed` when one is given.
     auto tracePiece = [&](std::int32_t label, Slot seed) {
@@ -1012,39 +930,19 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                 if (e[1] == NO_SLOT || steps[s] > steps[e[1]]) e[1] = s;
             }
         }
-        Slot from = NO_SLOT, to = NO_SLOT;
-        if (ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
-            dijkstra<2>(index, coarse, ends[0][0], ends[0][1], medialCoarse, 2.0 * minEdge,
-                        2.0 * maxEdge, dist, prev, progress)) {
-            from = ends[0][0];
-            to = ends[0][1];
-        } else if (ends[1][0] != NO_SLOT &&
-                   (ends[1][0] == ends[1][1] ||
-                    dijkstra<1>(index, core, ends[1][0], ends[1][1], medial, minEdge, maxEdge,
-                                dist, prev, progress))) {
-            from = ends[1][0];
-            to = ends[1][1];
-        } else {
-            for (Slot s : pieceSlots) core[s] = 1;
-            from = a;
-            to = b;
-            if (a != b) dijkstra<1>(index, core, a, b, medial, minEdge, maxEdge, dist, prev, progress);
-        }
         std::vector<Slot> route;
-        auto appendRoute = [&](Slot source, Slot target) {  // from prev, after a search
-            std::vector<Slot> part;
-            for (Slot s = target; s != NO_SLOT && s != source; s = prev[s]) part.push_back(s);
-            if (route.empty()) route.push_back(source);
-            route.insert(route.end(), part.rbegin(), part.rend());
-        };
-        std::vector<Slot> middle;
-        if (from != to) {
-            appendRoute(from, to);
-            middle.swap(route);
-        } else {
-            middle.push_back(from);
+        const bool coarseRoute =
+            ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
+            shortestRoute<2>(index, coarse, ends[0][0], ends[0][1], medialCoarse, 2.0 * minEdge, 2.0 * maxEdge,
+                             routeWork, route, progress);
+        const bool coreRoute = coarseRoute || (ends[1][0] != NO_SLOT &&
+                                               shortestRoute<1>(index, core, ends[1][0], ends[1][1], medial,
+                                                                minEdge, maxEdge, routeWork, route, progress));
+        if (!coreRoute) {
+            for (Slot s : pieceSlots) core[s] = 1;
+            if (!shortestRoute<1>(index, core, a, b, medial, minEdge, maxEdge, routeWork, route, progress))
+                route.assign(1, a);  // cannot happen: a and b lie in one piece
         }
-        route.swap(middle);
         std::vector<Vec3d> raw;
         for (Slot s : route) raw.push_back(toVec(xf.indexToWorld(index.coord(s))));
         PiecePath path;
