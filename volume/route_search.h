@@ -19,6 +19,8 @@
 /// count or on timing. Where several routes have exactly the same cost, the two searches may
 /// return different ones of them.
 ///
+/// allowed[s] must be 0 at the index's holes (slots of no lumen voxel): the searches read
+/// `allowed` alone, not the index's depths as well (one memory read less per neighbour).
 /// edgeCost(from, to, stepIndex) must lie in [minEdge, maxEdge], minEdge > 0, or be +infinity
 /// (no edge); for shortestRoute it must also be symmetric (the cost of a step back equals the
 /// cost of the step), as the centerline's costs are.
@@ -97,7 +99,7 @@ public:
                 ++settledNow;
                 if ((++mSettled & 0xfffff) == 0) checkCancelled(progress);
                 const double d = dist[u];
-                mIndex.template forEachNeighbour<STRIDE>(u, [&](Slot v, int k) {
+                mIndex.template forEachNeighbourSlot<STRIDE>(u, [&](Slot v, int k) {
                     if (!mAllowed[v]) return;
                     const double nd = d + mEdgeCost(u, v, k);
                     if (nd < dist[v]) {
@@ -168,7 +170,7 @@ bool dijkstra(const LumenIndex& index, const std::vector<std::uint8_t>& allowed,
         if (d > dist[u]) continue;  // stale entry
         if (u == target) return true;
         if ((++settled & 0xfffff) == 0) checkCancelled(progress);
-        index.forEachNeighbour<STRIDE>(u, [&](Slot v, int k) {
+        index.forEachNeighbourSlot<STRIDE>(u, [&](Slot v, int k) {
             if (!allowed[v]) return;
             const double nd = d + edgeCost(u, v, k);
             if (nd < dist[v]) {

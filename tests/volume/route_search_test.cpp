@@ -27,6 +27,14 @@ namespace {
 using namespace lumen_index;
 using route_search::RouteWorkspace;
 
+/// allowed = 1 at the lumen's slots, 0 at the holes (route_search.h's precondition).
+std::vector<std::uint8_t> lumenSlots(const LumenIndex& index)
+{
+    std::vector<std::uint8_t> allowed(index.slotCount(), 0);
+    for (Slot s = 0; s < index.slotCount(); ++s) allowed[s] = index.isLumen(s);
+    return allowed;
+}
+
 /// A lumen of the voxels (i, j, k) in [0, nx) x [0, ny) x [0, nz) for which keep(i, j, k).
 template<typename Keep>
 LumenIndex boxLumen(int nx, int ny, int nz, Keep&& keep)
@@ -144,7 +152,7 @@ TEST(RouteSearch, BothEndsFindTheMinimalCostThroughABlockWithRandomWalls)
             return i % 12 != 6 || holes[i / 12][j * 24 + k];
         });
         const Costs costs = randomCosts(index, seed, 1.0, 8.0);
-        const std::vector<std::uint8_t> allowed(index.slotCount(), 1);
+        const std::vector<std::uint8_t> allowed = lumenSlots(index);
         const Slot source = slotAt(index, {0, 1, 2}), target = slotAt(index, {79, 22, 21});
         ASSERT_NE(source, NO_SLOT);
         ASSERT_NE(target, NO_SLOT);
@@ -178,7 +186,7 @@ TEST(RouteSearch, NoRouteBetweenTwoPiecesAndTheSourceAloneWhenItIsTheTarget)
 {
     const LumenIndex index = boxLumen(40, 6, 6, [](int i, int, int) { return i != 20; });
     const Costs costs = randomCosts(index, 7, 1.0, 2.0);
-    const std::vector<std::uint8_t> allowed(index.slotCount(), 1);
+    const std::vector<std::uint8_t> allowed = lumenSlots(index);
     const Slot a = slotAt(index, {0, 0, 0}), b = slotAt(index, {39, 5, 5});
     RouteWorkspace work;
     std::vector<Slot> route{1, 2, 3};
@@ -196,7 +204,7 @@ TEST(RouteSearch, AWeightRangeTooWideForTheRingTakesTheHeapWithTheSameCost)
     const LumenIndex index = boxLumen(30, 10, 10, [](int, int, int) { return true; });
     Costs costs = randomCosts(index, 3, 1e-3, 1e4);
     ASSERT_EQ(route_search::ringWidth(costs.minEdge, costs.maxEdge), 0.0) << "expected a range that needs the heap";
-    const std::vector<std::uint8_t> allowed(index.slotCount(), 1);
+    const std::vector<std::uint8_t> allowed = lumenSlots(index);
     expectSameCost(index, allowed, costs, slotAt(index, {0, 0, 0}), slotAt(index, {29, 9, 9}), "wide weight range");
 }
 
@@ -209,7 +217,7 @@ TEST(RouteSearch, ACancelledSearchThrowsAndEitherSidesFailureReachesTheCaller)
 {
     const LumenIndex index = boxLumen(30, 10, 10, [](int, int, int) { return true; });
     const Costs costs = randomCosts(index, 5, 1.0, 2.0);
-    const std::vector<std::uint8_t> allowed(index.slotCount(), 1);
+    const std::vector<std::uint8_t> allowed = lumenSlots(index);
     CancelledProgress cancelled;
     RouteWorkspace work;
     std::vector<Slot> route;
