@@ -51,26 +51,40 @@ using route_search::shortestRoute;
 /// its breadth-first labelling search reached last (farthest in steps from the seed: for a
 /// tube, one of its two ends).
 struct Pieces {
-    std::vector<std::int32_t> label;  ///< per slot, -1 for non-lumen
+    std::vector<std::int32_t> label;  ///< per slot; HOLE at the index's holes (non-lumen slots)
     std::vector<std::size_t> size;    ///< per label
     std::vector<Slot> lastReached;    ///< per label
 };
 
+/// The mark of the index's holes in per-slot arrays whose searches test only their own value
+/// (forEachNeighbourSlot): never "not reached yet" (-1), never a piece or a step count.
+constexpr std::int32_t HOLE = -2;
+
+/// -1 at each lumen slot, HOLE at each hole.
+std::vector<std::int32_t> unreachedLumen(const LumenIndex& index)
+{
+    std::vector<std::int32_t> v(index.slotCount());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size(), 1 << 14), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s) v[s] = index.isLumen(static_cast<Slot>(s)) ? -1 : HOLE;
+    });
+    return v;
+}
+
 Pieces labelPieces(const LumenIndex& index, Progress* progress)
 {
     Pieces c;
-    c.label.assign(index.slotCount(), -1);
+    c.label = unreachedLumen(index);
     std::vector<Slot> queue;
     for (Slot s = 0; s < index.slotCount(); ++s) {
-        if (!index.isLumen(s) || c.label[s] >= 0) continue;
+        if (c.label[s] != -1) continue;
         const std::int32_t id = static_cast<std::int32_t>(c.size.size());
         queue.clear();
         queue.push_back(s);
         c.label[s] = id;
         for (std::size_t head = 0; head < queue.size(); ++head) {
             if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-            index.forEachNeighbour(queue[head], [&](Slot t, int) {
-                if (c.label[t] < 0) {
+            index.forEachNeighbourSlot(queue[head], [&](Slot t, int) {
+                if (c.label[t] == -1) {
                     c.label[t] = id;
                     queue.push_back(t);
                 }
@@ -83,7 +97,8 @@ Pieces labelPieces(const LumenIndex& index, Progress* progress)
 }
 
 /// Breadth-first search from `source` over its piece: steps[s] = number of 26-neighbour steps
-/// from the source (slots of this piece only; others untouched). Returns the slot reached
+/// from the source (slots of this piece only, which hold -1 before; others untouched; the
+/// index's holes hold HOLE). Returns the slot reached
 /// last, the farthest in steps (ties: the first found).
 Slot stepsFrom(const LumenIndex& index, Slot source, std::vector<std::int32_t>& steps,
                Progress* progress)
@@ -94,8 +109,8 @@ Slot stepsFrom(const LumenIndex& index, Slot source, std::vector<std::int32_t>& 
         if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
         const Slot u = queue[head];
         const std::int32_t next = steps[u] + 1;
-        index.forEachNeighbour(u, [&](Slot t, int) {
-            if (steps[t] < 0) {
+        index.forEachNeighbourSlot(u, [&](Slot t, int) {
+            if (steps[t] == -1) {
                 steps[t] = next;
                 queue.push_back(t);
             }
@@ -887,7 +902,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     // end, asked with another step, was another curve). Linear interpolation between samples
     // this close is exact to well under a micrometre on colon bends.
     const double fineMm = std::min(0.25 * voxelMm, 0.5);
-    std::vector<std::int32_t> steps(index.slotCount(), -1);
+    std::vector<std::int32_t> steps = unreachedLumen(index);
     std::vector<Slot> pieceSlots;
     RouteWorkspace routeWork;
     std::vector<PiecePath> paths;
