@@ -51,43 +51,30 @@ using route_search::shortestRoute;
 /// its breadth-first labelling search reached last (farthest in steps from the seed: for a
 /// tube, one of its two ends).
 struct Pieces {
-    std::vector<std::int32_t> label;  ///< per slot; HOLE at the index's holes (non-lumen slots)
+    std::vector<std::int32_t> label;  ///< per slot, -1 for non-lumen
     std::vector<std::size_t> size;    ///< per label
     std::vector<Slot> lastReached;    ///< per label
 };
 
-/// The mark of the index's holes in per-slot arrays whose searches test only their own value
-/// (forEachNeighbourSlot): never "not reached yet" (-1), never a piece or a step count.
-constexpr std::int32_t HOLE = -2;
-
-/// -1 at each lumen slot, HOLE at each hole.
-std::vector<std::int32_t> unreachedLumen(const LumenIndex& index)
-{
-    std::vector<std::int32_t> v(index.slotCount());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, v.size(), 1 << 14), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t s = r.begin(); s != r.end(); ++s) v[s] = index.isLumen(static_cast<Slot>(s)) ? -1 : HOLE;
-    });
-    return v;
-}
-
-Pieces labelPieces(const LumenIndex& index, Progress* progress)
+Pieces labelPieces(const LumenIndex& index, const SlotBits& holes, Progress* progress)
 {
     Pieces c;
-    c.label = unreachedLumen(index);
+    c.label.assign(index.slotCount(), -1);
+    SlotBits labelled = holes;  // and the lumen voxels labelled
     std::vector<Slot> queue;
     for (Slot s = 0; s < index.slotCount(); ++s) {
-        if (c.label[s] != -1) continue;
+        if (labelled.test(s)) continue;
         const std::int32_t id = static_cast<std::int32_t>(c.size.size());
         queue.clear();
         queue.push_back(s);
+        labelled.set(s);
         c.label[s] = id;
         for (std::size_t head = 0; head < queue.size(); ++head) {
             if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-            index.forEachNeighbourSlot(queue[head], [&](Slot t, int) {
-                if (c.label[t] == -1) {
-                    c.label[t] = id;
-                    queue.push_back(t);
-                }
+            forEachClearNeighbour(index, labelled, queue[head], [&](Slot t) {
+                labelled.set(t);
+                c.label[t] = id;
+                queue.push_back(t);
             });
         }
         c.size.push_back(queue.size());
@@ -97,23 +84,23 @@ Pieces labelPieces(const LumenIndex& index, Progress* progress)
 }
 
 /// Breadth-first search from `source` over its piece: steps[s] = number of 26-neighbour steps
-/// from the source (slots of this piece only, which hold -1 before; others untouched; the
-/// index's holes hold HOLE). Returns the slot reached
-/// last, the farthest in steps (ties: the first found).
-Slot stepsFrom(const LumenIndex& index, Slot source, std::vector<std::int32_t>& steps,
+/// from the source (slots of this piece only; others untouched). `holes`: holeBits(index).
+/// Returns the slot reached last, the farthest in steps (ties: the first found).
+Slot stepsFrom(const LumenIndex& index, const SlotBits& holes, Slot source, std::vector<std::int32_t>& steps,
                Progress* progress)
 {
+    SlotBits reached = holes;  // a bit per slot: a copy is a few MB at most
     std::vector<Slot> queue{source};
+    reached.set(source);
     steps[source] = 0;
     for (std::size_t head = 0; head < queue.size(); ++head) {
         if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
         const Slot u = queue[head];
         const std::int32_t next = steps[u] + 1;
-        index.forEachNeighbourSlot(u, [&](Slot t, int) {
-            if (steps[t] == -1) {
-                steps[t] = next;
-                queue.push_back(t);
-            }
+        forEachClearNeighbour(index, reached, u, [&](Slot t) {
+            reached.set(t);
+            steps[t] = next;
+            queue.push_back(t);
         });
     }
     const Slot last = queue.back();
@@ -802,7 +789,8 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     reportProgress(progress, 0.1, "lumen pieces");
 
     // 2. Pieces, largest first (ties: lower label, i.e. first in slot order).
-    const Pieces pieces = labelPieces(index, progress);
+    const SlotBits holes = holeBits(index);
+    const Pieces pieces = labelPieces(index, holes, progress);
     std::vector<std::int32_t> bySize(pieces.size.size());
     for (std::size_t i = 0; i < bySize.size(); ++i) bySize[i] = static_cast<std::int32_t>(i);
     std::stable_sort(bySize.begin(), bySize.end(),
@@ -902,7 +890,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     // end, asked with another step, was another curve). Linear interpolation between samples
     // this close is exact to well under a micrometre on colon bends.
     const double fineMm = std::min(0.25 * voxelMm, 0.5);
-    std::vector<std::int32_t> steps = unreachedLumen(index);
+    std::vector<std::int32_t> steps(index.slotCount(), -1);
     std::vector<Slot> pieceSlots;
     RouteWorkspace routeWork;
     std::vector<PiecePath> paths;
@@ -911,21 +899,14 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches
         // the other end last. Both lie on the wall of the blind ends; the path runs between
         // the core voxels nearest to them in steps.
-        auto reset = [&] {
-            for (Slot s = 0; s < index.slotCount(); ++s)
-                if (pieces.label[s] == label) steps[s] = -1;
-        };
-        reset();  // a piece may be traced twice
         Slot a = pieces.lastReached[label];
         if (seed != NO_SLOT) {
             // The end of the tube nearest to the seed: the voxel farthest from the seed's
             // farthest voxel (the seed itself when it lies at an end).
-            const Slot far = stepsFrom(index, seed, steps, progress);
-            reset();
-            a = stepsFrom(index, far, steps, progress);
-            reset();
+            const Slot far = stepsFrom(index, holes, seed, steps, progress);
+            a = stepsFrom(index, holes, far, steps, progress);
         }
-        const Slot b = stepsFrom(index, a, steps, progress);
+        const Slot b = stepsFrom(index, holes, a, steps, progress);
         // The search runs on the coarsest set that connects the ends: the core's voxels of even
         // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
         // whole piece (a stricture, or a piece next to a much deeper one, can break the core).

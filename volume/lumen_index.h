@@ -108,6 +108,97 @@ struct LumenIndex {
     }
 };
 
+/// One bit per slot of a LumenIndex, a block's 512 bits in one 64-byte cache line: testing a
+/// voxel's 26 neighbours reads at most 8 lines.
+class SlotBits {
+public:
+    explicit SlotBits(std::size_t blocks) : lines_(blocks) {}
+    bool test(Slot s) const { return (word(s) >> (s & 63)) & 1u; }
+    void set(Slot s) { word(s) |= std::uint64_t(1) << (s & 63); }
+    void reset(Slot s) { word(s) &= ~(std::uint64_t(1) << (s & 63)); }
+    /// Sets the bit; returns whether it was set before.
+    bool testAndSet(Slot s)
+    {
+        std::uint64_t& w = word(s);
+        const std::uint64_t bit = std::uint64_t(1) << (s & 63);
+        const bool was = (w & bit) != 0;
+        w |= bit;
+        return was;
+    }
+
+    /// The 8 words of a block's bits: word x holds the voxels (x, y, z) at bit y * 8 + z.
+    const std::uint64_t* blockWords(std::size_t block) const { return lines_[block].words; }
+
+private:
+    struct alignas(64) Line {
+        std::uint64_t words[LEAF_VOXELS / 64] = {};
+    };
+    static_assert(sizeof(Line) == 64, "a block's bits are one cache line");
+    static constexpr int BLOCK = LEAF_VOXELS;
+    std::uint64_t& word(Slot s) { return lines_[s / BLOCK].words[(s % BLOCK) >> 6]; }
+    const std::uint64_t& word(Slot s) const { return lines_[s / BLOCK].words[(s % BLOCK) >> 6]; }
+    std::vector<Line> lines_;
+};
+
+/// Calls fn(t) for each 26-neighbour slot t of `s` whose bit in `bits` is clear, in
+/// LumenIndex::forEachNeighbourSlot's order. For a voxel whose neighbours all lie in its block,
+/// the clear bits of each of the three x-slices' 3x3 windows are read as one masked word (the
+/// window's bits in increasing (y, z) order, the steps' order); for one whose z-neighbours lie
+/// in its block, each (dx, dy) row's three bits as one masked word; fn may set t's bit.
+template <typename Fn>
+void forEachClearNeighbour(const LumenIndex& index, const SlotBits& bits, Slot s, Fn&& fn)
+{
+    const int off = static_cast<int>(s % LEAF_VOXELS);
+    const int x = off >> (2 * LEAF_LOG2), y = (off >> LEAF_LOG2) & (LEAF_DIM - 1), z = off & (LEAF_DIM - 1);
+    if (x >= 1 && x <= LEAF_DIM - 2 && y >= 1 && y <= LEAF_DIM - 2 && z >= 1 && z <= LEAF_DIM - 2) {
+        static_assert(LEAF_DIM == 8, "a block's x-slice is one 64-bit word");
+        const std::uint64_t* words = bits.blockWords(s / LEAF_VOXELS);
+        const std::uint64_t window = std::uint64_t(0x070707) << ((y - 1) * 8 + (z - 1));
+        const std::uint64_t centre = std::uint64_t(1) << (y * 8 + z);
+        const Slot base = s - static_cast<Slot>(off);
+        for (int dx = -1; dx <= 1; ++dx) {
+            std::uint64_t clear = ~words[x + dx] & window & (dx == 0 ? ~centre : ~std::uint64_t(0));
+            while (clear) {
+                const int pos = __builtin_ctzll(clear);
+                clear &= clear - 1;
+                fn(base + static_cast<Slot>((x + dx) * 64 + pos));
+            }
+        }
+        return;
+    }
+    if (z >= 1 && z <= LEAF_DIM - 2) {
+        // Neighbours in other blocks along x or y only: per (dx, dy), the three z-neighbours'
+        // bits from one word of that row's block.
+        const auto& nb = index.neighbour[s / LEAF_VOXELS];
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int nx = x + dx;
+            for (int dy = -1; dy <= 1; ++dy) {
+                const int ny = y + dy;
+                const std::int32_t b = nb[((nx >> LEAF_LOG2) + 1) * 9 + ((ny >> LEAF_LOG2) + 1) * 3 + 1];
+                if (b < 0) continue;
+                const int lx = nx & (LEAF_DIM - 1), ly = ny & (LEAF_DIM - 1);
+                const int first = ly * 8 + z - 1;
+                std::uint64_t clear = (~bits.blockWords(static_cast<std::size_t>(b))[lx] >> first) & 7u;
+                if (dx == 0 && dy == 0) clear &= ~std::uint64_t(2);  // the voxel itself
+                const Slot row = static_cast<Slot>(b) * LEAF_VOXELS + static_cast<Slot>(lx * 64 + first);
+                while (clear) {
+                    const int pos = __builtin_ctzll(clear);
+                    clear &= clear - 1;
+                    fn(row + static_cast<Slot>(pos));
+                }
+            }
+        }
+        return;
+    }
+    index.forEachNeighbourSlot(s, [&](Slot t, int) {
+        if (!bits.test(t)) fn(t);
+    });
+}
+
+/// Bits set at the index's holes (its slots of no lumen voxel): where a search over the lumen
+/// with forEachClearNeighbour starts.
+SlotBits holeBits(const LumenIndex& index);
+
 /// Indexes every active voxel of `sdf` whose value is negative.
 /// @throw InputError when the lumen is too large for 32-bit slots
 LumenIndex buildIndex(const FloatTree& sdf);
