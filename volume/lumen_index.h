@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 namespace flyover::lumen_index {
@@ -140,14 +141,25 @@ private:
     std::vector<Line> lines_;
 };
 
-/// Calls fn(t) for each 26-neighbour slot t of `s` whose bit in `bits` is clear, in
-/// LumenIndex::forEachNeighbourSlot's order. For a voxel whose neighbours all lie in its block,
+/// The index in STEPS of the step (dx, dy, dz), each in {-1, 0, 1}, not all 0.
+constexpr int stepIndex(int dx, int dy, int dz)
+{
+    const int i = (dx + 1) * 9 + (dy + 1) * 3 + (dz + 1);
+    return i > 13 ? i - 1 : i;  // 13: (0, 0, 0), not a step
+}
+
+/// Calls fn(t) -- or fn(t, stepIndex) when fn takes two arguments -- for each 26-neighbour
+/// slot t of `s` whose bit in `bits` is clear, in LumenIndex::forEachNeighbourSlot's order. For a voxel whose neighbours all lie in its block,
 /// the clear bits of each of the three x-slices' 3x3 windows are read as one masked word (the
 /// window's bits in increasing (y, z) order, the steps' order); for one whose z-neighbours lie
 /// in its block, each (dx, dy) row's three bits as one masked word; fn may set t's bit.
 template <typename Fn>
 void forEachClearNeighbour(const LumenIndex& index, const SlotBits& bits, Slot s, Fn&& fn)
 {
+    auto call = [&fn](Slot t, int k) {
+        if constexpr (std::is_invocable_v<Fn&, Slot, int>) fn(t, k);
+        else fn(t);
+    };
     const int off = static_cast<int>(s % LEAF_VOXELS);
     const int x = off >> (2 * LEAF_LOG2), y = (off >> LEAF_LOG2) & (LEAF_DIM - 1), z = off & (LEAF_DIM - 1);
     if (x >= 1 && x <= LEAF_DIM - 2 && y >= 1 && y <= LEAF_DIM - 2 && z >= 1 && z <= LEAF_DIM - 2) {
@@ -161,7 +173,7 @@ void forEachClearNeighbour(const LumenIndex& index, const SlotBits& bits, Slot s
             while (clear) {
                 const int pos = __builtin_ctzll(clear);
                 clear &= clear - 1;
-                fn(base + static_cast<Slot>((x + dx) * 64 + pos));
+                call(base + static_cast<Slot>((x + dx) * 64 + pos), stepIndex(dx, (pos >> 3) - y, (pos & 7) - z));
             }
         }
         return;
@@ -184,14 +196,14 @@ void forEachClearNeighbour(const LumenIndex& index, const SlotBits& bits, Slot s
                 while (clear) {
                     const int pos = __builtin_ctzll(clear);
                     clear &= clear - 1;
-                    fn(row + static_cast<Slot>(pos));
+                    call(row + static_cast<Slot>(pos), stepIndex(dx, dy, pos - 1));
                 }
             }
         }
         return;
     }
-    index.forEachNeighbourSlot(s, [&](Slot t, int) {
-        if (!bits.test(t)) fn(t);
+    index.forEachNeighbourSlot(s, [&](Slot t, int k) {
+        if (!bits.test(t)) call(t, k);
     });
 }
 

@@ -29,6 +29,9 @@
 #include "volume/lumen_index.h"
 #include "volume/threads.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <condition_variable>
@@ -69,12 +72,24 @@ public:
                 double minEdge, double maxEdge, Slot source, std::vector<double>& dist, std::vector<Slot>& prev,
                 bool recordTouched)
         : mIndex(index), mAllowed(allowed), mEdgeCost(edgeCost), mWidth(ringWidth(minEdge, maxEdge)),
-          mRecordTouched(recordTouched),
+          mRecordTouched(recordTouched), mClosed(STRIDE == 1 ? index.blockOrigin.size() : 0),
           mBuckets(static_cast<std::size_t>(std::ceil(maxEdge / mWidth)) + 2), dist(dist), prev(prev)
     {
         dist.assign(index.slotCount(), std::numeric_limits<double>::infinity());
         prev.assign(index.slotCount(), NO_SLOT);
-        mDone.assign(index.slotCount(), 0);
+        if constexpr (STRIDE == 1) {
+            // Closed: not allowed, or settled. A settled neighbour is never improved (it lies in
+            // an earlier bucket, or in the same one, less than one bucket width lower: every
+            // edge is longer), so skipping it by its bit is exact.
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.blockOrigin.size(), 64),
+                              [&](const tbb::blocked_range<std::size_t>& r) {
+                for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
+                    for (Slot s = Slot(blk * lumen_index::LEAF_VOXELS); s < (blk + 1) * lumen_index::LEAF_VOXELS; ++s)
+                        if (!allowed[s]) mClosed.set(s);
+            });
+        } else {
+            mDone.assign(index.slotCount(), 0);
+        }
         dist[source] = 0.0;
         mBuckets[0].push_back(source);
         mPending = 1;
@@ -93,14 +108,17 @@ public:
             for (std::size_t i = 0; i < bucket.size(); ++i) {  // by index: see below
                 const Slot u = bucket[i];
                 --mPending;
-                if (mDone[u]) continue;  // stale entry from before an improvement
-                mDone[u] = 1;
+                if constexpr (STRIDE == 1) {
+                    if (mClosed.testAndSet(u)) continue;  // stale entry from before an improvement
+                } else {
+                    if (mDone[u]) continue;
+                    mDone[u] = 1;
+                }
                 if (u == stopAt) return true;
                 ++settledNow;
                 if ((++mSettled & 0xfffff) == 0) checkCancelled(progress);
                 const double d = dist[u];
-                mIndex.template forEachNeighbourSlot<STRIDE>(u, [&](Slot v, int k) {
-                    if (!mAllowed[v]) return;
+                auto relax = [&](Slot v, int k) {
                     const double nd = d + mEdgeCost(u, v, k);
                     if (nd < dist[v]) {
                         dist[v] = nd;
@@ -113,7 +131,14 @@ public:
                         mBuckets[b % ring].push_back(v);
                         ++mPending;
                     }
-                });
+                };
+                if constexpr (STRIDE == 1) {
+                    lumen_index::forEachClearNeighbour(mIndex, mClosed, u, relax);
+                } else {
+                    mIndex.template forEachNeighbourSlot<STRIDE>(u, [&](Slot v, int k) {
+                        if (mAllowed[v]) relax(v, k);
+                    });
+                }
             }
             bucket.clear();
             ++mCurrent;
@@ -132,8 +157,9 @@ private:
     EdgeCost& mEdgeCost;
     double mWidth;
     bool mRecordTouched;
+    lumen_index::SlotBits mClosed;       ///< STRIDE 1: not allowed, or settled
     std::vector<std::vector<Slot>> mBuckets;
-    std::vector<std::uint8_t> mDone;
+    std::vector<std::uint8_t> mDone;     ///< STRIDE 2: settled
     std::uint64_t mCurrent = 0;
     std::size_t mPending = 0;
     std::size_t mSettled = 0;
