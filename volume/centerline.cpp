@@ -893,6 +893,8 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     std::vector<std::int32_t> steps(index.slotCount(), -1);
     std::vector<Slot> pieceSlots;
     RouteWorkspace routeWork;
+    // The coarse lattice holds an eighth of the core: its search is short, from one end.
+    const route_search::RouteOptions coarseSearch{false};
     std::vector<PiecePath> paths;
     // One piece's path; from the end of the tube nearest to `seed` when one is given.
     auto tracePiece = [&](std::int32_t label, Slot seed) {
@@ -930,7 +932,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         const bool coarseRoute =
             ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
             shortestRoute<2>(index, coarse, ends[0][0], ends[0][1], medialCoarse, 2.0 * minEdge, 2.0 * maxEdge,
-                             routeWork, route, progress);
+                             routeWork, route, progress, coarseSearch);
         const bool coreRoute = coarseRoute || (ends[1][0] != NO_SLOT &&
                                                shortestRoute<1>(index, core, ends[1][0], ends[1][1], medial,
                                                                 minEdge, maxEdge, routeWork, route, progress));

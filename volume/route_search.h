@@ -3,8 +3,8 @@
 ///        centerline's minimal path (centerline.cpp), serial and deterministic.
 ///
 /// - dijkstra(): one source, stops once the target is settled; leaves dist and prev.
-/// - shortestRoute(): the same minimal cost, searched from both ends at once, each end's
-///   search on its own thread. On a 2.4 m real colon whose core is split, the whole piece
+/// - shortestRoute(): the same minimal cost, searched from both ends at once (by default),
+///   each end's search on its own thread. On a 2.4 m real colon whose core is split, the whole piece
 ///   (10.5 M voxels) is searched; one search from one end took ~3 s on one core.
 ///
 /// Both use a ring of buckets of width just below the smallest edge cost (Dial's algorithm
@@ -303,21 +303,31 @@ struct RouteWorkspace {
 /// barriers cost little and the two ends stay in step.
 constexpr std::size_t ROUND_SLOTS = 1 << 15;
 
+/// How shortestRoute searches.
+struct RouteOptions {
+    /// From both ends at once (each on its own thread when two may run), or from the source
+    /// alone: the second end costs a second set of per-slot arrays (12 bytes per slot of the
+    /// whole index, ~100 MB on the full phantom), which a small search does not repay.
+    bool bothEnds = true;
+    /// Slots each end settles per round (tests use small rounds to make the ends meet
+    /// mid-round).
+    std::size_t roundSlots = ROUND_SLOTS;
+};
+
 /// A minimal-cost route from `source` to `target` (both included, in that order) over the
-/// slots with allowed[s] != 0, searched from both ends at once; false when none exists.
-/// Same cost as dijkstra()'s route (see the file comment for ties). `roundSlots`: the slots
-/// each end settles per round (tests use small rounds to make the ends meet mid-round).
+/// slots with allowed[s] != 0; false when none exists. Same cost as dijkstra()'s route (see
+/// the file comment for ties).
 template<int STRIDE, typename EdgeCost>
 bool shortestRoute(const LumenIndex& index, const std::vector<std::uint8_t>& allowed, Slot source, Slot target,
                    EdgeCost&& edgeCost, double minEdge, double maxEdge, RouteWorkspace& work,
-                   std::vector<Slot>& route, Progress* progress, std::size_t roundSlots = ROUND_SLOTS)
+                   std::vector<Slot>& route, Progress* progress, const RouteOptions& options = {})
 {
     route.clear();
     if (source == target) {
         route.push_back(source);
         return true;
     }
-    if (ringWidth(minEdge, maxEdge) == 0) {  // the heap: one end
+    if (!options.bothEnds || ringWidth(minEdge, maxEdge) == 0) {  // one end (the heap: always)
         if (!dijkstra<STRIDE>(index, allowed, source, target, edgeCost, minEdge, maxEdge, work.dist[0],
                               work.prev[0], progress))
             return false;
@@ -347,8 +357,8 @@ bool shortestRoute(const LumenIndex& index, const std::vector<std::uint8_t>& all
         checkCancelled(progress);
         // A round: each end settles its quota of slots, or settles the other's source (then its
         // own distances alone hold a minimal route).
-        sides.run([&] { finished[0] = from.advance(roundSlots, target, progress); },
-                  [&] { finished[1] = to.advance(roundSlots, source, progress); });
+        sides.run([&] { finished[0] = from.advance(options.roundSlots, target, progress); },
+                  [&] { finished[1] = to.advance(options.roundSlots, source, progress); });
         if (finished[0] || finished[1]) {
             const int e = finished[0] ? 0 : 1;
             const std::vector<Slot>& prev = fronts[e]->prev;

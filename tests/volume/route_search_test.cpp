@@ -117,7 +117,8 @@ std::size_t expectSameCost(const LumenIndex& index, const std::vector<std::uint8
             bool found = false;
             tbb::task_arena(threads).execute([&] {
                 found = route_search::shortestRoute<1>(index, allowed, source, target, costs, costs.minEdge,
-                                                       costs.maxEdge, work, routes[threads - 1], nullptr, roundSlots);
+                                                       costs.maxEdge, work, routes[threads - 1], nullptr,
+                                                       route_search::RouteOptions{true, roundSlots});
             });
             EXPECT_TRUE(found) << with.str() << ", " << threads << " thread(s): no route";
         }
@@ -131,6 +132,19 @@ std::size_t expectSameCost(const LumenIndex& index, const std::vector<std::uint8
             << with.str() << ": expected the minimal cost " << dist[target] << " of the search from one end, saw "
             << cost;
         length = route.size();
+    }
+    {  // from the source alone
+        RouteWorkspace work;
+        std::vector<Slot> route;
+        EXPECT_TRUE(route_search::shortestRoute<1>(index, allowed, source, target, costs, costs.minEdge, costs.maxEdge,
+                                                   work, route, nullptr, route_search::RouteOptions{false}))
+            << what << ", one end: no route";
+        if (!route.empty()) {
+            EXPECT_EQ(route.front(), source) << what;
+            EXPECT_EQ(route.back(), target) << what;
+            const double cost = routeCost(index, allowed, costs, route, what + ", one end");
+            EXPECT_NEAR(cost, dist[target], 1e-9 * dist[target]) << what << ", one end";
+        }
     }
     return length;
 }
