@@ -1,11 +1,11 @@
 /// @file route_search.h
 /// @brief Minimal-cost routes over the lumen index (lumen_index.h): the searches of the
-///        centerline's minimal path (centerline.cpp), serial and deterministic.
+///        centerline's minimal path (centerline.cpp), deterministic.
 ///
 /// - dijkstra(): one source, stops once the target is settled; leaves dist and prev.
 /// - shortestRoute(): the same minimal cost, searched from both ends at once (by default),
-///   each end's search on its own thread. On a 2.4 m real colon whose core is split, the whole piece
-///   (10.5 M voxels) is searched; one search from one end took ~3 s on one core.
+///   each end's search on its own thread. On a 2.4 m real colon whose core is split, the whole
+///   piece (10.5 M voxels) is searched; the search from one end took ~3 s on one core.
 ///
 /// Both use a ring of buckets of width just below the smallest edge cost (Dial's algorithm
 /// generalised to real weights): a relaxation from bucket k always lands in a later bucket, and
@@ -386,16 +386,15 @@ bool shortestRoute(const LumenIndex& index, const std::vector<std::uint8_t>& all
         from.touched.clear();
         to.touched.clear();
         best = std::min({best, found[0], found[1]});
-        // Every route through a slot that neither end has settled costs at least the sum of
-        // the radii (one bucket of slack for rounding); once that exceeds the best meeting,
-        // the best meeting is minimal.
+        // A route cheaper than the best meeting steps somewhere from a slot the source's end
+        // has settled to one it has not; that one lies at least the source's radius from the
+        // source, so at most (cost - that radius) from the target: within the target's radius
+        // once the radii add up to the cost, hence settled there too, a meeting already seen.
+        // So once they add up to the best meeting's cost (one bucket of slack for rounding),
+        // it is minimal.
         if (best.slot != NO_SLOT && from.radius() + to.radius() >= best.cost + from.width()) break;
-        if (from.exhausted() || to.exhausted()) {
-            // One end has settled everything it can reach: had it reached the other's source,
-            // advance() would have said so.
-            if (best.slot == NO_SLOT) return false;
-            break;
-        }
+        // An end that has settled all it can reach without the other's source: no route.
+        if (from.exhausted() || to.exhausted()) return false;
     }
     for (Slot s = best.slot; s != NO_SLOT; s = from.prev[s]) route.push_back(s);
     std::reverse(route.begin(), route.end());
