@@ -4,7 +4,7 @@
 //     farthest from its seed in steps, so the labelling pass also yields one geodesic
 //     farthest end per piece, and a second search from it yields the other end;
 //  3. per piece, a minimal path under the cost D^-p per unit length (route_search.h: bucket
-//     queues, searched from both ends at once)
+//     queues; the core's and the whole piece's searched from both ends at once)
 //     through the piece's core (voxels at least half as deep as the deepest nearby), which
 //     is all a path through the middle needs and a quarter of the voxels;
 //  4. per piece: end trimming, ridge of D, cross-section centroids, twiced Gaussian
