@@ -39,9 +39,11 @@
 #include <exception>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <queue>
 #include <thread>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -51,6 +53,34 @@ using lumen_index::checkCancelled;
 using lumen_index::LumenIndex;
 using lumen_index::NO_SLOT;
 using lumen_index::Slot;
+
+/// An allocator whose resize() leaves new elements uninitialised: a search's per-slot arrays
+/// are written only where it reaches (a bit per slot says where), so the pages of the slots it
+/// never reaches are never touched and take no memory.
+template<typename T>
+struct DefaultInit : std::allocator<T> {
+    template<typename U>
+    struct rebind {
+        using other = DefaultInit<U>;
+    };
+    DefaultInit() = default;
+    template<typename U>
+    DefaultInit(const DefaultInit<U>&) noexcept {}
+    template<typename U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>)
+    {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template<typename U, typename... Args>
+    void construct(U* p, Args&&... args)
+    {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+
+/// A per-slot array of a search: valid only at the slots the search reached.
+template<typename T>
+using SlotArray = std::vector<T, DefaultInit<T>>;
 
 /// Largest ring of buckets before the binary heap takes over.
 constexpr double MAX_RING = double(1 << 20);
@@ -69,14 +99,17 @@ template<int STRIDE, typename EdgeCost>
 class BucketFront {
 public:
     BucketFront(const LumenIndex& index, const std::vector<std::uint8_t>& allowed, EdgeCost& edgeCost,
-                double minEdge, double maxEdge, Slot source, std::vector<double>& dist, std::vector<Slot>& prev,
+                double minEdge, double maxEdge, Slot source, SlotArray<double>& dist, SlotArray<Slot>& prev,
                 bool recordTouched)
         : mIndex(index), mAllowed(allowed), mEdgeCost(edgeCost), mWidth(ringWidth(minEdge, maxEdge)),
-          mRecordTouched(recordTouched), mClosed(STRIDE == 1 ? index.blockOrigin.size() : 0),
+          mRecordTouched(recordTouched), mReached(index.blockOrigin.size()),
+          mClosed(STRIDE == 1 ? index.blockOrigin.size() : 0),
           mBuckets(static_cast<std::size_t>(std::ceil(maxEdge / mWidth)) + 2), dist(dist), prev(prev)
     {
-        dist.assign(index.slotCount(), std::numeric_limits<double>::infinity());
-        prev.assign(index.slotCount(), NO_SLOT);
+        dist.resize(index.slotCount());  // uninitialised: read only where mReached is set
+        prev.resize(index.slotCount());
+        mReached.set(source);
+        prev[source] = NO_SLOT;
         if constexpr (STRIDE == 1) {
             // Closed: not allowed, or settled. A settled neighbour is never improved (it lies in
             // an earlier bucket, or in the same one, less than one bucket width lower: every
@@ -119,8 +152,9 @@ public:
                 if ((++mSettled & 0xfffff) == 0) checkCancelled(progress);
                 const double d = dist[u];
                 auto relax = [&](Slot v, int k) {
-                    const double nd = d + mEdgeCost(u, v, k);
-                    if (nd < dist[v]) {
+                    const double nd = d + mEdgeCost(u, v, k);  // +infinity: no edge
+                    if (nd < distance(v)) {
+                        mReached.set(v);
                         dist[v] = nd;
                         prev[v] = u;
                         if (mRecordTouched) touched.push_back(v);
@@ -147,6 +181,8 @@ public:
     }
 
     bool exhausted() const { return mPending == 0; }
+    /// The distance found so far from the source; +infinity where the search has not reached.
+    double distance(Slot s) const { return mReached.test(s) ? dist[s] : std::numeric_limits<double>::infinity(); }
     /// Every slot not yet settled is at least this far from the source (up to rounding).
     double radius() const { return double(mCurrent) * mWidth; }
     double width() const { return mWidth; }
@@ -157,6 +193,7 @@ private:
     EdgeCost& mEdgeCost;
     double mWidth;
     bool mRecordTouched;
+    lumen_index::SlotBits mReached;      ///< where dist and prev are valid
     lumen_index::SlotBits mClosed;       ///< STRIDE 1: not allowed, or settled
     std::vector<std::vector<Slot>> mBuckets;
     std::vector<std::uint8_t> mDone;     ///< STRIDE 2: settled
@@ -165,18 +202,19 @@ private:
     std::size_t mSettled = 0;
 
 public:
-    std::vector<double>& dist;
-    std::vector<Slot>& prev;
+    SlotArray<double>& dist;  ///< valid where reached (distance())
+    SlotArray<Slot>& prev;    ///< valid where reached; NO_SLOT at the source
     std::vector<Slot> touched;  ///< slots whose distance dropped since the caller last cleared it
 };
 
 /// Single-source search over the 26-connected lumen slots with allowed[s] != 0 (with STRIDE 2
 /// the steps join voxels two apart, see LumenIndex::forEachNeighbour). Stops once `target` is
-/// settled; returns whether it was reached. `prev` then leads back from it.
+/// settled; returns whether it was reached. dist[target] is then its distance, and `prev` leads
+/// back from it (dist and prev are valid only at the slots the search reached).
 template<int STRIDE, typename EdgeCost>
 bool dijkstra(const LumenIndex& index, const std::vector<std::uint8_t>& allowed, Slot source, Slot target,
-              EdgeCost&& edgeCost, double minEdge, double maxEdge, std::vector<double>& dist,
-              std::vector<Slot>& prev, Progress* progress)
+              EdgeCost&& edgeCost, double minEdge, double maxEdge, SlotArray<double>& dist,
+              SlotArray<Slot>& prev, Progress* progress)
 {
     if (ringWidth(minEdge, maxEdge) > 0) {
         BucketFront<STRIDE, std::remove_reference_t<EdgeCost>> front(index, allowed, edgeCost, minEdge, maxEdge,
@@ -295,8 +333,8 @@ private:
 
 /// Reusable memory of shortestRoute (two ends' distances and predecessors).
 struct RouteWorkspace {
-    std::vector<double> dist[2];
-    std::vector<Slot> prev[2];
+    SlotArray<double> dist[2];
+    SlotArray<Slot> prev[2];
 };
 
 /// Slots settled per end and round of shortestRoute: a few milliseconds of work, so that the
@@ -361,7 +399,7 @@ bool shortestRoute(const LumenIndex& index, const std::vector<std::uint8_t>& all
                   [&] { finished[1] = to.advance(options.roundSlots, source, progress); });
         if (finished[0] || finished[1]) {
             const int e = finished[0] ? 0 : 1;
-            const std::vector<Slot>& prev = fronts[e]->prev;
+            const SlotArray<Slot>& prev = fronts[e]->prev;
             for (Slot s = e == 0 ? target : source; s != NO_SLOT; s = prev[s]) route.push_back(s);
             if (e == 0) std::reverse(route.begin(), route.end());
             return true;
@@ -373,7 +411,7 @@ bool shortestRoute(const LumenIndex& index, const std::vector<std::uint8_t>& all
             const Front& other = *fronts[1 - e];
             for (Slot s : self.touched) {
                 if (!seen[1 - e][s / lumen_index::LEAF_VOXELS]) continue;
-                const double d = other.dist[s];
+                const double d = other.distance(s);
                 if (d == std::numeric_limits<double>::infinity()) continue;
                 const Meeting m{self.dist[s] + d, s};
                 if (m < found[e]) found[e] = m;
