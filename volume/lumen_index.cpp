@@ -84,18 +84,6 @@ LumenIndex buildIndex(const FloatTree& sdf)
     return index;
 }
 
-SlotBits holeBits(const LumenIndex& index)
-{
-    const std::size_t blocks = index.blockOrigin.size();
-    SlotBits bits(blocks);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
-            for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s)
-                if (!index.isLumen(s)) bits.set(s);
-    });
-    return bits;
-}
-
 std::vector<float> nearbyMaxDepth(const LumenIndex& index)
 {
     const std::size_t blocks = index.blockOrigin.size();

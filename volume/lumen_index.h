@@ -10,6 +10,9 @@
 
 #include <openvdb/openvdb.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <array>
 #include <cstdint>
 #include <limits>
@@ -207,9 +210,26 @@ void forEachClearNeighbour(const LumenIndex& index, const SlotBits& bits, Slot s
     });
 }
 
+/// Bits set at the slots s of `index` for which pred(s), filled in parallel over blocks.
+template <typename Pred>
+SlotBits bitsWhere(const LumenIndex& index, Pred&& pred)
+{
+    const std::size_t blocks = index.blockOrigin.size();
+    SlotBits bits(blocks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 64), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
+            for (Slot s = static_cast<Slot>(blk * LEAF_VOXELS); s < (blk + 1) * LEAF_VOXELS; ++s)
+                if (pred(s)) bits.set(s);
+    });
+    return bits;
+}
+
 /// Bits set at the index's holes (its slots of no lumen voxel): where a search over the lumen
 /// with forEachClearNeighbour starts.
-SlotBits holeBits(const LumenIndex& index);
+inline SlotBits holeBits(const LumenIndex& index)
+{
+    return bitsWhere(index, [&](Slot s) { return !index.isLumen(s); });
+}
 
 /// Indexes every active voxel of `sdf` whose value is negative.
 /// @throw InputError when the lumen is too large for 32-bit slots

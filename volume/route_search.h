@@ -29,9 +29,6 @@
 #include "volume/lumen_index.h"
 #include "volume/threads.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <condition_variable>
@@ -103,26 +100,18 @@ public:
                 bool recordTouched)
         : mIndex(index), mAllowed(allowed), mEdgeCost(edgeCost), mWidth(ringWidth(minEdge, maxEdge)),
           mRecordTouched(recordTouched), mReached(index.blockOrigin.size()),
-          mClosed(STRIDE == 1 ? index.blockOrigin.size() : 0),
+          // Stride 1 walks the closed bits (forEachClearNeighbour), so they hold the slots not
+          // allowed too; stride 2 tests `allowed` itself. A settled neighbour is never improved
+          // (it lies in an earlier bucket, or in the same one less than a bucket width lower,
+          // and every edge is longer), so skipping it by its bit is exact.
+          mClosed(STRIDE == 1 ? lumen_index::bitsWhere(index, [&](Slot s) { return !allowed[s]; })
+                              : lumen_index::SlotBits(index.blockOrigin.size())),
           mBuckets(static_cast<std::size_t>(std::ceil(maxEdge / mWidth)) + 2), dist(dist), prev(prev)
     {
         dist.resize(index.slotCount());  // uninitialised: read only where mReached is set
         prev.resize(index.slotCount());
         mReached.set(source);
         prev[source] = NO_SLOT;
-        if constexpr (STRIDE == 1) {
-            // Closed: not allowed, or settled. A settled neighbour is never improved (it lies in
-            // an earlier bucket, or in the same one, less than one bucket width lower: every
-            // edge is longer), so skipping it by its bit is exact.
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.blockOrigin.size(), 64),
-                              [&](const tbb::blocked_range<std::size_t>& r) {
-                for (std::size_t blk = r.begin(); blk != r.end(); ++blk)
-                    for (Slot s = Slot(blk * lumen_index::LEAF_VOXELS); s < (blk + 1) * lumen_index::LEAF_VOXELS; ++s)
-                        if (!allowed[s]) mClosed.set(s);
-            });
-        } else {
-            mDone.assign(index.slotCount(), 0);
-        }
         dist[source] = 0.0;
         mBuckets[0].push_back(source);
         mPending = 1;
@@ -141,12 +130,7 @@ public:
             for (std::size_t i = 0; i < bucket.size(); ++i) {  // by index: see below
                 const Slot u = bucket[i];
                 --mPending;
-                if constexpr (STRIDE == 1) {
-                    if (mClosed.testAndSet(u)) continue;  // stale entry from before an improvement
-                } else {
-                    if (mDone[u]) continue;
-                    mDone[u] = 1;
-                }
+                if (mClosed.testAndSet(u)) continue;  // stale entry from before an improvement
                 if (u == stopAt) return true;
                 ++settledNow;
                 if ((++mSettled & 0xfffff) == 0) checkCancelled(progress);
@@ -194,9 +178,8 @@ private:
     double mWidth;
     bool mRecordTouched;
     lumen_index::SlotBits mReached;      ///< where dist and prev are valid
-    lumen_index::SlotBits mClosed;       ///< STRIDE 1: not allowed, or settled
+    lumen_index::SlotBits mClosed;       ///< settled (stride 1: or not allowed)
     std::vector<std::vector<Slot>> mBuckets;
-    std::vector<std::uint8_t> mDone;     ///< STRIDE 2: settled
     std::uint64_t mCurrent = 0;
     std::size_t mPending = 0;
     std::size_t mSettled = 0;
