@@ -50,6 +50,15 @@ json runCenterline(StudyRun& run, Progress* progress)
     json bridges = json::array();
     for (const CenterlineBridgeInfo& b : cr.bridges)
         bridges.push_back(json{{"gap_mm", b.gapMm}, {"length_mm", b.lengthMm}});
+    // The pieces the path runs through, in travel order, and where each one's route was found.
+    json pieces = json::array();
+    for (const CenterlinePieceInfo& p : cr.pieces)
+        if (p.used) {
+            if (pieces.size() <= std::size_t(p.chainIndex)) pieces.get_ref<json::array_t&>().resize(p.chainIndex + 1);
+            pieces[std::size_t(p.chainIndex)] = json{{"volume_ml", p.volumeMl},
+                                                      {"path_length_mm", p.pathLengthMm},
+                                                      {"route_searched_on", p.routeSearchedOn}};
+        }
     const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
     return json{{"traced_beside_contact_cut", bool(speculative)},
                 {"points", pts.size()},
@@ -60,6 +69,7 @@ json runCenterline(StudyRun& run, Progress* progress)
                 {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")},
                 {"rectum_rule", cr.rectumRule},
                 {"rectum_above_lowest_lumen_mm", aboveLowest},
+                {"pieces", pieces},
                 {"bridges", bridges},
                 {"near_wall", nearWall},
                 {"contacts", contactsAlongPath(*sdf, cl)}};

@@ -58,7 +58,7 @@ struct CenterlineParams {
     double bridgeTurnMmPerRad = 20.0;
     /// Path points closer than this to the wall outside bridges are reported (mm, >= 0).
     double nearWallMm = 1.0;
-    static constexpr int VERSION = 5;
+    static constexpr int VERSION = 6;
 };
 
 /// One lumen piece as the centerline saw it.
@@ -68,6 +68,10 @@ struct CenterlinePieceInfo {
     int chainIndex = -1;            ///< position in the travel order (0: rectum piece), -1 if unused
     double pathLengthMm = 0;        ///< length of its own path (before resampling)
     Vec3d entryMm, exitMm;          ///< where the path enters and leaves it (LPS mm)
+    /// Where its minimal path was searched, the first of these that joins its ends: "coarse
+    /// core" (the deep voxels' lattice of even coordinates), "core" (the deep voxels), "whole
+    /// piece" (the core split, e.g. by a narrowing); empty if unused.
+    std::string routeSearchedOn;
 };
 
 /// One bridge across a gap between pieces.

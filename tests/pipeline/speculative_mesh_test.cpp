@@ -101,6 +101,16 @@ void expectSameCenterlineEitherWay(RunOptions one, RunOptions two, bool besideEx
     EXPECT_TRUE(clA["computed"].get<bool>());
     EXPECT_EQ(clA["report"]["traced_beside_contact_cut"].get<bool>(), besideExpected)
         << "contacts cut: " << segA["report"]["contacts"]["cut"];
+    // The pieces the path runs through, in travel order, each with where its route was found.
+    const nlohmann::json& pieces = clA["report"]["pieces"];
+    ASSERT_TRUE(pieces.is_array() && !pieces.empty()) << clA["report"].dump();
+    for (const nlohmann::json& p : pieces) {
+        ASSERT_TRUE(p.is_object()) << pieces.dump();
+        const std::string on = p["route_searched_on"].get<std::string>();
+        EXPECT_TRUE(on == "coarse core" || on == "core" || on == "whole piece") << on;
+        EXPECT_GT(p["path_length_mm"].get<double>(), 0.0);
+        EXPECT_GT(p["volume_ml"].get<double>(), 0.0);
+    }
 
     two.untilStage = "segment";
     runPipeline(two);

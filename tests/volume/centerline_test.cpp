@@ -410,6 +410,116 @@ TEST(Centerline, HairpinFlexureKeepsToTheDeepLumenRoundTheFold)
     EXPECT_GE(minRadius, 5.0) << "the path leaves the deep lumen round the bend";
 }
 
+/// A signed distance grid (world mm, negative inside) sampled from `sdfMm(localMm)` over the
+/// local box [lo, hi]: active inside and in a band of 3 voxels outside, as makeTubeSdf.
+template<typename Fn>
+openvdb::FloatGrid::Ptr sampledSdf(const Frame& frame, const Vec3d& lo, const Vec3d& hi, const Fn& sdfMm)
+{
+    const double h = frame.voxelMm;
+    const float band = float(3 * h);
+    auto grid = openvdb::FloatGrid::create(band);
+    auto acc = grid->getAccessor();
+    for (int i = int(std::floor(lo.x / h)); i <= int(std::ceil(hi.x / h)); ++i)
+        for (int j = int(std::floor(lo.y / h)); j <= int(std::ceil(hi.y / h)); ++j)
+            for (int k = int(std::floor(lo.z / h)); k <= int(std::ceil(hi.z / h)); ++k) {
+                const double d = sdfMm(Vec3d{i * h, j * h, k * h});
+                if (d <= band) acc.setValue(openvdb::Coord(i, j, k), float(d));
+            }
+    grid->setTransform(frame.xf->copy());
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    grid->setName("lumen_sdf");
+    return grid;
+}
+
+/// Largest distance (mm) from the path's points to the local z axis through (cx, cy), and the
+/// path's extent along z (local mm).
+struct AxisFit {
+    double worstMm = 0, zMin = 1e9, zMax = -1e9, throatMm = 1e9;
+};
+AxisFit fitToZAxis(const Centerline& cl, const Frame& frame, double cx, double cy, double throatZ)
+{
+    AxisFit f;
+    for (const CenterlinePoint& p : cl.points) {
+        const Vec3d q = frame.localFromWorld(p.positionMm);
+        const double off = std::hypot(q.x - cx, q.y - cy);
+        f.worstMm = std::max(f.worstMm, off);
+        f.zMin = std::min(f.zMin, q.z);
+        f.zMax = std::max(f.zMax, q.z);
+        f.throatMm = std::min(f.throatMm, length(Vec3d{q.x - cx, q.y - cy, q.z - throatZ}));
+    }
+    return f;
+}
+
+TEST(Centerline, NarrowingThatSplitsTheCoreIsCrossedOnTheAxis)
+{
+    // A straight lumen of radius 8 mm narrowed smoothly to 1.6 mm deep in its middle (as on
+    // gca-colon-00020: a narrowing 1.6 mm deep between stretches 10 mm deep split the core and
+    // sent the search over the whole piece, 10.5 M voxels). The narrowing is shallower than the
+    // core's threshold there, so neither the coarse lattice nor the core joins the ends; the
+    // search falls back to the whole piece, and the path must still run the whole lumen on its
+    // axis and through the middle of the throat.
+    const Frame frame = test::makeFrame(0.75, true);
+    const double R = 8.0, r0 = 1.6, halfWidth = 16.0, cx = 20, cy = 20, z0 = 15, z1 = 115, zc = 65;
+    auto radius = [&](double z, double* slope) {
+        const double u = (z - zc) / halfWidth;
+        if (std::abs(u) >= 1) {
+            *slope = 0;
+            return R;
+        }
+        const double c = std::cos(0.5 * PI * u);
+        *slope = (R - r0) * c * std::sin(0.5 * PI * u) * PI / halfWidth;
+        return R - (R - r0) * c * c;
+    };
+    auto sdfMm = [&](const Vec3d& p) {
+        const double rho = std::hypot(p.x - cx, p.y - cy);
+        if (p.z < z0 || p.z > z1) {  // hemispherical caps
+            const double dz = p.z < z0 ? z0 - p.z : p.z - z1;
+            return std::hypot(rho, dz) - R;
+        }
+        double slope = 0;
+        const double r = radius(p.z, &slope);
+        return (rho - r) / std::sqrt(1 + slope * slope);  // the wall's distance, to first order
+    };
+    auto sdf = sampledSdf(frame, {cx - R - 3, cy - R - 3, z0 - R - 3}, {cx + R + 3, cy + R + 3, z1 + R + 3}, sdfMm);
+    CenterlineReport report;
+    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, nullptr, &report);
+    ASSERT_EQ(report.pieces.size(), 1u);
+    EXPECT_EQ(report.pieces[0].routeSearchedOn, "whole piece");
+    const AxisFit f = fitToZAxis(cl, frame, cx, cy, zc);
+    std::cout << "[ narrowing ] " << report.pieces[0].routeSearchedOn << ": length " << cl.lengthMm() << " mm, z "
+              << f.zMin << ".." << f.zMax << ", off the axis at most " << f.worstMm << " mm, nearest to the throat "
+              << f.throatMm << " mm\n";
+    EXPECT_LT(f.worstMm, 1.0) << "mm off the axis";
+    EXPECT_LT(f.throatMm, 0.8) << "mm between the path and the throat's centre";
+    EXPECT_LT(f.zMin, z0 + 4.0) << "the path stops short of the first end";
+    EXPECT_GT(f.zMax, z1 - 4.0) << "the path stops short of the other end";
+}
+
+TEST(Centerline, AbruptThroatIsCrossedOnTheWholePiece)
+{
+    // Two chambers of radius 7 mm joined by a throat of radius 1.5 mm that meets their caps
+    // square: along the axis from the throat into a cap the depth rises by 1 mm per mm, so no
+    // medial voxel joins the throat to the chambers' cores, and the search falls back to the
+    // whole piece. The path must still run through the throat from one chamber to the other.
+    const TubeCase tc = straightCase();
+    const Frame frame = tc.frame;
+    const double cx = 20, cy = 20;
+    auto sdf = test::makeTubeSdf(frame, Axis::straight({cx, cy, 15}, {cx, cy, 55}), 7.0);
+    openvdb::tools::csgUnion(*sdf, *test::makeTubeSdf(frame, Axis::straight({cx, cy, 77}, {cx, cy, 117}), 7.0));
+    openvdb::tools::csgUnion(*sdf, *test::makeTubeSdf(frame, Axis::straight({cx, cy, 55}, {cx, cy, 77}), 1.5));
+    CenterlineReport report;
+    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, nullptr, &report);
+    ASSERT_EQ(report.pieces.size(), 1u);
+    EXPECT_EQ(report.pieces[0].routeSearchedOn, "whole piece");
+    const AxisFit f = fitToZAxis(cl, frame, cx, cy, 66);
+    std::cout << "[ throat ] " << report.pieces[0].routeSearchedOn << ": length " << cl.lengthMm() << " mm, z "
+              << f.zMin << ".." << f.zMax << ", off the axis at most " << f.worstMm << " mm\n";
+    EXPECT_LT(f.worstMm, 1.0) << "mm off the axis";
+    EXPECT_LT(f.throatMm, 0.8) << "mm between the path and the throat's centre";
+    EXPECT_LT(f.zMin, 15 + 4.0) << "the path stops short of the first end";
+    EXPECT_GT(f.zMax, 117 - 4.0) << "the path stops short of the other end";
+}
+
 TEST(Centerline, FromSegmentedNoisyTube)
 {
     // End to end on a noisy HU phantom: U-bend air tube of radius 8 voxels.
