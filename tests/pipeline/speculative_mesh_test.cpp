@@ -1,17 +1,22 @@
 // The mesh and the centerline made beside the segment stage's contact cut
 // (pipeline/speculative_mesh.h) are those of the lumen the segment stage hands on: kept when
-// the cut removes nothing, dropped when it cuts (issue 15).
+// the cut removes nothing, dropped when it cuts (issue 15); CancellableWork, which runs them.
 
 #include "data/phantom.h"
 #include "pipeline/artifact_io.h"
 #include "pipeline/phantom_io.h"
+#include "pipeline/speculative_mesh.h"
 #include "surface/lumen_surface.h"
 #include "study_fixture.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <atomic>
+#include <chrono>
 #include <filesystem>
+#include <stdexcept>
+#include <thread>
 
 namespace fs = std::filesystem;
 using namespace flyover;
@@ -192,4 +197,38 @@ TEST_F(StudyTest, MeshBesideAContactCutThatCutsIsDropped)
     RunOptions one = options("cut-one"), two = options("cut-two");
     one.ctPath = two.ctPath = ct;
     expectSameMeshEitherWay(one, two, false, 2);
+}
+
+TEST(CancellableWork, AnErrorReachesTheTakerAndOneThreadWorks)
+{
+    {
+        CancellableWork<int> failing([](Progress*) -> int { throw std::runtime_error("broken lumen"); });
+        try {
+            failing.get();
+            ADD_FAILURE() << "get() returned though the work threw";
+        } catch (const std::runtime_error& e) {
+            EXPECT_STREQ(e.what(), "broken lumen");
+        }
+    }
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    CancellableWork<std::string> work([](Progress* p) {
+        EXPECT_FALSE(p->cancelled());
+        return std::string("done");
+    });
+    EXPECT_EQ(work.get(), "done");
+}
+
+TEST(CancellableWork, DroppedWorkIsCancelledAndWaitedFor)
+{
+    std::atomic<bool> sawCancel{false};
+    {
+        CancellableWork<int> work([&](Progress* p) {
+            const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+            while (!p->cancelled() && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the owner must wait for this
+            sawCancel = p->cancelled();
+            return 0;
+        });
+    }
+    EXPECT_TRUE(sawCancel) << "the destructor returned before the work saw its cancellation";
 }
