@@ -85,7 +85,18 @@ TEST_F(MaskStudy, MaskAloneRunsEveryStageButIngestAndItsContentIsInTheKey)
     EXPECT_GT(cl.lengthMm(), 150.0);
 
     // Status: ingest unused, the rest fresh; a re-run computes nothing.
-    for (const StageStatus& st : studyStatus(StatusOptions{o.studyDir, "", "", {}, false}))
+    // (Named fields: a braced list put its last value into StatusOptions::inspect, not into
+    // paramsGiven, so the second call below compared with the last run's parameters.)
+    auto statusOf = [&](const PipelineParams* given) {
+        StatusOptions so;
+        so.studyDir = o.studyDir;
+        if (given) {
+            so.params = *given;
+            so.paramsGiven = true;
+        }
+        return studyStatus(so);
+    };
+    for (const StageStatus& st : statusOf(nullptr))
         EXPECT_EQ(st.state, st.stage == "ingest" ? "unused" : "fresh") << st.stage << ": " << st.reason;
     m = runPipeline(o);
     for (const auto& [stage, computed] : computedStages(m)) EXPECT_FALSE(computed) << stage;
@@ -96,7 +107,7 @@ TEST_F(MaskStudy, MaskAloneRunsEveryStageButIngestAndItsContentIsInTheKey)
     o.params.segment.maskLabel = 0;
     bool sawMaskChange = false;
     PipelineParams p = o.params;
-    for (const StageStatus& st : studyStatus(StatusOptions{o.studyDir, "", "", p, true}))
+    for (const StageStatus& st : statusOf(&p))
         if (st.stage == "segment") sawMaskChange = st.state == "stale";
     EXPECT_TRUE(sawMaskChange);
     m = runPipeline(o);

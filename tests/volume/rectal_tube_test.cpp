@@ -180,7 +180,9 @@ TEST(RectalTube, CtTubeIsCutFromTheLumenAndTheRectumKept)
     for (const AirComponent& c : seg.components) {
         tubes += c.reason == "rectal tube";
         kept += c.kept;
-        if (c.reason == "rectal tube") EXPECT_FALSE(c.kept);
+        if (c.reason == "rectal tube") {
+            EXPECT_FALSE(c.kept);
+        }
     }
     EXPECT_EQ(tubes, 1);
     EXPECT_EQ(kept, 1);
