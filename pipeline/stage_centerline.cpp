@@ -5,9 +5,11 @@
 #include "volume/centerline.h"
 #include "volume/segment.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <iomanip>
 #include <sstream>
+#include <vector>
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -51,14 +53,16 @@ json runCenterline(StudyRun& run, Progress* progress)
     for (const CenterlineBridgeInfo& b : cr.bridges)
         bridges.push_back(json{{"gap_mm", b.gapMm}, {"length_mm", b.lengthMm}});
     // The pieces the path runs through, in travel order, and where each one's route was found.
-    json pieces = json::array();
+    std::vector<const CenterlinePieceInfo*> travelled;
     for (const CenterlinePieceInfo& p : cr.pieces)
-        if (p.used) {
-            if (pieces.size() <= std::size_t(p.chainIndex)) pieces.get_ref<json::array_t&>().resize(p.chainIndex + 1);
-            pieces[std::size_t(p.chainIndex)] = json{{"volume_ml", p.volumeMl},
-                                                      {"path_length_mm", p.pathLengthMm},
-                                                      {"route_searched_on", p.routeSearchedOn}};
-        }
+        if (p.used) travelled.push_back(&p);
+    std::sort(travelled.begin(), travelled.end(),
+              [](const CenterlinePieceInfo* a, const CenterlinePieceInfo* b) { return a->chainIndex < b->chainIndex; });
+    json pieces = json::array();
+    for (const CenterlinePieceInfo* p : travelled)
+        pieces.push_back(json{{"volume_ml", p->volumeMl},
+                              {"path_length_mm", p->pathLengthMm},
+                              {"route_searched_on", p->routeSearchedOn}});
     const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
     return json{{"traced_beside_contact_cut", bool(speculative)},
                 {"points", pts.size()},

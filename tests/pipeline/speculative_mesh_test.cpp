@@ -109,6 +109,7 @@ void expectSameCenterlineEitherWay(RunOptions one, RunOptions two, bool besideEx
     // The pieces the path runs through, in travel order, each with where its route was found.
     const nlohmann::json& pieces = clA["report"]["pieces"];
     ASSERT_TRUE(pieces.is_array() && !pieces.empty()) << clA["report"].dump();
+    EXPECT_EQ(pieces.size(), clA["report"]["bridges"].size() + 1) << "a bridge between consecutive pieces";
     for (const nlohmann::json& p : pieces) {
         ASSERT_TRUE(p.is_object()) << pieces.dump();
         const std::string on = p["route_searched_on"].get<std::string>();

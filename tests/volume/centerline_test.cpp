@@ -498,9 +498,9 @@ TEST(Centerline, NarrowingThatSplitsTheCoreIsCrossedOnTheAxis)
 TEST(Centerline, AbruptThroatIsCrossedOnTheWholePiece)
 {
     // Two chambers of radius 7 mm joined by a throat of radius 1.5 mm that meets their caps
-    // square: along the axis from the throat into a cap the depth rises by 1 mm per mm, so no
-    // medial voxel joins the throat to the chambers' cores, and the search falls back to the
-    // whole piece. The path must still run through the throat from one chamber to the other.
+    // square, so the core (voxels at least half as deep as the deepest nearby) breaks at the
+    // throat and the search falls back to the whole piece. The path must still run through the
+    // throat from one chamber to the other.
     const TubeCase tc = straightCase();
     const Frame frame = tc.frame;
     const double cx = 20, cy = 20;
