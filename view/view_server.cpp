@@ -235,13 +235,13 @@ std::string defaultAssetDir()
 #endif
 }
 
-ViewServer::ViewServer(ViewStudy& study, const ViewServerOptions& options)
-    : mStudy(study), mServer(std::make_unique<httplib::Server>()), mToken(options.token),
+ViewServer::ViewServer(LiveStudy& study, const ViewServerOptions& options)
+    : mLive(study), mServer(std::make_unique<httplib::Server>()), mToken(options.token),
       mPort(options.port), mThreads(std::max(2, options.threads))
 {
     if (mToken.empty()) mToken = randomToken();
     if (mPort < 0 || mPort > 65535) throw ParameterError("--port: must be 0..65535");
-    mBookmarks = std::make_unique<BookmarkStore>((fs::path(study.studyDir()) / "bookmarks.json").string());
+    mBookmarks = std::make_unique<BookmarkStore>((fs::path(mLive.studyDir()) / "bookmarks.json").string());
 
     // The page's files, read once: requests are answered from this map only.
     mAssetDir = options.assetDir.empty() ? defaultAssetDir() : options.assetDir;
@@ -365,6 +365,9 @@ void ViewServer::handle(const httplib::Request& req, httplib::Response& res)
         sendJson(res, json{{"error", oneLine(e.what())}}, 422);
     } catch (const ParameterError& e) {
         sendJson(res, json{{"error", oneLine(e.what())}}, 400);
+    } catch (const StudyNotReady& e) {
+        res.set_header("Retry-After", "1");
+        sendJson(res, json{{"error", oneLine(e.what())}}, 503);
     } catch (const InputError& e) {
         sendJson(res, json{{"error", oneLine(e.what())}}, 500);
     }
@@ -378,42 +381,6 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
     auto onlyGet = [&] {
         if (!get) throw HttpError(405, method + " " + path + ": only GET");
     };
-    const RenderParams& rp = mStudy.renderParams();
-    const int defaultPx = std::min(rp.heightPx, mStudy.maxPx());
-    const double arcMax = mStudy.arcMaxMm();
-
-    // A pose from the query (pair, pick, screenshot share it).
-    auto poseFrom = [&](const Query& q) {
-        ViewPose pose;
-        pose.arcMm = q.number("arc_mm", 0.0);
-        pose.rollDeg = q.number("roll_deg", rp.rollDeg, -3600, 3600);
-        pose.direction = q.choice("direction", rp.direction, {"right", "left"});
-        pose.mode = q.choice("mode", "flyover", {"flyover", "flythrough"});
-        pose.clipOffsetFraction = q.has("clip_offset_fraction") ? q.number("clip_offset_fraction", 0.5, 0.0, 1.0) : -1.0;
-        pose.px = q.integer("px", defaultPx, 16, mStudy.maxPx());
-        mStudy.indexOfArc(pose.arcMm);  // 422 when off the path
-        return pose;
-    };
-    auto poseFromJson = [&](const json& body) {
-        ViewPose pose;
-        pose.arcMm = jsonNumber(body, "arc_mm", 0.0, -1e9, 1e9);
-        pose.rollDeg = jsonNumber(body, "roll_deg", rp.rollDeg, -3600, 3600);
-        pose.direction = jsonChoice(body, "direction", rp.direction, {"right", "left"});
-        pose.mode = jsonChoice(body, "mode", "flyover", {"flyover", "flythrough"});
-        pose.clipOffsetFraction = jsonNumber(body, "clip_offset_fraction", -1.0, 0.0, 1.0);
-        if (body.contains("clip_offset_fraction") && body["clip_offset_fraction"].is_null()) pose.clipOffsetFraction = -1;
-        pose.px = int(jsonNumber(body, "px", defaultPx, 16, mStudy.maxPx()));
-        mStudy.indexOfArc(pose.arcMm);
-        return pose;
-    };
-    auto poseSummary = [&](const ViewPose& p) {
-        return json{{"arc_mm", p.arcMm},
-                    {"roll_deg", p.rollDeg},
-                    {"direction", p.direction},
-                    {"mode", p.mode},
-                    {"clip_offset_fraction", p.clipOffsetFraction < 0 ? rp.clipOffsetFraction : p.clipOffsetFraction}};
-    };
-
     if (path == "/" || path == "/index.html") {
         onlyGet();
         Query q(req, {});
@@ -438,10 +405,59 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         res.set_content(it->second.body, it->second.mime);
         return;
     }
+    if (path == "/api/status") {
+        onlyGet();
+        Query q(req, {});
+        sendJson(res, mLive.status());
+        return;
+    }
+
+    // Every other request is answered by the study of the latest revision (503 while none).
+    int revision = 0;
+    const std::shared_ptr<const ViewStudy> held = mLive.current(&revision);
+    const ViewStudy& study = *held;
+    const RenderParams& rp = study.renderParams();
+    const int defaultPx = std::min(rp.heightPx, study.maxPx());
+    const double arcMax = study.arcMaxMm();
+
+    // A pose from the query (pair, pick, screenshot share it).
+    auto poseFrom = [&](const Query& q) {
+        ViewPose pose;
+        pose.arcMm = q.number("arc_mm", 0.0);
+        pose.rollDeg = q.number("roll_deg", rp.rollDeg, -3600, 3600);
+        pose.direction = q.choice("direction", rp.direction, {"right", "left"});
+        pose.mode = q.choice("mode", "flyover", {"flyover", "flythrough"});
+        pose.clipOffsetFraction = q.has("clip_offset_fraction") ? q.number("clip_offset_fraction", 0.5, 0.0, 1.0) : -1.0;
+        pose.px = q.integer("px", defaultPx, 16, study.maxPx());
+        study.indexOfArc(pose.arcMm);  // 422 when off the path
+        return pose;
+    };
+    auto poseFromJson = [&](const json& body) {
+        ViewPose pose;
+        pose.arcMm = jsonNumber(body, "arc_mm", 0.0, -1e9, 1e9);
+        pose.rollDeg = jsonNumber(body, "roll_deg", rp.rollDeg, -3600, 3600);
+        pose.direction = jsonChoice(body, "direction", rp.direction, {"right", "left"});
+        pose.mode = jsonChoice(body, "mode", "flyover", {"flyover", "flythrough"});
+        pose.clipOffsetFraction = jsonNumber(body, "clip_offset_fraction", -1.0, 0.0, 1.0);
+        if (body.contains("clip_offset_fraction") && body["clip_offset_fraction"].is_null()) pose.clipOffsetFraction = -1;
+        pose.px = int(jsonNumber(body, "px", defaultPx, 16, study.maxPx()));
+        study.indexOfArc(pose.arcMm);
+        return pose;
+    };
+    auto poseSummary = [&](const ViewPose& p) {
+        return json{{"arc_mm", p.arcMm},
+                    {"roll_deg", p.rollDeg},
+                    {"direction", p.direction},
+                    {"mode", p.mode},
+                    {"clip_offset_fraction", p.clipOffsetFraction < 0 ? rp.clipOffsetFraction : p.clipOffsetFraction}};
+    };
+
     if (path == "/api/study") {
         onlyGet();
         Query q(req, {});
-        sendJson(res, mStudy.studyJson());
+        json j = study.studyJson();
+        j["revision"] = revision;
+        sendJson(res, j);
         return;
     }
     if (path == "/api/pair") {
@@ -450,7 +466,7 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         const ViewPose pose = poseFrom(q);
         const std::string format = q.choice("format", "jpeg", {"jpeg", "png"});
         const int quality = q.integer("quality", 88, 1, 100);
-        const PairRender pr = mStudy.renderPair(pose);
+        const PairRender pr = study.renderPair(pose);
         res.set_header("X-Flyover-Pose", pr.poseJson.dump());
         if (format == "png") res.set_content(encodePng(pr.image), "image/png");
         else res.set_content(encodeJpeg(pr.image, quality), "image/jpeg");
@@ -464,7 +480,7 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         const double x = q.number("x"), y = q.number("y");
         if (x < 0 || x > pose.px || y < 0 || y > pose.px)
             throw HttpError(422, "x, y: must lie in [0, px] = [0, " + std::to_string(pose.px) + "]");
-        const PickResult r = mStudy.pick(pose, view, x, y);
+        const PickResult r = study.pick(pose, view, x, y);
         json j{{"hit", r.hit}, {"world_frame", WORLD_FRAME}, {"view", view}, {"x", x}, {"y", y}};
         if (r.hit) {
             j["point_mm"] = json::array({r.pointMm.x, r.pointMm.y, r.pointMm.z});
@@ -482,9 +498,9 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         onlyGet();
         Query q(req, {"x_mm", "y_mm", "z_mm", "px", "direction"});
         const Vec3d p{q.number("x_mm"), q.number("y_mm"), q.number("z_mm")};
-        const int px = q.integer("px", defaultPx, 16, mStudy.maxPx());
+        const int px = q.integer("px", defaultPx, 16, study.maxPx());
         const std::string direction = q.choice("direction", rp.direction, {"right", "left"});
-        const LocateResult r = mStudy.locate(p, px, direction);
+        const LocateResult r = study.locate(p, px, direction);
         sendJson(res, json{{"arc_mm", r.pose.arcMm},
                            {"roll_deg", r.pose.rollDeg},
                            {"direction", r.pose.direction},
@@ -500,13 +516,13 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
     if (path == "/api/slice") {
         onlyGet();
         Query q(req, {"plane", "x_mm", "y_mm", "z_mm", "window", "level"});
-        if (!mStudy.hasCt())
+        if (!study.hasCt())
             throw HttpError(404, "this study has no CT (mask only): restart the viewer with --ct FILE for slices");
         const std::string plane = q.choice("plane", "axial", {"axial", "coronal", "sagittal"});
         const Vec3d p{q.number("x_mm"), q.number("y_mm"), q.number("z_mm")};
         const double window = q.number("window", 1500, 1, 100000);
         const double level = q.number("level", -300, -100000, 100000);
-        const json info = mStudy.studyJson()["ct"];
+        const json info = study.studyJson()["ct"];
         const json& lo = info["bounds_mm"][0];
         const json& hi = info["bounds_mm"][1];
         const double coord[3] = {p.x, p.y, p.z};
@@ -515,7 +531,7 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         if (coord[axis] < lo[std::size_t(axis)].get<double>() - slack || coord[axis] > hi[std::size_t(axis)].get<double>() + slack)
             throw HttpError(422, std::string(axis == 2 ? "z_mm" : axis == 1 ? "y_mm" : "x_mm") + ": " +
                                      Query::shortNumber(coord[axis]) + " is outside the CT");
-        const SliceImage s = mStudy.slice(plane, p, window, level);
+        const SliceImage s = study.slice(plane, p, window, level);
         const SliceGeometry& g = s.geometry;
         auto v = [](const Vec3d& a) { return json::array({a.x, a.y, a.z}); };
         res.set_header("X-Flyover-Slice",
@@ -538,23 +554,23 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
     if (path == "/api/overview") {
         onlyGet();
         Query q(req, {"marker_mm", "px"});
-        const int px = q.integer("px", std::min(rp.overviewPx, mStudy.maxPx()), 16, mStudy.maxPx());
+        const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
         double marker = -1;
         if (q.has("marker_mm")) {
             marker = q.number("marker_mm");
-            mStudy.indexOfArc(marker);
+            study.indexOfArc(marker);
         }
-        res.set_content(encodePng(mStudy.overview(px, marker)), "image/png");
+        res.set_content(encodePng(study.overview(px, marker)), "image/png");
         return;
     }
     if (path == "/api/overview/pick") {
         onlyGet();
         Query q(req, {"x", "y", "px"});
-        const int px = q.integer("px", std::min(rp.overviewPx, mStudy.maxPx()), 16, mStudy.maxPx());
+        const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
         const double x = q.number("x"), y = q.number("y");
         if (x < 0 || x > px || y < 0 || y > px)
             throw HttpError(422, "x, y: must lie in [0, px] = [0, " + std::to_string(px) + "]");
-        const auto r = mStudy.overviewPick(px, x, y);
+        const auto r = study.overviewPick(px, x, y);
         json j{{"hit", r.hit}, {"world_frame", WORLD_FRAME}, {"point_mm", nullptr}, {"arc_mm", nullptr}};
         if (r.hit) {
             j["point_mm"] = json::array({r.pointMm.x, r.pointMm.y, r.pointMm.z});
@@ -604,8 +620,8 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         for (auto it = body.begin(); it != body.end(); ++it)
             if (!fields.count(it.key())) throw HttpError(400, "body: unknown field '" + it.key().substr(0, 40) + "'");
         const ViewPose pose = poseFromJson(body);
-        const PairRender pr = mStudy.renderPair(pose);
-        const fs::path dir = fs::path(mStudy.studyDir()) / "screenshots";
+        const PairRender pr = study.renderPair(pose);
+        const fs::path dir = fs::path(study.studyDir()) / "screenshots";
         fs::create_directories(dir);
         const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
         std::tm tm{};
@@ -642,7 +658,7 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         for (char c : name) ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.');
         const std::string ext = fs::path(name).extension().string();
         ok = ok && (ext == ".png" || ext == ".json") && name.find("..") == std::string::npos;
-        const fs::path file = fs::path(mStudy.studyDir()) / "screenshots" / name;
+        const fs::path file = fs::path(study.studyDir()) / "screenshots" / name;
         if (!ok || fs::is_symlink(file) || !fs::is_regular_file(file)) throw HttpError(404, "no such screenshot");
         std::ifstream in(file, std::ios::binary);
         std::string body((std::istreambuf_iterator<char>(in)), {});
@@ -674,10 +690,12 @@ sigset_t blockStopSignals()
 int runViewCommand(const std::string& studyDir, int port, const std::string& ctPath, std::ostream& out)
 {
     const sigset_t stopSignals = blockStopSignals();
-    ViewStudy study(studyDir, ctPath);
+    LiveStudy study(studyDir, ctPath);
     // The surface and CT load in the background: the URL is printed at once, and requests wait
-    // for the load (a failure ends the server with its message).
-    study.startLoading();
+    // for the load (a failure of the study there at start ends the server with its message).
+    // A study that a run is still computing is served once its surface and centerline are
+    // written; later changes to its files are picked up (live_study.h).
+    study.start();
     ViewServer server(study, ViewServerOptions{port, "", "", 16});
     server.bind();
     std::atomic<bool> stopping{false}, listenDone{false};
@@ -693,24 +711,34 @@ int runViewCommand(const std::string& studyDir, int port, const std::string& ctP
         stopping = true;
         stopServer();
     });
+    std::atomic<bool> firstLoaded{false};
     std::thread loadWatch([&] {
         try {
-            study.waitLoaded();
+            study.waitFirstLoad();
         } catch (const std::exception& e) {
             loadFailure = e.what();
             stopServer();
         }
+        firstLoaded = true;
     });
     out << "flyover: view: " << server.url() << std::endl;
+    if (study.revision() == 0) {
+        const json status = study.status();
+        std::string lacks;
+        for (const auto& f : status["waiting_for"]) lacks += (lacks.empty() ? "" : ", ") + f.get<std::string>();
+        out << "flyover: view: " << studyDir << " is being computed by flyover run (waiting for " << lacks
+            << "): the page shows it once they are written" << std::endl;
+    }
     server.listen();
     listenDone = true;
-    if (stopping && !study.loaded()) {
+    if (stopping && !firstLoaded) {
         // Stopped while the study is still loading: nothing to save, do not wait for the load.
         watcher.join();
         out.flush();
         std::_Exit(0);
     }
     loadWatch.join();
+    study.stop();
     if (!stopping) pthread_kill(watcher.native_handle(), SIGTERM);
     watcher.join();
     if (!loadFailure.empty()) throw InputError(loadFailure);

@@ -8,6 +8,7 @@
 #pragma once
 
 #include "view/bookmarks.h"
+#include "view/live_study.h"
 #include "view/view_study.h"
 
 #include <atomic>
@@ -37,7 +38,8 @@ std::string defaultAssetDir();
 
 class ViewServer {
 public:
-    ViewServer(ViewStudy& study, const ViewServerOptions& options);
+    /// Serves `study` as it is now: the study of its latest revision answers each request.
+    ViewServer(LiveStudy& study, const ViewServerOptions& options);
     ~ViewServer();
     ViewServer(const ViewServer&) = delete;
     ViewServer& operator=(const ViewServer&) = delete;
@@ -62,7 +64,7 @@ private:
     void route(const httplib::Request& req, httplib::Response& res);
     bool allowed(const httplib::Request& req, httplib::Response& res) const;
 
-    ViewStudy& mStudy;
+    LiveStudy& mLive;
     std::unique_ptr<httplib::Server> mServer;
     std::unique_ptr<BookmarkStore> mBookmarks;
     std::map<std::string, Asset> mAssets;  ///< "index.html", "app.js", "sub/x.png" -> content

@@ -113,18 +113,24 @@ void ViewStudy::loadNow()
     std::string error;
     try {
         const std::string ply = (fs::path(mDir) / "surface.ply").string();
-        std::vector<float> xyz;
-        std::vector<uint32_t> tris;
-        std::unique_ptr<RayScene> scene;
-        // Only the layout flyover writes: OpenMesh's general reader can allocate without bound
-        // on a malformed header (measured: gigabytes for a 3-line file), so it is never tried here.
-        if (!readPlainPly(ply, xyz, tris))
-            throw InputError(ply + ": not the binary PLY layout flyover writes (float x y z, triangles); remake it "
-                                   "with: " + mRunHint + " --force mesh");
-        scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris));
+        std::shared_ptr<const RayScene> scene = mReusedScene;
+        if (!scene) {
+            std::vector<float> xyz;
+            std::vector<uint32_t> tris;
+            // Only the layout flyover writes: OpenMesh's general reader can allocate without bound
+            // on a malformed header (measured: gigabytes for a 3-line file), so it is never tried here.
+            if (!readPlainPly(ply, xyz, tris))
+                throw InputError(ply + ": not the binary PLY layout flyover writes (float x y z, triangles); remake it "
+                                       "with: " + mRunHint + " --force mesh");
+            scene = std::make_shared<const RayScene>(std::move(xyz), std::move(tris));
+        }
+        mReusedScene.reset();
         if (scene->triangleCount() == 0) throw InputError(ply + ": the surface has no triangles");
         openvdb::FloatGrid::Ptr ct;
-        if (!mCtSource.empty()) {
+        if (mReusedCt) {  // its bounds and spacing were copied by reuse()
+            ct = std::move(mReusedCt);
+            mReusedCt.reset();
+        } else if (!mCtSource.empty()) {
             if (fs::path(mCtSource).extension() == ".vdb") {
                 ct = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(mCtSource, "ct_hu"));
                 if (!ct) throw InputError(mCtSource + ": grid ct_hu is not a float grid");
@@ -161,6 +167,19 @@ void ViewStudy::loadNow()
         mLoaded = true;
     }
     mLoadedCv.notify_all();
+}
+
+void ViewStudy::reuse(const ViewStudy& previous, bool surface, bool ct)
+{
+    previous.waitLoaded();
+    if (surface) mReusedScene = previous.mScene;
+    if (ct && previous.mCt && previous.mCtSource == mCtSource) {
+        std::lock_guard<std::mutex> lock(mLoadMutex);
+        mReusedCt = previous.mCt;
+        mCtMin = previous.mCtMin;
+        mCtMax = previous.mCtMax;
+        mCtSpacing = previous.mCtSpacing;
+    }
 }
 
 void ViewStudy::startLoading()
@@ -212,6 +231,13 @@ openvdb::FloatGrid::ConstPtr ViewStudy::ctGrid() const
 
 double ViewStudy::stepMm() const { return mCenterline.stepMm; }
 double ViewStudy::arcMaxMm() const { return double(mCenterline.points.size() - 1) * mCenterline.stepMm; }
+
+bool ViewStudy::sharesSurfaceWith(const ViewStudy& other) const
+{
+    waitLoaded();
+    other.waitLoaded();
+    return mScene == other.mScene;
+}
 
 std::size_t ViewStudy::sceneBytes() const
 {

@@ -92,6 +92,10 @@ public:
     void load();
     /// Blocks until loading has finished; @throw InputError when it failed.
     void waitLoaded() const;
+    /// Before loading: take `previous`'s loaded surface scene (when `surface`) and CT grid (when
+    /// `ct` and both read the same CT source) instead of reading their files again (LiveStudy,
+    /// for files it saw unchanged). @throw InputError when `previous` failed to load.
+    void reuse(const ViewStudy& previous, bool surface, bool ct);
     /// True once loading has finished (successfully or not).
     bool loaded() const;
     /// "" while loading or after success, else the one-line reason.
@@ -136,6 +140,8 @@ public:
 
     /// Nearest centerline index to a world point (non-bridged points preferred).
     std::size_t nearestIndex(const Vec3d& pointMm) const;
+    /// Whether both serve the very same loaded surface scene (reuse() took it over).
+    bool sharesSurfaceWith(const ViewStudy& other) const;
     /// Rough bytes held by the scene and grids (for the bench).
     std::size_t sceneBytes() const;
 
@@ -154,8 +160,10 @@ private:
     nlohmann::json mCoverage;  ///< coverage.json or null
     std::string mRunHint;      ///< the `flyover run` command of this study
 
-    std::unique_ptr<RayScene> mScene;
+    std::shared_ptr<const RayScene> mScene;
     openvdb::FloatGrid::Ptr mCt;
+    std::shared_ptr<const RayScene> mReusedScene;  ///< reuse(): taken instead of surface.ply
+    openvdb::FloatGrid::Ptr mReusedCt;             ///< reuse(): taken instead of reading the CT
     std::array<double, 3> mCtSpacing{};
     Vec3d mCtMin, mCtMax;
     std::thread mLoader;

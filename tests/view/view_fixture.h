@@ -86,14 +86,16 @@ inline std::string copyStudy(const std::string& name)
 /// A server on 127.0.0.1:0 over a study, listening in a thread until destroyed.
 class RunningServer {
 public:
-    explicit RunningServer(const std::string& studyDir, const std::string& assetDir = "")
-        : study(studyDir)
+    explicit RunningServer(const std::string& studyDir, const std::string& assetDir = "",
+                           LiveStudy::Options liveOptions = {})
+        : live(studyDir, "", liveOptions)
     {
-        study.load();
+        live.start();
+        if (live.waitFirstLoad()) held = live.current();
         ViewServerOptions o;
         o.assetDir = assetDir;
         o.threads = 8;
-        server = std::make_unique<ViewServer>(study, o);
+        server = std::make_unique<ViewServer>(live, o);
         port = server->bind();
         thread = std::thread([this] { server->listen(); });
         for (int i = 0; i < 500 && !server->isRunning(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(2));
@@ -114,7 +116,11 @@ public:
     }
     std::string origin() const { return "http://127.0.0.1:" + std::to_string(port); }
 
-    ViewStudy study;
+    /// The study served at start (a study being computed: none).
+    const ViewStudy& study() const { return *held; }
+
+    LiveStudy live;
+    std::shared_ptr<const ViewStudy> held;
     std::unique_ptr<ViewServer> server;
     int port = 0;
     std::thread thread;

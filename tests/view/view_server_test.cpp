@@ -47,7 +47,7 @@ TEST_F(ViewApi, StudyDescribesPathCtAndMissedRegions)
     ASSERT_EQ(r->status, 200) << r->body;
     const json j = json::parse(r->body);
     EXPECT_EQ(j["world_frame"], "LPS");
-    const Centerline& cl = sServer->study.centerline();
+    const Centerline& cl = sServer->study().centerline();
     EXPECT_EQ(j["centerline"].size(), cl.points.size());
     EXPECT_EQ(j["bridged"].size(), cl.points.size());
     EXPECT_NEAR(j["arc_max_mm"].get<double>(), double(cl.points.size() - 1) * cl.stepMm, 1e-9);
@@ -84,7 +84,7 @@ TEST_F(ViewApi, PairHasTwoViewsSideBySideInJpegAndPng)
         EXPECT_EQ(uint8_t(jpg->body[0]), 0xFF);
         EXPECT_EQ(uint8_t(jpg->body[1]), 0xD8);
         const json pose = json::parse(jpg->get_header_value("X-Flyover-Pose"));
-        EXPECT_NEAR(pose["arc_mm"].get<double>(), 50.0, 0.5 * sServer->study.stepMm());
+        EXPECT_NEAR(pose["arc_mm"].get<double>(), 50.0, 0.5 * sServer->study().stepMm());
         EXPECT_EQ(pose["cameras"].size(), 2u);
     }
 }
@@ -121,9 +121,9 @@ TEST_F(ViewApi, SamePoseGivesTheRenderStagesFramePixels)
 TEST_F(ViewApi, PickOnTheCentrePixelHitsTheWall)
 {
     auto c = sServer->client();
-    const double arc = 0.5 * sServer->study.arcMaxMm();
-    const std::size_t i = sServer->study.indexOfArc(arc);
-    const CenterlinePoint& p = sServer->study.centerline().points[i];
+    const double arc = 0.5 * sServer->study().arcMaxMm();
+    const std::size_t i = sServer->study().indexOfArc(arc);
+    const CenterlinePoint& p = sServer->study().centerline().points[i];
     for (int view = 0; view < 2; ++view) {
         auto r = c->Get(("/api/pick?arc_mm=" + q(arc) + "&px=256&view=" + std::to_string(view) + "&x=128&y=128").c_str());
         ASSERT_TRUE(r);
@@ -136,7 +136,7 @@ TEST_F(ViewApi, PickOnTheCentrePixelHitsTheWall)
         const double d = distance(hit, p.positionMm);
         EXPECT_GT(d, 0.3 * p.radiusMm);
         EXPECT_LT(d, 3.0 * p.radiusMm + 5.0);
-        const Camera cam = sServer->study.cameras(ViewPose{arc, sServer->study.renderParams().rollDeg, "right",
+        const Camera cam = sServer->study().cameras(ViewPose{arc, sServer->study().renderParams().rollDeg, "right",
                                                            "flyover", -1, 256})[std::size_t(view)];
         EXPECT_NEAR(j["distance_mm"].get<double>(), distance(hit, cam.position), 1e-6);
         // On the camera's axis and beyond the centerline point.
@@ -183,7 +183,7 @@ TEST_F(ViewApi, LocateThenPickFindsEveryTruthPolyp)
 TEST_F(ViewApi, SlicesHaveTheirSizeAndAMappingThatRoundTrips)
 {
     auto c = sServer->client();
-    const Centerline& cl = sServer->study.centerline();
+    const Centerline& cl = sServer->study().centerline();
     const Vec3d p = cl.points[cl.points.size() / 3].positionMm;  // inside the lumen: air
     for (const std::string plane : {"axial", "coronal", "sagittal"}) {
         auto r = c->Get(("/api/slice?plane=" + plane + "&x_mm=" + q(p.x) + "&y_mm=" + q(p.y) + "&z_mm=" + q(p.z) +
@@ -244,8 +244,8 @@ TEST_F(ViewApi, OverviewMatchesTheStudysAndItsPickJumpsToThePath)
     ASSERT_EQ(marked->status, 200);
     EXPECT_EQ(decodePng(marked->body).width, 300);
     // The projection of a centerline point, picked, gives an arc near it.
-    const Camera cam = sServer->study.overviewCamera();
-    const Centerline& cl = sServer->study.centerline();
+    const Camera cam = sServer->study().overviewCamera();
+    const Centerline& cl = sServer->study().centerline();
     const std::size_t i = cl.points.size() / 2;
     const Vec3d v = cl.points[i].positionMm - cam.position;
     const double z = dot(v, cam.forward), t = std::tan(0.5 * cam.fovDeg * 3.14159265358979 / 180.0);
@@ -257,7 +257,7 @@ TEST_F(ViewApi, OverviewMatchesTheStudysAndItsPickJumpsToThePath)
     const json j = json::parse(pk->body);
     ASSERT_TRUE(j["hit"].get<bool>());
     // The wall seen there belongs to this stretch (or one lying in front of it along the view).
-    const std::size_t k = sServer->study.nearestIndex(vec(j["point_mm"]));
+    const std::size_t k = sServer->study().nearestIndex(vec(j["point_mm"]));
     EXPECT_NEAR(j["arc_mm"].get<double>(), double(k) * cl.stepMm, 1e-9);
     auto corner = c->Get("/api/overview/pick?px=400&x=0.5&y=0.5");
     ASSERT_TRUE(corner);
@@ -343,7 +343,7 @@ TEST(ViewBookmarks, ACorruptFileIsReportedNotOverwritten)
     {
         std::ofstream(dir + "/bookmarks.json") << "[1, 2";
     }
-    ViewStudy study(dir);
+    LiveStudy study(dir, "");
     try {
         ViewServer server(study, ViewServerOptions{});
         FAIL() << "a corrupt bookmarks.json was accepted";

@@ -9,6 +9,11 @@
 // Rendering keeps one /api/pair request in flight: a new one goes out only when the last image
 // has arrived, always for the state at that moment, so intermediate states are dropped and
 // playback never queues up behind the renderer.
+//
+// A study that `flyover run` is still computing ("live study"): the page polls /api/status
+// (every 1 s) until the server serves a study, then starts; afterwards it polls every 2 s and,
+// when the server has swapped in a new revision (coverage landed, a re-run replaced the
+// surface), fetches /api/study again and applies it in place (applyStudy), without a reload.
 
 'use strict';
 
@@ -101,7 +106,8 @@ const S = {
   speed: 20, // mm/s, negative = backward
   playing: false,
   measuring: false,
-  shown: null, // {key, params, pose} of the frame on screen
+  shown: null, // {key, params, pose, gen} of the frame on screen
+  gen: 0, // +1 each time a study document is applied: a frame of an older one is stale
   marker: null, // {key, view, x, y, px}: a located point, drawn when its pose is on screen
   picks: [], // [{key, view, x, y, px, point}] picked points (measure) on the views
   cursor: null, // CT cursor, LPS mm
@@ -152,7 +158,9 @@ async function pumpPair() {
   if (pairInFlight || !S.study) return;
   const params = pairParams();
   const key = poseKey(params);
-  if (S.shown && S.shown.key === key) return;
+  if (S.shown && S.shown.key === key && S.shown.gen === S.gen) return;
+  const gen = S.gen;
+  const revision = S.study.revision;
   pairInFlight = true;
   views.dataset.loading = 'true';
   try {
@@ -167,7 +175,7 @@ async function pumpPair() {
     }
     pairCtx.drawImage(bmp, 0, 0);
     bmp.close();
-    S.shown = { key, params, pose };
+    S.shown = { key, params, pose, gen };
     S.frames += 1;
     const d = views.dataset;
     d.arcMm = String(params.arc_mm);
@@ -178,6 +186,7 @@ async function pumpPair() {
     d.frames = String(S.frames);
     d.key = key;
     d.pose = pose ? JSON.stringify(pose) : '';
+    d.revision = String(revision);
     const now = performance.now();
     fpsTimes.push(now);
     fpsTimes = fpsTimes.filter((t) => now - t < 2000);
@@ -187,7 +196,7 @@ async function pumpPair() {
     maybeOverview();
   } catch (e) {
     // Do not retry the same state in a loop: remember it as shown (with no image).
-    S.shown = { key, params, pose: null, failed: true };
+    S.shown = { key, params, pose: null, failed: true, gen };
     if (S.playing) setPlaying(false);
     reportError(e);
   } finally {
@@ -464,9 +473,12 @@ let overviewShownArc = null;
 let overviewAt = 0;
 let overviewUrl = null;
 let overviewPx = 512;
+let overviewForced = false; // a forced refresh (new study revision) waits for the one in flight
 
 async function maybeOverview(force = false) {
+  if (force) overviewForced = true;
   if (overviewInFlight || !S.study) return;
+  force = overviewForced;
   const arc = fmt(S.arc, 1);
   if (!force && overviewShownArc !== null && Math.abs(arc - overviewShownArc) < 0.5) return;
   const now = performance.now();
@@ -475,6 +487,7 @@ async function maybeOverview(force = false) {
     return;
   }
   overviewInFlight = true;
+  overviewForced = false;
   overviewAt = now;
   try {
     const res = await api('/api/overview', { marker_mm: arc, px: overviewPx });
@@ -486,7 +499,7 @@ async function maybeOverview(force = false) {
     overviewImg.dataset.markerMm = String(arc);
   } catch (e) { reportError(e); }
   finally { overviewInFlight = false; }
-  if (Math.abs(fmt(S.arc, 1) - overviewShownArc) >= 0.5) maybeOverview();
+  if (overviewForced || Math.abs(fmt(S.arc, 1) - overviewShownArc) >= 0.5) maybeOverview();
 }
 
 overviewImg.addEventListener('click', async (ev) => {
@@ -874,6 +887,164 @@ function bind() {
   });
 }
 
+// ---------------------------------------------------------------- the study document
+
+/** The CT slices and their controls, or the note that the study has no CT. */
+function showCt(on) {
+  $('#ct-missing').hidden = on;
+  $('#slices').hidden = !on;
+  $('#ct-controls').hidden = !on;
+}
+
+/** Fills the view size menu (up to the study's max_px, with its default); returns the sizes. */
+function fillPxSizes(study) {
+  const maxPx = study.max_px || study.default_px || 512;
+  const sizes = [...new Set([256, 384, 512, 640, 768, 1024, study.default_px].filter((v) => v && v <= maxPx))].sort((a, b) => a - b);
+  const sel = $('#px');
+  if (sel.dataset.sizes !== sizes.join(',')) {
+    sel.textContent = '';
+    for (const v of sizes) {
+      const o = document.createElement('option');
+      o.value = String(v); o.textContent = String(v);
+      sel.appendChild(o);
+    }
+    sel.dataset.sizes = sizes.join(',');
+  }
+  return sizes;
+}
+
+/** Applies a study document (/api/study): at start (first) and again at each new revision the
+ *  server swaps in. The pose is kept (the arc clamped to the new path) and its pair, the slices
+ *  and the overview are asked for again. */
+function applyStudy(study, first) {
+  const prev = S.study;
+  S.study = study;
+  S.gen += 1; // the frame on screen is of the old document: pumpPair asks for it again
+  document.body.dataset.revision = String(study.revision);
+  if (first) {
+    S.clip = Number.isFinite(study.clip_offset_fraction) ? study.clip_offset_fraction : 0.5;
+    $('#clip').value = String(S.clip);
+    overviewPx = Math.min(768, Math.max(256, Math.round(370 * (window.devicePixelRatio || 1))));
+  }
+  const arc = $('#arc');
+  arc.max = String(study.arc_max_mm);
+  arc.step = String(study.step_mm || 1);
+  $('#arc-max').textContent = Number(study.arc_max_mm).toFixed(0);
+  $('#arc-input').max = String(study.arc_max_mm);
+  const sizes = fillPxSizes(study);
+  if (first || !sizes.includes(S.px)) S.px = study.default_px || sizes[sizes.length - 1];
+  $('#px').value = String(S.px);
+
+  const hadCt = !!(prev && prev.has_ct && prev.ct);
+  const hasCt = !!(study.has_ct && study.ct);
+  showCt(hasCt);
+  if (hasCt && !hadCt) {
+    setWindowLevel(Number(study.ct.default_window) || S.window, Number.isFinite(study.ct.default_level) ? study.ct.default_level : S.level);
+  }
+  for (const plane of PLANES) slices[plane].shownKey = null; // the CT may be another one now
+
+  if (prev && JSON.stringify(prev.missed_regions || []) !== JSON.stringify(study.missed_regions || [])) {
+    currentMissed = null; // region ids are positions in the list: they name other regions now
+    $('#missed-list').dataset.currentId = '';
+  }
+  renderMissed();
+
+  if (first) setPose({ arc_mm: 0 });
+  else setPose({ arc_mm: S.arc }, { keepMarker: true });
+  const cl = study.centerline || [];
+  if (hasCt && S.cursor) reloadSlices();
+  else if (hasCt && cl.length) setCursor(cl[clamp(Math.round(S.arc / (study.step_mm || 1)), 0, cl.length - 1)]);
+  maybeOverview(true);
+}
+
+const studySummary = (study) => `${Number(study.length_mm).toFixed(0)} mm of centerline, ${(study.missed_regions || []).length} missed region(s)`;
+
+// ---------------------------------------------------------------- live study
+
+const WAIT_POLL_MS = 1000; // /api/status while no study is served yet
+const LIVE_POLL_MS = 2000; // /api/status once the page shows a study
+const sleep = (ms) => new Promise((ok) => setTimeout(ok, ms));
+let lastReloadError = '';
+
+const stagesDone = (st) => ((st.stages || []).length ? `stages done: ${st.stages.join(', ')}` : 'no stage done yet');
+
+/** The header's unobtrusive mark while a flyover run holds the study's lock. */
+function showRunState(st) {
+  const on = !!(st && st.computing);
+  const el = $('#run-state');
+  el.hidden = !on;
+  el.textContent = on ? `run in progress: ${stagesDone(st)}` : '';
+  el.title = on ? 'flyover run is still working on this study; the page picks up what it writes' : '';
+  document.body.dataset.computing = String(on);
+}
+
+/** The notice over the views while no study is served ('' hides it). */
+function showNotice(text, state = 'computing') {
+  const n = $('#notice');
+  n.hidden = !text;
+  n.textContent = text;
+  n.dataset.state = text ? state : '';
+}
+
+/** Says why no study is served yet (status with ready false). */
+function showNotReady(st) {
+  const waiting = st.waiting_for || [];
+  let text;
+  let state;
+  if (st.loading) {
+    text = 'Loading the study…';
+    state = 'loading';
+  } else if (st.computing) {
+    text = `The study is being computed by flyover run: waiting for ${waiting.length ? waiting.join(', ') : 'its files'} — ${stagesDone(st)}`;
+    state = 'computing';
+  } else {
+    text = st.error ? `The study cannot be shown: ${st.error}`
+      : `The run ended without making ${waiting.length ? waiting.join(', ') : 'what the viewer needs'}`;
+    state = 'error';
+  }
+  document.body.dataset.state = state;
+  setStatus(text, state);
+  showNotice(text, state);
+}
+
+/** Polls /api/status until the server serves a study (a complete study is served at once:
+ *  its requests wait for its load); returns the status, or null when the token is refused. */
+async function waitUntilReady() {
+  for (;;) {
+    try {
+      const st = await apiJson('/api/status');
+      showRunState(st);
+      if (st.ready) return st;
+      showNotReady(st);
+    } catch (e) {
+      reportError(e);
+      if (e instanceof ApiError && (e.status === 401 || e.status === 403)) return null;
+    }
+    await sleep(WAIT_POLL_MS);
+  }
+}
+
+/** Once a study is shown: follows the run's state and swaps in each new revision. */
+async function pollLive() {
+  try {
+    const st = await apiJson('/api/status');
+    showRunState(st);
+    const err = st.error || '';
+    if (err && err !== lastReloadError) {
+      setStatus(`Reloading the study failed: ${err} (still showing revision ${S.study.revision})`, 'error');
+    }
+    lastReloadError = err;
+    if (st.ready && st.revision !== S.study.revision) {
+      const study = await apiJson('/api/study');
+      if (study.revision !== S.study.revision) {
+        applyStudy(study, false);
+        setStatus(`Study updated: revision ${study.revision} (${studySummary(study)})`, 'loading');
+      }
+    }
+  } catch (e) { reportError(e); }
+  setTimeout(pollLive, LIVE_POLL_MS);
+}
+
 // ---------------------------------------------------------------- start
 
 async function start() {
@@ -883,43 +1054,24 @@ async function start() {
     setStatus('No token: open the exact URL that `flyover view` printed (…/?token=…)', 'error');
     return;
   }
-  let study;
-  try {
-    study = await apiJson('/api/study');
-  } catch (e) { reportError(e); return; }
-  S.study = study;
-  S.clip = Number.isFinite(study.clip_offset_fraction) ? study.clip_offset_fraction : 0.5;
-  $('#clip').value = String(S.clip);
-  const arc = $('#arc');
-  arc.max = String(study.arc_max_mm);
-  arc.step = String(study.step_mm || 1);
-  $('#arc-max').textContent = Number(study.arc_max_mm).toFixed(0);
-  $('#arc-input').max = String(study.arc_max_mm);
-  const maxPx = study.max_px || study.default_px || 512;
-  const sizes = [...new Set([256, 384, 512, 640, 768, 1024, study.default_px].filter((v) => v && v <= maxPx))].sort((a, b) => a - b);
-  const sel = $('#px');
-  for (const v of sizes) {
-    const o = document.createElement('option');
-    o.value = String(v); o.textContent = String(v);
-    sel.appendChild(o);
+  let study = null;
+  while (!study) {
+    if (!(await waitUntilReady())) return;
+    try {
+      study = await apiJson('/api/study');
+    } catch (e) {
+      // 503: no study served after all (the status changed in between): wait again
+      if (!(e instanceof ApiError) || e.status !== 503) { reportError(e); return; }
+      await sleep(WAIT_POLL_MS);
+    }
   }
-  S.px = study.default_px || sizes[sizes.length - 1];
-  sel.value = String(S.px);
-  overviewPx = Math.min(768, Math.max(256, Math.round(370 * (window.devicePixelRatio || 1))));
-  if (study.has_ct && study.ct) {
-    setWindowLevel(Number(study.ct.default_window) || S.window, Number.isFinite(study.ct.default_level) ? study.ct.default_level : S.level);
-  } else {
-    $('#ct-missing').hidden = false;
-    $('#slices').hidden = true;
-    $('#ct-controls').hidden = true;
-  }
-  renderMissed();
+  showNotice('');
+  applyStudy(study, true);
+  document.body.dataset.state = 'ready';
   document.body.dataset.ready = 'true';
-  setStatus(`Study: ${Number(study.length_mm).toFixed(0)} mm of centerline, ${(study.missed_regions || []).length} missed region(s)`, 'loading');
-  setPose({ arc_mm: 0 });
-  if (study.has_ct && study.centerline && study.centerline.length) setCursor(study.centerline[0]);
-  maybeOverview(true);
+  setStatus(`Study: ${studySummary(study)}`, 'loading');
   loadBookmarks();
+  setTimeout(pollLive, LIVE_POLL_MS);
 }
 
 // Read-only view of the state for debugging from the console.

@@ -1,0 +1,244 @@
+#include "view/live_study.h"
+
+#include "pipeline/artifact_io.h"
+#include "volume/error.h"
+
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace flyover {
+
+namespace {
+
+/// The watched files, in the order of LiveStudy::Stamps.
+enum Watched { CENTERLINE, SURFACE, CT, COVERAGE, MANIFEST };
+
+std::string joinNames(const std::vector<std::string>& names)
+{
+    std::string out;
+    for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
+    return out;
+}
+
+} // namespace
+
+FileStamp fileStamp(const std::string& path)
+{
+    struct stat st {};
+    FileStamp s;
+    if (::stat(path.c_str(), &st) != 0 || !(S_ISREG(st.st_mode) || S_ISDIR(st.st_mode))) return s;
+    s.exists = true;
+    s.size = std::uintmax_t(st.st_size);
+    s.mtimeNs = std::int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec;
+    s.inode = std::uint64_t(st.st_ino);
+    return s;
+}
+
+bool studyLockHeld(const std::string& studyDir)
+{
+    struct stat st {};
+    const std::string lock = (fs::path(studyDir) / ".flyover" / "lock").string();
+    if (::stat(lock.c_str(), &st) != 0) return false;
+    const unsigned wantMajor = major(st.st_dev), wantMinor = minor(st.st_dev);
+    // Lines such as "3: FLOCK  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF"; a process waiting for
+    // a lock has "->" after the number (it does not hold it).
+    std::ifstream in("/proc/locks");
+    std::string line;
+    while (std::getline(in, line)) {
+        std::istringstream words(line);
+        std::string w;
+        bool flock = false, waiting = false;
+        while (words >> w) {
+            if (w == "->") waiting = true;
+            else if (w == "FLOCK") flock = true;
+            else if (std::count(w.begin(), w.end(), ':') == 2 && flock && !waiting) {
+                unsigned maj = 0, min = 0;
+                unsigned long long ino = 0;
+                if (std::sscanf(w.c_str(), "%x:%x:%llu", &maj, &min, &ino) == 3 && maj == wantMajor &&
+                    min == wantMinor && ino == static_cast<unsigned long long>(st.st_ino))
+                    return true;
+                break;
+            }
+        }
+    }
+    return false;
+}
+
+LiveStudy::LiveStudy(const std::string& studyDir, const std::string& ctPath, Options options)
+    : mDir(studyDir), mCtPath(ctPath), mOptions(options)
+{
+    const Stamps stamps = readStamps();
+    mSeenStamps = stamps;
+    if (missing(stamps).empty() || !fs::is_directory(studyDir) || !studyLockHeld(studyDir)) {
+        // A study to show now (or to refuse now, with ViewStudy's one line naming what lacks).
+        mFirst = std::make_shared<ViewStudy>(studyDir, ctPath);
+        mServed = mFirst;
+        mServedStamps = mTriedStamps = stamps;
+        mRevision = 1;
+    } else {
+        mComputing = true;
+    }
+}
+
+LiveStudy::~LiveStudy() { stop(); }
+
+void LiveStudy::start()
+{
+    if (mFirst) mFirst->startLoading();
+    if (!mWatcher.joinable()) mWatcher = std::thread([this] { watch(); });
+}
+
+void LiveStudy::stop()
+{
+    {
+        std::lock_guard<std::mutex> lock(mMutex);
+        mStop = true;
+    }
+    mStopCv.notify_all();
+    if (mWatcher.joinable()) mWatcher.join();
+}
+
+LiveStudy::Stamps LiveStudy::readStamps() const
+{
+    const fs::path d(mDir);
+    return Stamps{fileStamp((d / "centerline.json").string()), fileStamp((d / "surface.ply").string()),
+                  fileStamp(mCtPath.empty() ? (d / "ct.vdb").string() : mCtPath),
+                  fileStamp((d / "coverage" / "coverage.json").string()), fileStamp((d / "manifest.json").string())};
+}
+
+std::vector<std::string> LiveStudy::missing(const Stamps& stamps) const
+{
+    std::vector<std::string> out;
+    if (!stamps[SURFACE].exists) out.push_back("surface.ply");
+    if (!stamps[CENTERLINE].exists) out.push_back("centerline.json");
+    return out;
+}
+
+void LiveStudy::watch()
+{
+    const auto poll = std::chrono::duration<double>(mOptions.pollSeconds);
+    for (;;) {
+        {
+            std::unique_lock<std::mutex> lock(mMutex);
+            if (mStopCv.wait_for(lock, poll, [this] { return mStop.load(); })) return;
+        }
+        const Stamps now = readStamps();
+        const bool computing = studyLockHeld(mDir);
+        json stages = nullptr;
+        bool complete = false;
+        if (now[MANIFEST] != mManifestStamp) {
+            try {
+                const json m = readJson((fs::path(mDir) / "manifest.json").string());
+                stages = json::array();
+                if (m.contains("stages") && m["stages"].is_array())
+                    for (const auto& e : m["stages"])
+                        if (e.is_object() && e.contains("stage") && e["stage"].is_string()) stages.push_back(e["stage"]);
+                complete = m.value("complete", false);
+            } catch (const std::exception&) {
+                stages = nullptr;  // being replaced, or broken: read it again at the next poll
+            }
+        }
+        bool stable = false, due = false;
+        {
+            std::lock_guard<std::mutex> lock(mMutex);
+            mComputing = computing;
+            if (!stages.is_null()) {
+                mStages = stages;
+                mComplete = complete;
+                mManifestStamp = now[MANIFEST];
+            }
+            stable = now == mSeenStamps;  // held still for one poll: a run's burst of renames is over
+            mSeenStamps = now;
+            due = stable && now != mTriedStamps;
+            if (due && !missing(now).empty()) {
+                mTriedStamps = now;  // nothing to load: the study served (if any) stays
+                due = false;
+            }
+        }
+        if (due) reload(now);
+    }
+}
+
+void LiveStudy::reload(const Stamps& stamps)
+{
+    std::shared_ptr<ViewStudy> previous;
+    Stamps previousStamps{};
+    {
+        std::lock_guard<std::mutex> lock(mMutex);
+        previous = mServed;
+        previousStamps = mServedStamps;
+        mLoading = true;
+    }
+    try {
+        auto next = std::make_shared<ViewStudy>(mDir, mCtPath);
+        if (previous) {
+            try {
+                next->reuse(*previous, stamps[SURFACE] == previousStamps[SURFACE], stamps[CT] == previousStamps[CT]);
+            } catch (const std::exception&) {
+                // the study served failed to load: read everything
+            }
+        }
+        next->load();
+        std::lock_guard<std::mutex> lock(mMutex);
+        mServed = std::move(next);
+        mServedStamps = mTriedStamps = stamps;
+        ++mRevision;
+        mError.clear();
+        mLoading = false;
+    } catch (const std::exception& e) {
+        std::lock_guard<std::mutex> lock(mMutex);
+        mTriedStamps = stamps;  // tried again once the files change
+        mError = e.what();
+        mLoading = false;
+    }
+}
+
+std::shared_ptr<const ViewStudy> LiveStudy::current(int* revision) const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    if (revision) *revision = mRevision;
+    if (mServed) return mServed;
+    const std::vector<std::string> lacks = missing(mSeenStamps);
+    if (mLoading) throw StudyNotReady("the study is loading");
+    if (!lacks.empty())
+        throw StudyNotReady(mComputing ? "the study is being computed: waiting for " + joinNames(lacks)
+                                       : "the study lacks " + joinNames(lacks) + " and no flyover run is computing it");
+    throw StudyNotReady("the study could not be loaded: " + mError);
+}
+
+bool LiveStudy::waitFirstLoad() const
+{
+    if (!mFirst) return false;
+    mFirst->waitLoaded();
+    return true;
+}
+
+int LiveStudy::revision() const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    return mRevision;
+}
+
+json LiveStudy::status() const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    const std::vector<std::string> lacks = missing(mSeenStamps);
+    std::string error = mError;
+    if (!mServed && !mComputing && !mLoading && !lacks.empty() && error.empty())
+        error = "the study lacks " + joinNames(lacks) + " and no flyover run is computing it";
+    return json{{"revision", mRevision},   {"ready", bool(mServed)}, {"computing", mComputing},
+                {"loading", mLoading},     {"waiting_for", lacks},   {"stages", mStages},
+                {"complete", mComplete},   {"error", error}};
+}
+
+} // namespace flyover
