@@ -173,14 +173,23 @@ void LiveStudy::reload(const Stamps& stamps)
 {
     std::shared_ptr<ViewStudy> previous;
     Stamps previousStamps{};
+    bool computing = false;
     {
         std::lock_guard<std::mutex> lock(mMutex);
         previous = mServed;
         previousStamps = mServedStamps;
+        computing = mComputing;
         mLoading = true;
     }
+    Stamps served = stamps;
     try {
         auto next = std::make_shared<ViewStudy>(mDir, mCtPath);
+        if (!previous && computing && mCtPath.empty() && stamps[CT].exists) {
+            // The first study of a run in progress: the fly-over first, the CT grid (224 MB on
+            // the full phantom) in the next revision, at the next poll, with the scene reused.
+            next->leaveOutCt();
+            served[CT] = FileStamp{};
+        }
         if (previous) {
             try {
                 next->reuse(*previous, stamps[SURFACE] == previousStamps[SURFACE], stamps[CT] == previousStamps[CT]);
@@ -191,7 +200,7 @@ void LiveStudy::reload(const Stamps& stamps)
         next->load();
         std::lock_guard<std::mutex> lock(mMutex);
         mServed = std::move(next);
-        mServedStamps = mTriedStamps = stamps;
+        mServedStamps = mTriedStamps = served;
         ++mRevision;
         mError.clear();
         mLoading = false;

@@ -140,6 +140,9 @@ public:
 
     /// Nearest centerline index to a world point (non-bridged points preferred).
     std::size_t nearestIndex(const Vec3d& pointMm) const;
+    /// Before loading: leave the CT out of this study (LiveStudy serves a study being computed
+    /// without it first, so that the fly-over shows before the CT grid is read).
+    void leaveOutCt() { mCtSource.clear(); }
     /// Whether both serve the very same loaded surface scene (reuse() took it over).
     bool sharesSurfaceWith(const ViewStudy& other) const;
     /// Rough bytes held by the scene and grids (for the bench).

@@ -131,6 +131,26 @@ TEST(ViewLive, AStudyBeingComputedIsServedOnceItsSurfaceAndCenterlineAreWritten)
     live.stop();
 }
 
+TEST(ViewLive, ARunsFlyOverIsServedBeforeItsCtGrid)
+{
+    const std::string dir = emptyStudy("live-ct-later");
+    auto run = std::make_unique<StudyLock>(dir, false);
+    LiveStudy live(dir, "", FAST);
+    live.start();
+    // Everything lands at once (as after a first pair): the surface is served first, without
+    // the CT, and the CT follows in the next revision on the same scene.
+    for (const char* f : {"manifest.json", "centerline.json", "surface.ply", "ct.vdb"}) land(dir, f);
+    ASSERT_TRUE(waitFor([&] { return live.revision() >= 1; })) << live.status().dump();
+    const auto first = live.current();
+    EXPECT_FALSE(first->hasCt()) << "revision 1 leaves the CT grid for the next one";
+    ASSERT_TRUE(waitFor([&] { return live.revision() == 2; })) << live.status().dump();
+    const auto second = live.current();
+    EXPECT_TRUE(second->hasCt());
+    EXPECT_TRUE(second->sharesSurfaceWith(*first));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_EQ(live.revision(), 2) << "nothing changed since";
+}
+
 TEST(ViewLive, ARewrittenSurfaceIsReadAgain)
 {
     const std::string dir = copyStudy("live-rewrite");
