@@ -12,79 +12,22 @@
 //
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium; CTest's SKIP_RETURN_CODE).
 
-import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
-import readline from 'node:readline';
 
-const SKIP = 77;
-const t0 = Date.now();
-const log = (...a) => console.log(`[${((Date.now() - t0) / 1000).toFixed(1)} s]`, ...a);
+import {
+  apiOf, check, CheckFailed, chromiumOrSkip, finish, launchBrowser, loadPlaywrightChromium, log, parseArgs, sleep,
+  Viewer,
+} from './harness.mjs';
 
-// ---------------------------------------------------------------- arguments
-
-function parseArgs(argv) {
-  const out = { chromium: process.env.FLYOVER_CHROMIUM || '', keepOpen: false };
-  for (let i = 0; i < argv.length; i++) {
-    const a = argv[i];
-    const next = () => {
-      if (i + 1 >= argv.length) throw new Error(`${a} needs a value`);
-      return argv[++i];
-    };
-    if (a === '--flyover') out.flyover = next();
-    else if (a === '--study') out.study = next();
-    else if (a === '--truth') out.truth = next();
-    else if (a === '--screenshot') out.screenshot = next();
-    else if (a === '--chromium') out.chromium = next();
-    else if (a === '--keep-open') out.keepOpen = true;
-    else throw new Error(`unknown argument ${a}`);
-  }
-  for (const k of ['flyover', 'study', 'truth']) if (!out[k]) throw new Error(`--${k} is required`);
-  return out;
-}
-
-let args;
-try {
-  args = parseArgs(process.argv.slice(2));
-} catch (e) {
-  console.error(`view_browser_test: ${e.message}`);
-  process.exit(2);
-}
-
-function findChromium() {
-  const candidates = [args.chromium, '/usr/bin/chromium', '/usr/bin/chromium-browser'].filter(Boolean);
-  for (const c of candidates) {
-    try { fs.accessSync(c, fs.constants.X_OK); return c; } catch (_) { /* next */ }
-  }
-  return null;
-}
-
-const chromiumPath = findChromium();
-if (!chromiumPath) {
-  console.log('SKIPPED: no chromium found (looked at $FLYOVER_CHROMIUM, /usr/bin/chromium, /usr/bin/chromium-browser); '
-    + 'install it with `apt-get install chromium` (scripts/setup.sh does)');
-  process.exit(SKIP);
-}
-
-let chromium;
-try {
-  ({ chromium } = await import('playwright-core'));
-} catch (e) {
-  console.error(`view_browser_test: cannot load playwright-core (${e.message}); run \`npm ci\` in tests/view/browser`);
-  process.exit(1);
-}
+const args = parseArgs(process.argv.slice(2),
+  { name: 'view_browser_test', values: ['flyover', 'study', 'truth', 'screenshot'], required: ['flyover', 'study', 'truth'] });
+const chromiumPath = chromiumOrSkip(args.chromium);
+const chromium = await loadPlaywrightChromium('view_browser_test');
 
 // ---------------------------------------------------------------- checks
 
-class CheckFailed extends Error {}
-let checks = 0;
-function check(cond, what, expected, seen) {
-  checks += 1;
-  if (!cond) throw new CheckFailed(`${what}: expected ${expected}, saw ${seen}`);
-}
-
 const dist = (a, b) => Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-const sleep = (ms) => new Promise((ok) => setTimeout(ok, ms));
 const fmtP = (p) => `(${p.map((v) => Number(v).toFixed(2)).join(', ')})`;
 
 // Slice mapping as the server states it in X-Flyover-Slice ("rule"): the centre of pixel (c, r) is
@@ -104,37 +47,7 @@ function worldToSlice(m, p) {
 // ---------------------------------------------------------------- the server
 
 const truth = JSON.parse(fs.readFileSync(args.truth, 'utf8'));
-let server = null;
-let serverExit = null;
-let serverOut = '';
-
-function startServer() {
-  return new Promise((resolve, reject) => {
-    server = spawn(args.flyover, ['view', '--study', args.study, '--port', '0'], { stdio: ['ignore', 'pipe', 'pipe'] });
-    const timer = setTimeout(() => reject(new Error(`flyover view printed no URL within 90 s; output:\n${serverOut}`)), 90000);
-    const onLine = (line) => {
-      serverOut += `${line}\n`;
-      const m = /^flyover: view: (http:\/\/127\.0\.0\.1:(\d+)\/\?token=([A-Za-z0-9_-]+))\s*$/.exec(line);
-      if (m) { clearTimeout(timer); resolve({ url: m[1], port: Number(m[2]), token: m[3] }); }
-    };
-    readline.createInterface({ input: server.stdout }).on('line', onLine);
-    readline.createInterface({ input: server.stderr }).on('line', (l) => { serverOut += `${l}\n`; });
-    server.on('exit', (code, signal) => {
-      serverExit = { code, signal };
-      clearTimeout(timer);
-      reject(new Error(`flyover view exited (code ${code}, signal ${signal}) before printing its URL:\n${serverOut}`));
-    });
-  });
-}
-
-async function stopServer() {
-  if (!server || serverExit) return serverExit;
-  const done = new Promise((ok) => server.once('exit', (code, signal) => ok({ code, signal })));
-  server.kill('SIGTERM');
-  const r = await Promise.race([done, sleep(15000).then(() => null)]);
-  if (!r) { server.kill('SIGKILL'); return { code: null, signal: 'timeout' }; }
-  return r;
-}
+const viewer = new Viewer(args.flyover, args.study);
 
 // ---------------------------------------------------------------- the test
 
@@ -142,33 +55,13 @@ let browser = null;
 let srv = null;
 let failure = null;
 const pageErrors = [];
-
-async function apiGet(p, params = {}) {
-  const url = new URL(p, `http://127.0.0.1:${srv.port}`);
-  for (const [k, v] of Object.entries(params)) url.searchParams.set(k, String(v));
-  const res = await fetch(url, { headers: { 'X-Flyover-Token': srv.token } });
-  const body = Buffer.from(await res.arrayBuffer());
-  return { status: res.status, headers: res.headers, body, json: () => JSON.parse(body.toString('utf8')) };
-}
-
-async function apiJson(p, params) {
-  const r = await apiGet(p, params);
-  if (r.status !== 200) throw new CheckFailed(`GET ${p} ${JSON.stringify(params)}: expected 200, saw ${r.status} ${r.body.toString('utf8').slice(0, 300)}`);
-  return r.json();
-}
+let apiJson = null; // GET of a JSON endpoint, 200 expected (apiOf)
 
 async function run() {
-  srv = await startServer();
+  srv = await viewer.start();
+  apiJson = apiOf(srv).getJson;
   log(`server: ${srv.url.replace(srv.token, '…')}`);
-
-  // launch() starts chromium with a fresh temporary profile of its own (its --user-data-dir),
-  // removed when the browser closes.
-  browser = await chromium.launch({
-    executablePath: chromiumPath,
-    headless: true,
-    args: ['--no-sandbox', '--no-first-run', '--disable-background-networking', '--disable-component-update',
-      '--disable-sync'],
-  });
+  browser = await launchBrowser(chromium, chromiumPath);
   log(`chromium ${browser.version()}`);
   const context = await browser.newContext({ viewport: { width: 1600, height: 1000 }, acceptDownloads: true });
   const page = await context.newPage();
@@ -575,7 +468,7 @@ async function waitCrosshairs(page, p) {
 
 const guard = setTimeout(() => {
   console.error('FAIL: the browser test ran past 300 s');
-  if (server && !serverExit) server.kill('SIGKILL');
+  viewer.kill();
   process.exit(1);
 }, 300000);
 
@@ -585,18 +478,6 @@ try {
   failure = e;
 }
 if (browser && !args.keepOpen) await browser.close().catch(() => {});
-let stopped = null;
-if (srv) stopped = await stopServer();
+const stopped = srv ? await viewer.stop() : null;
 clearTimeout(guard);
-
-if (!failure && stopped && !(stopped.code === 0 || stopped.signal === 'SIGTERM')) {
-  failure = new CheckFailed(`flyover view after SIGTERM: expected exit code 0, saw code ${stopped.code} signal ${stopped.signal}`);
-}
-if (failure) {
-  console.error(`FAIL: ${failure instanceof CheckFailed ? '' : 'error: '}${failure.message}`);
-  if (!(failure instanceof CheckFailed)) console.error(failure.stack);
-  if (serverOut) console.error(`flyover view output:\n${serverOut.split('\n').slice(-20).join('\n')}`);
-  process.exit(1);
-}
-log(`PASS: ${checks} checks; flyover view stopped cleanly (code ${stopped && stopped.code})`);
-process.exit(0);
+finish(failure, stopped, viewer);

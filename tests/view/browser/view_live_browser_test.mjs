@@ -20,89 +20,20 @@ import { spawn, spawnSync } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import readline from 'node:readline';
 
-const SKIP = 77;
-const t0 = Date.now();
-const log = (...a) => console.log(`[${((Date.now() - t0) / 1000).toFixed(1)} s]`, ...a);
+import {
+  apiOf, check, CheckFailed, chromiumOrSkip, finish, launchBrowser, loadPlaywrightChromium, log, parseArgs, SKIP,
+  Viewer, waitFor,
+} from './harness.mjs';
 
-// ---------------------------------------------------------------- arguments
-
-function parseArgs(argv) {
-  const out = { chromium: process.env.FLYOVER_CHROMIUM || '', keepOpen: false };
-  for (let i = 0; i < argv.length; i++) {
-    const a = argv[i];
-    const next = () => {
-      if (i + 1 >= argv.length) throw new Error(`${a} needs a value`);
-      return argv[++i];
-    };
-    if (a === '--flyover') out.flyover = next();
-    else if (a === '--study') out.study = next();
-    else if (a === '--chromium') out.chromium = next();
-    else if (a === '--keep-open') out.keepOpen = true;
-    else throw new Error(`unknown argument ${a}`);
-  }
-  for (const k of ['flyover', 'study']) if (!out[k]) throw new Error(`--${k} is required`);
-  return out;
-}
-
-let args;
-try {
-  args = parseArgs(process.argv.slice(2));
-} catch (e) {
-  console.error(`view_live_browser_test: ${e.message}`);
-  process.exit(2);
-}
-
-function findChromium() {
-  const candidates = [args.chromium, '/usr/bin/chromium', '/usr/bin/chromium-browser'].filter(Boolean);
-  for (const c of candidates) {
-    try { fs.accessSync(c, fs.constants.X_OK); return c; } catch (_) { /* next */ }
-  }
-  return null;
-}
-
-const chromiumPath = findChromium();
-if (!chromiumPath) {
-  console.log('SKIPPED: no chromium found (looked at $FLYOVER_CHROMIUM, /usr/bin/chromium, /usr/bin/chromium-browser); '
-    + 'install it with `apt-get install chromium` (scripts/setup.sh does)');
-  process.exit(SKIP);
-}
+const args = parseArgs(process.argv.slice(2),
+  { name: 'view_live_browser_test', values: ['flyover', 'study'], required: ['flyover', 'study'] });
+const chromiumPath = chromiumOrSkip(args.chromium);
 if (spawnSync('flock', ['--version'], { stdio: 'ignore' }).error) {
   console.log('SKIPPED: no util-linux `flock` (it holds the study lock as a flyover run does); install util-linux');
   process.exit(SKIP);
 }
-
-let chromium;
-try {
-  ({ chromium } = await import('playwright-core'));
-} catch (e) {
-  console.error(`view_live_browser_test: cannot load playwright-core (${e.message}); run \`npm ci\` in tests/view/browser`);
-  process.exit(1);
-}
-
-// ---------------------------------------------------------------- checks
-
-class CheckFailed extends Error {}
-let checks = 0;
-function check(cond, what, expected, seen) {
-  checks += 1;
-  if (!cond) throw new CheckFailed(`${what}: expected ${expected}, saw ${seen}`);
-}
-
-const sleep = (ms) => new Promise((ok) => setTimeout(ok, ms));
-
-/** Polls fn() every `every` ms until pred(value) holds; returns {ok, value, ms}. */
-async function waitFor(fn, pred, timeoutMs, every = 200) {
-  const start = Date.now();
-  let value;
-  for (;;) {
-    value = await fn();
-    if (pred(value)) return { ok: true, value, ms: Date.now() - start };
-    if (Date.now() - start > timeoutMs) return { ok: false, value, ms: Date.now() - start };
-    await sleep(every);
-  }
-}
+const chromium = await loadPlaywrightChromium('view_live_browser_test');
 
 // ---------------------------------------------------------------- the study folder and its "run"
 
@@ -147,63 +78,15 @@ function landFile(rel) {
   fs.renameSync(tmp, to);
 }
 
-// ---------------------------------------------------------------- the server
-
-let server = null;
-let serverExit = null;
-let serverOut = '';
-
-function startServer() {
-  return new Promise((resolve, reject) => {
-    server = spawn(args.flyover, ['view', '--study', T, '--port', '0'], { stdio: ['ignore', 'pipe', 'pipe'] });
-    const timer = setTimeout(() => reject(new Error(`flyover view printed no URL within 30 s; output:\n${serverOut}`)), 30000);
-    const onLine = (line) => {
-      serverOut += `${line}\n`;
-      const m = /^flyover: view: (http:\/\/127\.0\.0\.1:(\d+)\/\?token=([A-Za-z0-9_-]+))\s*$/.exec(line);
-      if (m) { clearTimeout(timer); resolve({ url: m[1], port: Number(m[2]), token: m[3] }); }
-    };
-    readline.createInterface({ input: server.stdout }).on('line', onLine);
-    readline.createInterface({ input: server.stderr }).on('line', (l) => { serverOut += `${l}\n`; });
-    server.on('exit', (code, signal) => {
-      serverExit = { code, signal };
-      clearTimeout(timer);
-      reject(new CheckFailed(`flyover view on a study whose run holds the lock (no surface.ply, no centerline.json): `
-        + `expected it to start and print its URL, saw it exit (code ${code}, signal ${signal}):\n${serverOut}`));
-    });
-  });
-}
-
-async function stopServer() {
-  if (!server || serverExit) return serverExit;
-  const done = new Promise((ok) => server.once('exit', (code, signal) => ok({ code, signal })));
-  server.kill('SIGTERM');
-  const r = await Promise.race([done, sleep(15000).then(() => null)]);
-  if (!r) { server.kill('SIGKILL'); return { code: null, signal: 'timeout' }; }
-  return r;
-}
-
 // ---------------------------------------------------------------- the test
 
+let viewer = null;
 let browser = null;
 let srv = null;
 let failure = null;
 const pageErrors = [];
-
-async function apiGet(p, params = {}) {
-  const url = new URL(p, `http://127.0.0.1:${srv.port}`);
-  for (const [k, v] of Object.entries(params)) url.searchParams.set(k, String(v));
-  const res = await fetch(url, { headers: { 'X-Flyover-Token': srv.token } });
-  const body = Buffer.from(await res.arrayBuffer());
-  let json = null;
-  try { json = JSON.parse(body.toString('utf8')); } catch (_) { json = null; }
-  return { status: res.status, body, json, text: body.toString('utf8').slice(0, 300) };
-}
-
-async function apiJson(p, params) {
-  const r = await apiGet(p, params);
-  if (r.status !== 200 || !r.json) throw new CheckFailed(`GET ${p}: expected 200 with JSON, saw ${r.status} ${r.text}`);
-  return r.json;
-}
+let apiGet = null; // GET with the token (apiOf): {status, json, text, ...}
+let apiJson = null; // the same, 200 with JSON expected
 
 const status = () => apiJson('/api/status');
 const brief = (st) => JSON.stringify(st);
@@ -216,17 +99,12 @@ async function run() {
   log(`study folder ${T}, lock held by flock (pid ${runner.pid})`);
 
   // ---- b. the viewer starts on it and says that the study is being computed
-  srv = await startServer();
+  viewer = new Viewer(args.flyover, T);
+  srv = await viewer.start(30000, 'flyover view on a study whose run holds the lock (no surface.ply, no centerline.json): '
+    + 'expected it to start and print its URL, saw it exit');
+  ({ get: apiGet, getJson: apiJson } = apiOf(srv));
   log(`server: ${srv.url.replace(srv.token, '…')}`);
-
-  // launch() starts chromium with a fresh temporary profile of its own (its --user-data-dir),
-  // removed when the browser closes.
-  browser = await chromium.launch({
-    executablePath: chromiumPath,
-    headless: true,
-    args: ['--no-sandbox', '--no-first-run', '--disable-background-networking', '--disable-component-update',
-      '--disable-sync'],
-  });
+  browser = await launchBrowser(chromium, chromiumPath);
   log(`chromium ${browser.version()}`);
   const context = await browser.newContext({ viewport: { width: 1600, height: 1000 } });
   const page = await context.newPage();
@@ -395,7 +273,7 @@ async function run() {
 
 async function cleanup() {
   if (browser && !args.keepOpen) await browser.close().catch(() => {});
-  const stopped = srv || server ? await stopServer() : null;
+  const stopped = viewer ? await viewer.stop() : null;
   await releaseLock();
   if (T && !args.keepOpen) fs.rmSync(T, { recursive: true, force: true });
   return stopped;
@@ -403,7 +281,7 @@ async function cleanup() {
 
 const guard = setTimeout(async () => {
   console.error('FAIL: the live browser test ran past 280 s');
-  if (server && !serverExit) server.kill('SIGKILL');
+  if (viewer) viewer.kill();
   if (runner && !runnerExit) { try { process.kill(-runner.pid, 'SIGKILL'); } catch (_) { /* gone */ } }
   if (T) fs.rmSync(T, { recursive: true, force: true });
   process.exit(1);
@@ -417,15 +295,5 @@ try {
 const stopped = await cleanup();
 clearTimeout(guard);
 
-if (!failure && stopped && !(stopped.code === 0 || stopped.signal === 'SIGTERM')) {
-  failure = new CheckFailed(`flyover view after SIGTERM: expected exit code 0, saw code ${stopped.code} signal ${stopped.signal}`);
-}
 if (!failure && T && !args.keepOpen && fs.existsSync(T)) failure = new CheckFailed(`study folder removed: expected no ${T}, saw it`);
-if (failure) {
-  console.error(`FAIL: ${failure instanceof CheckFailed ? '' : 'error: '}${failure.message}`);
-  if (!(failure instanceof CheckFailed)) console.error(failure.stack);
-  if (serverOut) console.error(`flyover view output:\n${serverOut.split('\n').slice(-20).join('\n')}`);
-  process.exit(1);
-}
-log(`PASS: ${checks} checks; flyover view stopped cleanly (code ${stopped && stopped.code})`);
-process.exit(0);
+finish(failure, stopped, viewer);
