@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <sys/resource.h>
 #include <unistd.h>
@@ -143,7 +144,11 @@ void RunLog::firstPair(const std::string& path)
 {
     std::lock_guard<std::mutex> lock(mMutex);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - mStart).count();
-    const std::string line = "first fly-over pair: " + path + " (" + seconds(secs) + " after start)";
+    // The study (the pair is STUDY/frames/pair_0000.png) can be read now: `flyover view` serves a
+    // study that a run is still computing (view/live_study.h).
+    const std::string study = std::filesystem::path(path).parent_path().parent_path().string();
+    const std::string line = "first fly-over pair: " + path + " (" + seconds(secs) + " after start)\n" +
+                             "flyover: read the study now: flyover view --study " + study;
     switch (mMode) {
     case Mode::Quiet: return;
     case Mode::Json: jsonLine(mOut, {{"event", "first_pair"}, {"path", path}, {"seconds_since_start", secs}}); return;

@@ -90,6 +90,8 @@ TEST(RunLog, FirstPairIsALineOrAJsonEventWithTheTimeSinceStart)
     }
     EXPECT_EQ(plain.str().rfind("flyover: first fly-over pair: /s/frames/pair_0000.png (", 0), 0u) << plain.str();
     EXPECT_NE(plain.str().find(" s after start)\n"), std::string::npos) << plain.str();
+    EXPECT_NE(plain.str().find("\nflyover: read the study now: flyover view --study /s\n"), std::string::npos)
+        << "the first pair line names the viewer of the study; saw: " << plain.str();
     const auto e = nlohmann::json::parse(json.str());
     EXPECT_EQ(e["event"], "first_pair");
     EXPECT_EQ(e["path"], "/s/frames/pair_0000.png");
