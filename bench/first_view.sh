@@ -5,7 +5,8 @@
 # study served), the first /api/pair image answered, and the whole run; then the revisions the
 # viewer swapped in by the run's end. Median / min / max over RUNS cold runs, each in a fresh
 # study in its own folder (FLYOVER_BENCH_DIR, default /tmp/flyover-bench-first-view): never a
-# user's study. Needs curl. Usage: bench/first_view.sh [small|medium|full] [RUNS]
+# user's study. Needs curl. Usage: bench/first_view.sh [small|medium|full|gca] [RUNS]
+# gca: the shared data's real colon mask (gca-colon-00020, run with --mask; no CT, no slices).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZE=${1:-full}
@@ -14,8 +15,16 @@ FLYOVER=${FLYOVER_BIN:-build/pipeline/flyover}
 WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-first-view}
 command -v curl > /dev/null || { echo "first_view.sh: needs curl"; exit 1; }
 mkdir -p "$WORK"
-CT="$WORK/phantom-$SIZE.nii.gz"
-[ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
+if [ "$SIZE" = gca ]; then
+  ROOT=$(pwd)
+  . bench/shared_data.sh
+  INPUT=(--mask "$(shared_data)/real/gca-colon-00020/large_intestine.nii.gz") KIND="real colon mask"
+  [ -f "${INPUT[1]}" ] || { echo "no ${INPUT[1]}: the gca mode needs the shared real data"; exit 1; }
+else
+  CT="$WORK/phantom-$SIZE.nii.gz"
+  [ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
+  INPUT=("$CT") KIND=phantom
+fi
 STUDY="$WORK/study-$SIZE"
 
 now() { date +%s%N; }
@@ -34,7 +43,7 @@ for _ in $(seq "$RUNS"); do
   mkdir -p "$STUDY"
   sync
   t0=$(now)
-  "$FLYOVER" run "$CT" --study "$STUDY" --log-json 2> "$WORK/run.jsonl" > /dev/null &
+  "$FLYOVER" run "${INPUT[@]}" --study "$STUDY" --log-json 2> "$WORK/run.jsonl" > /dev/null &
   runPid=$!
   # The run takes the study lock first thing; the viewer then waits for its files.
   for _ in $(seq 200); do [ -s "$STUDY/.flyover/lock" ] && break; sleep 0.01; done
@@ -64,7 +73,7 @@ for _ in $(seq "$RUNS"); do
   firstPair+=("$fp") ready+=("$(secs "$t0" "$tReady")") image+=("$(secs "$t0" "$tImage")")
   whole+=("$(secs "$t0" "$t1")") revs+=("$rev")
 done
-echo "flyover run + flyover view, $SIZE phantom, cold (fresh study each run)"
+echo "flyover run + flyover view, $SIZE $KIND, cold (fresh study each run)"
 stats "run: first_pair event" "${firstPair[@]}"
 stats "viewer: study served (/api/status ready)" "${ready[@]}"
 stats "viewer: first /api/pair image" "${image[@]}"

@@ -83,14 +83,26 @@ std::string DeferredWrites::pendingFile(const std::string& path) const
     return {};
 }
 
-void DeferredWrites::finish()
+void DeferredWrites::rename()
 {
     for (const auto& [tmp, target] : mFiles) {
-        fsyncFile(tmp);
         crashPoint("atomic-write:before-rename");
         fs::rename(tmp, target);
+        mRenamed.push_back(target);
     }
     mFiles.clear();
+}
+
+void DeferredWrites::sync()
+{
+    for (const auto& target : mRenamed) fsyncFile(target);
+    mRenamed.clear();
+}
+
+void DeferredWrites::finish()
+{
+    rename();
+    sync();
 }
 
 void DeferredWrites::addReportPart(std::function<void(nlohmann::json&)> complete)

@@ -47,8 +47,15 @@ public:
     void add(const std::string& tmpPath, const std::string& path);
     /// The temporary holding the deferred write of `path`, or "" when there is none.
     std::string pendingFile(const std::string& path) const;
-    /// fsyncs each temporary and renames it onto its name, in the order written.
+    /// Renames each temporary onto its name, in the order written: the files reach their
+    /// names (and an open `flyover view`) at once, without waiting for the disk.
     /// @throw std::filesystem::filesystem_error when a rename fails.
+    void rename();
+    /// fsyncs each file rename() renamed. The pipeline writes the stage's cache record only
+    /// after it: a file renamed but not yet on disk when the machine loses power has no
+    /// record, so no later run trusts it.
+    void sync();
+    /// rename(), then sync().
     void finish();
 
     /// Leaves part of the stage's report to be made behind: `complete` runs in
@@ -61,6 +68,7 @@ public:
 
 private:
     std::vector<std::pair<std::string, std::string>> mFiles;  ///< (temporary, final name)
+    std::vector<std::string> mRenamed;                        ///< renamed, not yet fsynced
     std::vector<std::function<void(nlohmann::json&)>> mReportParts;
 };
 

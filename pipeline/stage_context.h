@@ -134,11 +134,20 @@ public:
     void beginSurfaceArrays();
 
     /// Work that should not compete with the first pair (the mesh checks made behind, the
-    /// fsyncs, renames and records of the write-behind) waits here until the frames step has
+    /// fsyncs and records of the write-behind) waits here until the frames step has
     /// announced it and built the whole scene after it, or is reused from the cache, or the stage graph has ended (frames not run
     /// or failed): runPipeline opens the gate then, before it joins the write-behind.
     void waitForFirstPair() { mFirstPairGate.wait(); }
-    void openFirstPairGate() { std::call_once(mGateOnce, [this] { mFirstPair.set_value(); }); }
+    void openFirstPairGate()
+    {
+        mFirstPairOutGate.open();
+        mFirstPairGate.open();
+    }
+    /// The write-behind's renames (no CPU, no memory) wait only for the first pair's
+    /// announcement, so that an open `flyover view` gets the study at once; opened by the
+    /// frames step right after it, and by openFirstPairGate().
+    void waitForFirstPairOut() { mFirstPairOutGate.wait(); }
+    void openFirstPairOutGate() { mFirstPairOutGate.open(); }
 
     const RunOptions& opt;
     std::filesystem::path dir;
@@ -146,9 +155,18 @@ public:
     std::chrono::steady_clock::time_point start;  ///< when runPipeline started
 
 private:
-    std::once_flag mGateOnce;
-    std::promise<void> mFirstPair;
-    std::shared_future<void> mFirstPairGate = mFirstPair.get_future().share();
+    /// A one-way gate: wait() blocks until open() (called any number of times, any thread).
+    class Gate {
+    public:
+        void wait() const { mOpened.wait(); }
+        void open() { std::call_once(mOnce, [this] { mPromise.set_value(); }); }
+
+    private:
+        std::once_flag mOnce;
+        std::promise<void> mPromise;
+        std::shared_future<void> mOpened = mPromise.get_future().share();
+    };
+    Gate mFirstPairOutGate, mFirstPairGate;
     std::mutex mLoadMutex;
     tbb::collaborative_once_flag mRenderOnce;
     std::unique_ptr<RenderInputs> mRender;

@@ -599,6 +599,7 @@ json runFrames(StudyRun& run, Progress* progress)
     const double firstPairSinceRunStart = secondsSince(run.start);
     if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
     crashPoint("frames:first-pair");
+    run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
 
     // The whole scene, before the work that waited for the first pair (the mesh checks, the
     // write-behind's fsyncs) starts: the BVH build's temporaries and theirs would add up.

@@ -431,13 +431,17 @@ nlohmann::json runPipeline(const RunOptions& options)
             // taken above): the fsyncs (the disk's writeback of ct.vdb's 224 MB on the full
             // phantom), renames and records wait until it is out, so as not to share the two
             // cores with the way to it (or until the frames step is reused, or the graph ends).
-            if (behindFirstPair) run.waitForFirstPair();
+            if (behindFirstPair) run.waitForFirstPairOut();
             crashPoint(("writebehind:" + name + ":before-finish").c_str());
-            // The files first (an open `flyover view` shows them as soon as they are renamed),
-            // then what the body left to be made behind (the mesh checks, 0.9 s on the full
-            // phantom), then the record: a run killed in between leaves renamed files without
-            // a record, which the next run recomputes.
-            deferred->finish();
+            // The files under their names as soon as the first pair is announced (an open
+            // `flyover view` shows the study then); their fsyncs, what the body left to be made
+            // behind (the mesh checks, 0.9 s on the full phantom) and the record once the whole
+            // scene is built after it. A run killed in between leaves renamed files without a
+            // record, which the next run recomputes.
+            deferred->rename();
+            crashPoint(("writebehind:" + name + ":renamed").c_str());
+            if (behindFirstPair) run.waitForFirstPair();
+            deferred->sync();
             deferred->completeReport(record2["report"]);
             entry["report"] = record2["report"];
             {

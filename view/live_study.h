@@ -58,7 +58,7 @@ struct StudyNotReady : std::runtime_error {
 class LiveStudy {
 public:
     struct Options {
-        double pollSeconds = 0.2;  ///< how often the files and the lock are looked at
+        double pollSeconds = 0.1;  ///< how often the files and the lock are looked at
     };
 
     /// Reads the study's small files at once when the surface and centerline are there (its

@@ -347,6 +347,9 @@ TEST_F(StudyTest, KilledRunsLeaveNothingThatLies)
                               // ingest's record after its file, both while later stages run;
                               // mesh's report completed behind (its checks), nothing recorded
                               "writebehind:mesh:before-finish", "writebehind:mesh:report-completed",
+                              // mesh's files renamed at the first pair, not yet fsynced nor
+                              // recorded: the next run must not trust them (no record)
+                              "writebehind:mesh:renamed",
                               "stage:ingest:committed",
                               // the first pair out, ct.vdb still in its temporary (the fsyncs
                               // and renames wait for the first pair)
@@ -358,6 +361,20 @@ TEST_F(StudyTest, KilledRunsLeaveNothingThatLies)
         ASSERT_EQ(std::system((flyover + " -q run " + ctPath() + " --study " + s + common).c_str()), 0) << point;
         EXPECT_TRUE(temporaries(s).empty()) << point << ": " << temporaries(s).front();
         EXPECT_EQ(outputDigests(readJson(s + "/manifest.json")), refDigests) << "after a crash at " << point;
+    }
+    {
+        // The write-behind renames at the first pair's announcement (an open viewer reads the
+        // study then) and records only after the fsyncs: killed in between, surface.ply is
+        // under its name with no mesh record, so the next run does not trust it.
+        const std::string s = studyDir("crash-renamed-look");
+        const int killed = std::system(("FLYOVER_CRASH_AT=writebehind:mesh:renamed " + flyover + " -q run " +
+                                        ctPath() + " --study " + s + common + " 2>/dev/null").c_str());
+        EXPECT_NE(killed, 0);
+        EXPECT_TRUE(fs::is_regular_file(s + "/surface.ply")) << "renamed before the crash point";
+        bool meshRecord = false;
+        for (const auto& e : fs::directory_iterator(s + "/.flyover/records"))
+            meshRecord = meshRecord || e.path().filename().string().rfind("mesh-", 0) == 0;
+        EXPECT_FALSE(meshRecord) << "a mesh record written before its files were fsynced";
     }
     const auto digests = outputDigests(readJson(study + "/manifest.json"));
     EXPECT_EQ(digests, refDigests) << "a run after kill -9 must give the uninterrupted run's artifacts";
