@@ -159,7 +159,7 @@ void LiveStudy::watch()
             }
             stable = now == mSeenStamps;  // held still for one poll: a run's burst of renames is over
             mSeenStamps = now;
-            due = stable && now != mTriedStamps;
+            due = stable && (now != mTriedStamps || mProvisional);
             if (due && !missing(now).empty()) {
                 mTriedStamps = now;  // nothing to load: the study served (if any) stays
                 due = false;
@@ -173,26 +173,35 @@ void LiveStudy::reload(const Stamps& stamps)
 {
     std::shared_ptr<ViewStudy> previous;
     Stamps previousStamps{};
-    bool computing = false;
+    bool computing = false, previousProvisional = false;
     {
         std::lock_guard<std::mutex> lock(mMutex);
         previous = mServed;
         previousStamps = mServedStamps;
+        previousProvisional = mProvisional;
         computing = mComputing;
         mLoading = true;
     }
     Stamps served = stamps;
+    bool provisional = false;
     try {
         auto next = std::make_shared<ViewStudy>(mDir, mCtPath);
-        if (!previous && computing && mCtPath.empty() && stamps[CT].exists) {
-            // The first study of a run in progress: the fly-over first, the CT grid (224 MB on
-            // the full phantom) in the next revision, at the next poll, with the scene reused.
-            next->leaveOutCt();
-            served[CT] = FileStamp{};
+        if (!previous && computing) {
+            // The first study of a run in progress, as soon as can be: its scene built fast
+            // (Morton BVH: 0.3 s instead of 0.6-0.9 s for 2.5 M triangles) and without the CT
+            // grid (224 MB on the full phantom); the next revision, at the next look, rebuilds
+            // the scene at Embree's default quality and reads the CT.
+            next->buildSceneFast();
+            provisional = true;
+            if (mCtPath.empty() && stamps[CT].exists) {
+                next->leaveOutCt();
+                served[CT] = FileStamp{};
+            }
         }
         if (previous) {
             try {
-                next->reuse(*previous, stamps[SURFACE] == previousStamps[SURFACE], stamps[CT] == previousStamps[CT]);
+                next->reuse(*previous, stamps[SURFACE] == previousStamps[SURFACE] && !previousProvisional,
+                            stamps[CT] == previousStamps[CT]);
             } catch (const std::exception&) {
                 // the study served failed to load: read everything
             }
@@ -201,12 +210,14 @@ void LiveStudy::reload(const Stamps& stamps)
         std::lock_guard<std::mutex> lock(mMutex);
         mServed = std::move(next);
         mServedStamps = mTriedStamps = served;
+        mProvisional = provisional;
         ++mRevision;
         mError.clear();
         mLoading = false;
     } catch (const std::exception& e) {
         std::lock_guard<std::mutex> lock(mMutex);
         mTriedStamps = stamps;  // tried again once the files change
+        mProvisional = false;   // (not at every look: the fast-built scene stays served)
         mError = e.what();
         mLoading = false;
     }

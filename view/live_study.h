@@ -4,7 +4,9 @@
 ///        (centerline.json, surface.ply, ct.vdb, coverage/coverage.json, manifest.json); when
 ///        they have changed and then held still for one more poll, it loads a new ViewStudy in
 ///        the background (taking the surface's scene and the CT grid over from the study served
-///        when their files are the same) and swaps it in under a new revision. While a
+///        when their files are the same) and swaps it in under a new revision. A run's first
+///        study is served with a fast-built scene and without its CT grid; the next revision,
+///        at the next look, has both. While a
 ///        `flyover run` holds the study's lock and has not yet written the surface or the
 ///        centerline, nothing is served: requests get StudyNotReady (HTTP 503) and status()
 ///        says what is awaited. A study that lacks them with no run computing it is refused at
@@ -110,6 +112,7 @@ private:
     Stamps mServedStamps{}, mTriedStamps{}, mSeenStamps{};
     int mRevision = 0;
     bool mComputing = false, mLoading = false;
+    bool mProvisional = false;  ///< the study served has a fast-built scene: rebuilt at the next look
     std::string mError;
     nlohmann::json mStages = nlohmann::json::array();
     bool mComplete = false;

@@ -122,7 +122,9 @@ void ViewStudy::loadNow()
             if (!readPlainPly(ply, xyz, tris))
                 throw InputError(ply + ": not the binary PLY layout flyover writes (float x y z, triangles); remake it "
                                        "with: " + mRunHint + " --force mesh");
-            scene = std::make_shared<const RayScene>(std::move(xyz), std::move(tris));
+            SceneOptions options;
+            options.fastBuild = mFastScene;
+            scene = std::make_shared<const RayScene>(std::move(xyz), std::move(tris), options);
         }
         mReusedScene.reset();
         if (scene->triangleCount() == 0) throw InputError(ply + ": the surface has no triangles");
