@@ -197,7 +197,10 @@ int main(int argc, char** argv)
                                                "flying over a study; Ctrl-C stops it");
     std::string viewStudy, viewCt;
     int viewPort = 0;
-    viewCmd->add_option("--study", viewStudy, "study folder (after flyover run)")->required();
+    viewCmd->add_option("--study", viewStudy,
+                        "study folder (after flyover run, or while it runs: the page shows the study as soon as "
+                        "its first pair is out and follows it)")
+        ->required();
     viewCmd->add_option("--port", viewPort, "port on 127.0.0.1 (0 = a free one)")->check(CLI::Range(0, 65535));
     viewCmd->add_option("--ct", viewCt, "CT for the slices when the study has no ct.vdb (a mask-only study)");
 
