@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -44,34 +45,54 @@ FileStamp fileStamp(const std::string& path)
     return s;
 }
 
+bool flockHeldIn(std::istream& procLocks, unsigned devMajor, unsigned devMinor, unsigned long long inode,
+                 long filePid)
+{
+    // Lines such as "3: FLOCK  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF"; a process waiting for
+    // a lock has "->" after the number (it does not hold it).
+    std::string line;
+    while (std::getline(procLocks, line)) {
+        std::istringstream words(line);
+        std::string w;
+        bool flock = false, waiting = false;
+        long previous = -1;
+        while (words >> w) {
+            if (w == "->") waiting = true;
+            else if (w == "FLOCK") flock = true;
+            else if (std::count(w.begin(), w.end(), ':') == 2 && flock && !waiting) {
+                const long pid = previous;  // the field before the device names the holder
+                unsigned maj = 0, min = 0;
+                unsigned long long ino = 0;
+                if (std::sscanf(w.c_str(), "%x:%x:%llu", &maj, &min, &ino) == 3 && ino == inode &&
+                    ((maj == devMajor && min == devMinor) || (pid > 0 && pid == filePid)))
+                    return true;
+                break;
+            } else {
+                char* end = nullptr;
+                const long v = std::strtol(w.c_str(), &end, 10);
+                previous = (end && *end == '\0') ? v : -1;
+            }
+        }
+    }
+    return false;
+}
+
 bool studyLockHeld(const std::string& studyDir)
 {
     struct stat st {};
     const std::string lock = (fs::path(studyDir) / ".flyover" / "lock").string();
     if (::stat(lock.c_str(), &st) != 0) return false;
-    const unsigned wantMajor = major(st.st_dev), wantMinor = minor(st.st_dev);
-    // Lines such as "3: FLOCK  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF"; a process waiting for
-    // a lock has "->" after the number (it does not hold it).
-    std::ifstream in("/proc/locks");
-    std::string line;
-    while (std::getline(in, line)) {
-        std::istringstream words(line);
-        std::string w;
-        bool flock = false, waiting = false;
-        while (words >> w) {
-            if (w == "->") waiting = true;
-            else if (w == "FLOCK") flock = true;
-            else if (std::count(w.begin(), w.end(), ':') == 2 && flock && !waiting) {
-                unsigned maj = 0, min = 0;
-                unsigned long long ino = 0;
-                if (std::sscanf(w.c_str(), "%x:%x:%llu", &maj, &min, &ino) == 3 && maj == wantMajor &&
-                    min == wantMinor && ino == static_cast<unsigned long long>(st.st_ino))
-                    return true;
-                break;
-            }
-        }
+    // The pid a run writes into the lock file (StudyLock): on an overlay file system /proc/locks
+    // names the lower file system's device, not the one stat() gives, so the holder's pid
+    // stands in for the device there.
+    long filePid = -1;
+    {
+        std::ifstream in(lock);
+        if (!(in >> filePid)) filePid = -1;
     }
-    return false;
+    std::ifstream locks("/proc/locks");
+    return flockHeldIn(locks, major(st.st_dev), minor(st.st_dev), static_cast<unsigned long long>(st.st_ino),
+                       filePid);
 }
 
 LiveStudy::LiveStudy(const std::string& studyDir, const std::string& ctPath, Options options)

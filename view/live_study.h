@@ -21,6 +21,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <istream>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -50,6 +51,12 @@ FileStamp fileStamp(const std::string& path);
 /// study), read from /proc/locks: the lock is never taken, so a run starting at that moment is
 /// never refused because of the viewer.
 bool studyLockHeld(const std::string& studyDir);
+
+/// studyLockHeld()'s reading of /proc/locks: whether a granted FLOCK lock is held on the file
+/// (device, inode); where the device differs (an overlay file system names the lower one), a
+/// holder whose pid is `filePid` (the pid a run writes into its lock file) counts too.
+bool flockHeldIn(std::istream& procLocks, unsigned devMajor, unsigned devMinor, unsigned long long inode,
+                 long filePid);
 
 /// A request the study cannot answer yet (HTTP 503): its surface or centerline is still being
 /// computed, or is loading.

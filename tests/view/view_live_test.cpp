@@ -9,6 +9,7 @@
 #include <chrono>
 #include <filesystem>
 #include <functional>
+#include <sstream>
 #include <thread>
 
 namespace fs = std::filesystem;
@@ -68,6 +69,28 @@ TEST(ViewLive, TheStudyLockIsSeenWithoutBeingTaken)
         EXPECT_FALSE(studyLockHeld(dir));
         StudyLock next(dir, false);  // never refused because of a look
     }
+}
+
+TEST(ViewLive, ProcLocksAreReadForGrantedFlocksOfTheFile)
+{
+    auto held = [](const std::string& text, long filePid) {
+        std::istringstream in(text);
+        return flockHeldIn(in, 0xfd, 0x01, 1234567, filePid);
+    };
+    EXPECT_TRUE(held("1: FLOCK  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF\n", -1));
+    EXPECT_FALSE(held("1: FLOCK  ADVISORY  WRITE 4242 fd:01:7654321 0 EOF\n", -1)) << "another file";
+    EXPECT_FALSE(held("1: POSIX  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF\n", -1)) << "not a flock";
+    EXPECT_FALSE(held("1: -> FLOCK  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF\n", -1)) << "only waiting for it";
+    // An overlay file system: /proc/locks names another device; the holder's pid in the lock
+    // file stands in for it, another pid does not.
+    EXPECT_TRUE(held("2: FLOCK  ADVISORY  WRITE 4242 00:2a:1234567 0 EOF\n", 4242));
+    EXPECT_FALSE(held("2: FLOCK  ADVISORY  WRITE 4242 00:2a:1234567 0 EOF\n", 99));
+    EXPECT_FALSE(held("2: FLOCK  ADVISORY  WRITE 4242 00:2a:1234567 0 EOF\n", -1));
+    EXPECT_TRUE(held("1: POSIX  ADVISORY  READ 7 08:02:11 0 EOF\n"
+                     "2: -> FLOCK  ADVISORY  WRITE 9 fd:01:1234567 0 EOF\n"
+                     "3: FLOCK  ADVISORY  WRITE 4242 fd:01:1234567 0 EOF\n",
+                     -1));
+    EXPECT_FALSE(held("", -1));
 }
 
 TEST(ViewLive, AStudyBeingComputedIsServedOnceItsSurfaceAndCenterlineAreWritten)

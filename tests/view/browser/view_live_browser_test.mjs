@@ -61,6 +61,9 @@ async function holdLock() {
   const r = await waitFor(async () => lockHeld(), (v) => v || runnerExit !== null, 10000, 50);
   check(r.ok && !runnerExit, 'study lock held by `flock T/.flyover/lock sleep 600`', 'held within 10 s',
     runnerExit ? `flock exited ${JSON.stringify(runnerExit)}` : 'not held');
+  // As a run does: its pid in the lock file (the viewer needs it where /proc/locks names another
+  // device than stat(), on an overlay file system).
+  fs.writeFileSync(path.join(T, '.flyover', 'lock'), String(runner.pid));
 }
 
 /** Ends the "run": flock and its sleep (the sleep inherits the locked file descriptor). */
