@@ -99,12 +99,6 @@ void DeferredWrites::sync()
     mRenamed.clear();
 }
 
-void DeferredWrites::finish()
-{
-    rename();
-    sync();
-}
-
 void DeferredWrites::addReportPart(std::function<void(nlohmann::json&)> complete)
 {
     mReportParts.push_back(std::move(complete));

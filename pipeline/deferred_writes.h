@@ -1,10 +1,11 @@
 /// @file deferred_writes.h
 /// @brief Write-behind of a stage's artifacts (issue 15). While a DeferredWrites::Scope is
 ///        open on a thread, writeAtomically() (artifact_io.h) writes each file to its temporary
-///        as usual but leaves the fsync and the rename to DeferredWrites::finish(). The pipeline
-///        hashes the temporaries at once (so that the next stages' keys stay content digests and
-///        they can start) and runs finish() and the cache record beside the next stages. A run
-///        killed before finish() leaves only temporaries, which the next run removes; nothing
+///        as usual but leaves the rename and the fsync to DeferredWrites::rename() and sync().
+///        The pipeline hashes the temporaries at once (so that the next stages' keys stay
+///        content digests and they can start) and runs rename(), sync() and the cache record
+///        beside the next stages. A run killed before rename() leaves only temporaries, which
+///        the next run removes; nothing
 ///        is recorded before its files are renamed and on disk.
 #pragma once
 
@@ -55,8 +56,6 @@ public:
     /// after it: a file renamed but not yet on disk when the machine loses power has no
     /// record, so no later run trusts it.
     void sync();
-    /// rename(), then sync().
-    void finish();
 
     /// Leaves part of the stage's report to be made behind: `complete` runs in
     /// completeReport(), beside the next stages and before the cache record is written (so a

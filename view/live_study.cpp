@@ -151,7 +151,7 @@ void LiveStudy::watch()
     for (;;) {
         {
             std::unique_lock<std::mutex> lock(mMutex);
-            if (mStopCv.wait_for(lock, poll, [this] { return mStop.load(); })) return;
+            if (mStopCv.wait_for(lock, poll, [this] { return mStop; })) return;
         }
         const Stamps now = readStamps();
         const bool computing = studyLockHeld(mDir);
@@ -244,17 +244,29 @@ void LiveStudy::reload(const Stamps& stamps)
     }
 }
 
+std::string LiveStudy::notReadyReasonLocked() const
+{
+    if (mServed) return "";
+    if (mLoading) return "the study is loading";
+    const std::vector<std::string> lacks = missing(mSeenStamps);
+    if (!lacks.empty())
+        return mComputing ? "the study is being computed: waiting for " + joinNames(lacks)
+                          : "the study lacks " + joinNames(lacks) + " and no flyover run is computing it";
+    return "the study could not be loaded: " + mError;
+}
+
+std::string LiveStudy::notReadyReason() const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    return notReadyReasonLocked();
+}
+
 std::shared_ptr<const ViewStudy> LiveStudy::current(int* revision) const
 {
     std::lock_guard<std::mutex> lock(mMutex);
     if (revision) *revision = mRevision;
-    if (mServed) return mServed;
-    const std::vector<std::string> lacks = missing(mSeenStamps);
-    if (mLoading) throw StudyNotReady("the study is loading");
-    if (!lacks.empty())
-        throw StudyNotReady(mComputing ? "the study is being computed: waiting for " + joinNames(lacks)
-                                       : "the study lacks " + joinNames(lacks) + " and no flyover run is computing it");
-    throw StudyNotReady("the study could not be loaded: " + mError);
+    if (!mServed) throw StudyNotReady(notReadyReasonLocked());
+    return mServed;
 }
 
 bool LiveStudy::waitFirstLoad() const
@@ -274,9 +286,10 @@ json LiveStudy::status() const
 {
     std::lock_guard<std::mutex> lock(mMutex);
     const std::vector<std::string> lacks = missing(mSeenStamps);
-    std::string error = mError;
-    if (!mServed && !mComputing && !mLoading && !lacks.empty() && error.empty())
-        error = "the study lacks " + joinNames(lacks) + " and no flyover run is computing it";
+    // A run that ended without the files is an error too (the page says so).
+    const std::string error = !mError.empty() || mServed || mComputing || mLoading || lacks.empty()
+                                  ? mError
+                                  : notReadyReasonLocked();
     return json{{"revision", mRevision},   {"ready", bool(mServed)}, {"computing", mComputing},
                 {"loading", mLoading},     {"waiting_for", lacks},   {"stages", mStages},
                 {"complete", mComplete},   {"error", error}};

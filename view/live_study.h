@@ -18,7 +18,6 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
-#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <istream>
@@ -98,6 +97,9 @@ public:
     /// computing (a run holds the lock), loading, waiting_for (needed files missing), stages
     /// (manifest.json's, in order), complete, error ("" or the last load's failure).
     nlohmann::json status() const;
+    /// Why no study is served ("" when one is): being computed (waiting for which files),
+    /// loading, lacking files with no run computing it, or the load's failure.
+    std::string notReadyReason() const;
     int revision() const;
     const std::string& studyDir() const { return mDir; }
 
@@ -109,6 +111,7 @@ private:
     /// Loads the study as `stamps` found it, reusing what `previous` loaded from unchanged files.
     void reload(const Stamps& stamps);
     std::vector<std::string> missing(const Stamps& stamps) const;
+    std::string notReadyReasonLocked() const;
 
     std::string mDir, mCtPath;
     Options mOptions;
@@ -125,7 +128,7 @@ private:
     bool mComplete = false;
     FileStamp mManifestStamp;
 
-    std::atomic<bool> mStop{false};
+    bool mStop = false;
     std::condition_variable mStopCv;
     std::thread mWatcher;
 };

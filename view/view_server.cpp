@@ -722,13 +722,9 @@ int runViewCommand(const std::string& studyDir, int port, const std::string& ctP
         firstLoaded = true;
     });
     out << "flyover: view: " << server.url() << std::endl;
-    if (study.revision() == 0) {
-        const json status = study.status();
-        std::string lacks;
-        for (const auto& f : status["waiting_for"]) lacks += (lacks.empty() ? "" : ", ") + f.get<std::string>();
-        out << "flyover: view: " << studyDir << " is being computed by flyover run (waiting for " << lacks
-            << "): the page shows it once they are written" << std::endl;
-    }
+    if (const std::string why = study.notReadyReason(); !why.empty())
+        out << "flyover: view: " << studyDir << ": " << why << "; the page shows it once they are written"
+            << std::endl;
     server.listen();
     listenDone = true;
     if (stopping && !firstLoaded) {

@@ -131,7 +131,6 @@ void ViewStudy::loadNow()
         openvdb::FloatGrid::Ptr ct;
         if (mReusedCt) {  // its bounds and spacing were copied by reuse()
             ct = std::move(mReusedCt);
-            mReusedCt.reset();
         } else if (!mCtSource.empty()) {
             if (fs::path(mCtSource).extension() == ".vdb") {
                 ct = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(mCtSource, "ct_hu"));

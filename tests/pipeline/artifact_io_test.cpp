@@ -72,8 +72,9 @@ TEST(ArtifactIo, PngOfManySizesAndContentsReadsBackExactlyThroughLibpng)
             ASSERT_EQ(back.width, w) << what;
             ASSERT_EQ(back.height, h) << what;
             EXPECT_TRUE(back.rgb == img.rgb) << what << ": the pixels read back differ from those written";
-            if (!noisy && w * h >= 1000)
+            if (!noisy && w * h >= 1000) {
                 EXPECT_LT(fs::file_size(path), img.rgb.size() / 4) << what << ": a smooth image is barely compressed";
+            }
 
             const std::string grayPng = encodeGrayPng(w, h, gray);
             png_image pi{};
@@ -388,8 +389,9 @@ TEST(ArtifactIo, DeferredWritesStayInTheirTemporariesUntilFinished)
         EXPECT_EQ(DeferredWrites::active(), nullptr);
         EXPECT_EQ(writtenFile(a), a) << "outside the scope the name is the file";
         EXPECT_EQ(tmpCount(), 1);
-        writes.finish();
+        writes.rename();
         EXPECT_EQ(readJson(a)["x"], 1);
+        writes.sync();
         EXPECT_EQ(tmpCount(), 0);
     }
     {
