@@ -88,11 +88,14 @@ BoolTree::Ptr airCandidates(const FloatTree& hu, float thresholdHu)
         for (auto it = src->cbeginValueOn(); it; ++it)
             if (!(*it < thresholdHu)) leaf.setValueOff(it.pos(), false);
     });
+    // Active tiles of the HU tree (a constant region) became active tiles of `air`: kept where
+    // their value is air. Only the tiles are visited: the leaves' voxels were done above, and a
+    // walk over every active voxel here took 0.065 s of one thread on a 3.6 L colon's CT.
     FloatConstAccessor huAcc(hu);
-    for (auto it = air->beginValueOn(); it; ++it) {
-        if (it.isVoxelValue()) continue;
+    BoolTree::ValueOnIter it = air->beginValueOn();
+    it.setMaxDepth(BoolTree::ValueOnIter::LEAF_DEPTH - 1);
+    for (; it; ++it)
         if (!(huAcc.getValue(it.getCoord()) < thresholdHu)) it.setValueOff();
-    }
     air->voxelizeActiveTiles();
     detail::pruneInactive(*air);
     return air;

@@ -10,6 +10,7 @@
 
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetMeasure.h>
+#include <openvdb/tools/Prune.h>
 
 #include <tbb/task_arena.h>
 
@@ -400,6 +401,35 @@ TEST(SegmentLumen, SameResultWithOneThread)
     std::size_t differ = 0;
     for (auto it = a.sdf->cbeginValueOn(); it; ++it) differ += accB.getValue(it.getCoord()) != *it;
     EXPECT_EQ(differ, 0u);
+}
+
+// A HU grid whose constant regions are active tiles (as a pruned or generated grid may hold)
+// is segmented as its voxelised copy is: an air tile inside the body is lumen, a tissue tile
+// is not (airCandidates visits the tiles apart from the leaves).
+TEST(SegmentLumen, ActiveTilesAreSegmentedAsTheirVoxels)
+{
+    auto voxels = openvdb::FloatGrid::create(-1000.0f);  // outside the body: air, inactive
+    voxels->setTransform(openvdb::math::Transform::createLinearTransform(2.0));
+    // Body of tissue, 64^3 voxels at 2 mm; an air cube of 16^3 voxels (32 mL) inside it, both
+    // aligned to 8^3 leaves so that pruning turns them into tiles.
+    voxels->tree().fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(63)), 40.0f, true);
+    voxels->tree().fill(openvdb::CoordBBox(openvdb::Coord(24), openvdb::Coord(39)), -1000.0f, true);
+    voxels->tree().voxelizeActiveTiles();
+    auto tiles = voxels->deepCopy();
+    openvdb::tools::prune(tiles->tree());
+    ASSERT_TRUE(tiles->tree().hasActiveTiles());
+    ASSERT_FALSE(voxels->tree().hasActiveTiles());
+    SegmentParams params;
+    const LumenSegmentation a = segmentLumen(*voxels, params);
+    const LumenSegmentation b = segmentLumen(*tiles, params);
+    EXPECT_NEAR(a.maskVolumeMl, 32.768, 1e-9) << "the air cube is the lumen";
+    EXPECT_EQ(a.maskVolumeMl, b.maskVolumeMl);
+    EXPECT_EQ(a.lumenVolumeMl, b.lumenVolumeMl);
+    ASSERT_EQ(a.sdf->activeVoxelCount(), b.sdf->activeVoxelCount());
+    auto accB = b.sdf->getConstAccessor();
+    std::size_t differ = 0;
+    for (auto it = a.sdf->cbeginValueOn(); it; ++it) differ += accB.getValue(it.getCoord()) != *it;
+    EXPECT_EQ(differ, 0u) << "level set values that differ between the tiled and the voxelised grid";
 }
 
 // ------------------------------------------------------------------ external masks
