@@ -58,6 +58,11 @@ struct CenterlineParams {
     double bridgeTurnMmPerRad = 20.0;
     /// Path points closer than this to the wall outside bridges are reported (mm, >= 0).
     double nearWallMm = 1.0;
+    /// Where a narrowing splits a piece's core, the route is searched on the core plus the
+    /// piece's voxels within this many millimetres (in steps) of the narrowings and the piece's
+    /// ends instead of on the whole piece (mm; 0: the whole piece). Not a stage parameter: the
+    /// tests and benches compare the two.
+    double corridorMm = 5.0;
     static constexpr int VERSION = 6;
 };
 

@@ -62,6 +62,22 @@ struct LumenIndex {
                Coord(off >> (2 * LEAF_LOG2), (off >> LEAF_LOG2) & (LEAF_DIM - 1), off & (LEAF_DIM - 1));
     }
 
+    /// The slot of the 26-neighbour of `s` one step STEPS[k] away (a lumen voxel or a hole), or
+    /// NO_SLOT where no block holds it.
+    Slot stepSlot(Slot s, int k) const
+    {
+        const int off = static_cast<int>(s % LEAF_VOXELS);
+        const Step& st = STEPS[std::size_t(k)];
+        const int nx = (off >> (2 * LEAF_LOG2)) + st.dx, ny = ((off >> LEAF_LOG2) & (LEAF_DIM - 1)) + st.dy,
+                  nz = (off & (LEAF_DIM - 1)) + st.dz;
+        const int b = neighbour[s / LEAF_VOXELS][std::size_t(((nx >> LEAF_LOG2) + 1) * 9 +
+                                                             ((ny >> LEAF_LOG2) + 1) * 3 + ((nz >> LEAF_LOG2) + 1))];
+        if (b < 0) return NO_SLOT;
+        return static_cast<Slot>(b) * LEAF_VOXELS +
+               static_cast<Slot>(((nx & (LEAF_DIM - 1)) << (2 * LEAF_LOG2)) | ((ny & (LEAF_DIM - 1)) << LEAF_LOG2) |
+                                 (nz & (LEAF_DIM - 1)));
+    }
+
     /// Calls fn(neighbourSlot, stepIndex) for each 26-neighbour of `s` that is a lumen voxel;
     /// with STRIDE 2, for the neighbours two voxels away (the lattice of even coordinates).
     template<int STRIDE = 1, typename Fn>

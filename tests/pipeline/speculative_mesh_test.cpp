@@ -113,7 +113,7 @@ void expectSameCenterlineEitherWay(RunOptions one, RunOptions two, bool besideEx
     for (const nlohmann::json& p : pieces) {
         ASSERT_TRUE(p.is_object()) << pieces.dump();
         const std::string on = p["route_searched_on"].get<std::string>();
-        EXPECT_TRUE(on == "coarse core" || on == "core" || on == "whole piece") << on;
+        EXPECT_TRUE(on == "coarse core" || on == "core" || on == "core and corridors" || on == "whole piece") << on;
         EXPECT_GT(p["path_length_mm"].get<double>(), 0.0);
         EXPECT_GT(p["volume_ml"].get<double>(), 0.0);
     }

@@ -450,14 +450,37 @@ AxisFit fitToZAxis(const Centerline& cl, const Frame& frame, double cx, double c
     return f;
 }
 
+/// The centerline of a piece whose core a narrowing splits: searched on the core with corridors
+/// (the default) and on the whole piece (corridorMm 0), which must give the same path, point for
+/// point. Returns the default's.
+Centerline corridorAgainstWholePiece(const openvdb::FloatGrid& sdf, CenterlineReport& report)
+{
+    const Centerline cl = extractCenterline(sdf, CenterlineParams{}, nullptr, &report);
+    EXPECT_EQ(report.pieces.size(), 1u);
+    if (report.pieces.empty()) return cl;
+    EXPECT_EQ(report.pieces[0].routeSearchedOn, "core and corridors");
+    CenterlineParams whole;
+    whole.corridorMm = 0;
+    CenterlineReport wholeReport;
+    const Centerline wl = extractCenterline(sdf, whole, nullptr, &wholeReport);
+    EXPECT_EQ(wholeReport.pieces[0].routeSearchedOn, "whole piece");
+    EXPECT_EQ(cl.points.size(), wl.points.size()) << "points with corridors, and on the whole piece";
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < std::min(cl.points.size(), wl.points.size()); ++i)
+        differ += !(cl.points[i].positionMm == wl.points[i].positionMm);
+    EXPECT_EQ(differ, 0u) << "path points that differ between the corridors' route and the whole piece's";
+    return cl;
+}
+
 TEST(Centerline, NarrowingThatSplitsTheCoreIsCrossedOnTheAxis)
 {
     // A straight lumen of radius 8 mm narrowed smoothly to 1.6 mm deep in its middle (as on
     // gca-colon-00020: a narrowing 1.6 mm deep between stretches 10 mm deep split the core and
     // sent the search over the whole piece, 10.5 M voxels). The narrowing is shallower than the
     // core's threshold there, so neither the coarse lattice nor the core joins the ends; the
-    // search falls back to the whole piece, and the path must still run the whole lumen on its
-    // axis and through the middle of the throat.
+    // search takes the core with corridors through the narrowing and the ends, which must give
+    // the whole piece's path, and the path must still run the whole lumen on its axis and
+    // through the middle of the throat.
     const Frame frame = test::makeFrame(0.75, true);
     const double R = 8.0, r0 = 1.6, halfWidth = 16.0, cx = 20, cy = 20, z0 = 15, z1 = 115, zc = 65;
     auto radius = [&](double z, double* slope) {
@@ -482,9 +505,8 @@ TEST(Centerline, NarrowingThatSplitsTheCoreIsCrossedOnTheAxis)
     };
     auto sdf = sampledSdf(frame, {cx - R - 3, cy - R - 3, z0 - R - 3}, {cx + R + 3, cy + R + 3, z1 + R + 3}, sdfMm);
     CenterlineReport report;
-    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, nullptr, &report);
+    const Centerline cl = corridorAgainstWholePiece(*sdf, report);
     ASSERT_EQ(report.pieces.size(), 1u);
-    EXPECT_EQ(report.pieces[0].routeSearchedOn, "whole piece");
     const AxisFit f = fitToZAxis(cl, frame, cx, cy, zc);
     std::cout << "[ narrowing ] " << report.pieces[0].routeSearchedOn << ": length " << cl.lengthMm() << " mm, z "
               << f.zMin << ".." << f.zMax << ", off the axis at most " << f.worstMm << " mm, nearest to the throat "
@@ -495,12 +517,12 @@ TEST(Centerline, NarrowingThatSplitsTheCoreIsCrossedOnTheAxis)
     EXPECT_GT(f.zMax, z1 - 4.0) << "the path stops short of the other end";
 }
 
-TEST(Centerline, AbruptThroatIsCrossedOnTheWholePiece)
+TEST(Centerline, AbruptThroatIsCrossedThroughCorridorsAsOnTheWholePiece)
 {
     // Two chambers of radius 7 mm joined by a throat of radius 1.5 mm that meets their caps
     // square, so the core (voxels at least half as deep as the deepest nearby) breaks at the
-    // throat and the search falls back to the whole piece. The path must still run through the
-    // throat from one chamber to the other.
+    // throat; the core with corridors must give the whole piece's path, and that must still run
+    // through the throat from one chamber to the other.
     const TubeCase tc = straightCase();
     const Frame frame = tc.frame;
     const double cx = 20, cy = 20;
@@ -508,9 +530,8 @@ TEST(Centerline, AbruptThroatIsCrossedOnTheWholePiece)
     openvdb::tools::csgUnion(*sdf, *test::makeTubeSdf(frame, Axis::straight({cx, cy, 77}, {cx, cy, 117}), 7.0));
     openvdb::tools::csgUnion(*sdf, *test::makeTubeSdf(frame, Axis::straight({cx, cy, 55}, {cx, cy, 77}), 1.5));
     CenterlineReport report;
-    const Centerline cl = extractCenterline(*sdf, CenterlineParams{}, nullptr, &report);
+    const Centerline cl = corridorAgainstWholePiece(*sdf, report);
     ASSERT_EQ(report.pieces.size(), 1u);
-    EXPECT_EQ(report.pieces[0].routeSearchedOn, "whole piece");
     const AxisFit f = fitToZAxis(cl, frame, cx, cy, 66);
     std::cout << "[ throat ] " << report.pieces[0].routeSearchedOn << ": length " << cl.lengthMm() << " mm, z "
               << f.zMin << ".." << f.zMax << ", off the axis at most " << f.worstMm << " mm\n";
