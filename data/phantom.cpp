@@ -211,6 +211,29 @@ private:
         // A collapsed stretch is a slab in arc length (flat ends across the tube).
         for (const PhantomCollapse& c : mAnatomy.collapsed)
             sd = std::max(sd, std::min(arc - c.arcStartMm, c.arcEndMm - arc));
+        // A stricture: where the nearest centerline sample lies in it, the lumen is no wider
+        // than the narrowed radius there. (The tube's own distance is the union of its chords'
+        // cones, whose round ends, a full radius wide, would fill a narrowing shorter than the
+        // radius.)
+        for (const PhantomStricture& st : mAnatomy.strictures) {
+            const auto n = long(mAnatomy.centerlineMm.size());
+            const long i0 = std::clamp(long(std::floor(st.arcStartMm / mAnatomy.stepMm)) - 40, 0L, n - 1);
+            const long i1 = std::clamp(long(std::ceil(st.arcEndMm / mAnatomy.stepMm)) + 40, 0L, n - 1);
+            const Vec3d& middle = mAnatomy.centerlineMm[std::size_t((i0 + i1) / 2)];
+            if (distance(p, middle) > 0.5 * double(i1 - i0) * mAnatomy.stepMm + 60.0) continue;
+            long nearest = i0;
+            double nearestMm = distance(p, mAnatomy.centerlineMm[std::size_t(i0)]);
+            for (long i = i0 + 1; i <= i1; ++i) {
+                const double d = distance(p, mAnatomy.centerlineMm[std::size_t(i)]);
+                if (d < nearestMm) {
+                    nearestMm = d;
+                    nearest = i;
+                }
+            }
+            const double at = double(nearest) * mAnatomy.stepMm;
+            if (at > st.arcStartMm && at < st.arcEndMm)
+                sd = std::max(sd, nearestMm - mAnatomy.radiusMm[std::size_t(nearest)]);
+        }
         return sd;
     }
 
@@ -389,6 +412,9 @@ Phantom makePhantom(const PhantomParams& params)
     PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed, options);
     if (params.collapse)
         addCollapses(anatomy, params.seed);
+    if (params.stricture && params.colon)
+        addStricture(anatomy, params.seed,
+                     std::max({geometry.spacingMm.x, geometry.spacingMm.y, geometry.spacingMm.z}));
     if (params.fluid)
         addFluidPools(anatomy, params.seed);
 
@@ -413,6 +439,7 @@ Phantom makePhantom(const PhantomParams& params)
         truth.segment = anatomy.segment;
         truth.polyps = anatomy.polyps;
         truth.collapsed = anatomy.collapsed;
+        truth.strictures = anatomy.strictures;
         truth.fluidPools = anatomy.fluidPools;
         truth.contacts = anatomy.contacts;
         truth.hasRectalTube = anatomy.hasRectalTube;

@@ -16,6 +16,12 @@
 /// - collapse: one or two stretches of 20-40 mm of the sigmoid have no lumen (soft tissue
 ///   inside the wall), so the colon falls into 2 or 3 pieces; the truth centerline stays
 ///   the full path and the truth lists the collapsed arc ranges.
+/// - stricture: a stretch of the transverse colon narrows abruptly (shoulders of 3 mm, as an
+///   annular tumour's) to a lumen radius of max(3 mm, 1.6 voxels) over 8-12 mm, then widens
+///   again, without haustral folds: the colon stays one piece, but its core (the voxels at
+///   least half as deep as the deepest nearby) is split there, as a passage 0.8 mm deep
+///   splits a real colon's (gca-colon-00020). The truth radii follow the narrowing, and the
+///   truth lists it.
 /// - colon = false: no colon at all (body, lungs, small-bowel gas, spine): a scan on which
 ///   segmentation must refuse with a clear message.
 /// - redundant: a longer colon (about 2.02 m, 2.03-2.09 m with contacts: an extra sigmoid
@@ -53,6 +59,7 @@ struct PhantomParams {
     double noiseHu = 15.0;   ///< standard deviation of the added Gaussian noise (HU)
     bool fluid = false;      ///< tagged fluid pools with flat air-fluid levels
     bool collapse = false;   ///< one or two collapsed stretches of the sigmoid
+    bool stricture = false;  ///< an abrupt narrowing of the transverse colon
     bool colon = true;       ///< false: no colon (lungs, gas pockets, body only)
     int touching = 0;        ///< contacts between far-apart loops, 0..PHANTOM_MAX_CONTACTS
     bool redundant = false;  ///< extra sigmoid and transverse loops (about 2.0-2.1 m of colon)
@@ -103,6 +110,15 @@ struct PhantomCollapse {
     double arcEndMm = 0;
 };
 
+/// A narrowing of the lumen: arc lengths from the rectum end of the centerline where the
+/// fold-free radius starts to fall and where it is whole again (3 mm shoulders each side),
+/// and the radius between the shoulders.
+struct PhantomStricture {
+    double arcStartMm = 0;
+    double arcEndMm = 0;
+    double minRadiusMm = 0;
+};
+
 /// A pool of tagged fluid: the lumen points whose nearest centerline arc is in
 /// [arcStartMm, arcEndMm] and that lie posterior of the level (y > levelYMm) hold fluid.
 struct PhantomFluidPool {
@@ -118,6 +134,7 @@ struct PhantomTruth {
     std::vector<std::string> segment;  ///< anatomical segment name per point
     std::vector<PhantomPolyp> polyps;
     std::vector<PhantomCollapse> collapsed;   ///< sorted by arc; empty unless params.collapse
+    std::vector<PhantomStricture> strictures; ///< empty unless params.stricture
     std::vector<PhantomFluidPool> fluidPools; ///< sorted by arc; empty unless params.fluid
     std::vector<PhantomContact> contacts;     ///< sorted by arcAMm; empty unless touching
     bool hasRectalTube = false;

@@ -877,6 +877,48 @@ void addCollapses(PhantomAnatomy& a, uint64_t seed)
     throw std::logic_error("phantom anatomy: could not place a collapsed stretch clear of the polyps");
 }
 
+void addStricture(PhantomAnatomy& a, uint64_t seed, double voxelMm)
+{
+    std::mt19937_64 rng(splitmix64(seed ^ 0x57121C7E5ull));
+    const double minRadius = std::max(3.0, 1.6 * voxelMm);
+    double first = -1, last = -1;  // the transverse colon's arc range
+    for (std::size_t i = 0; i < a.segment.size(); ++i)
+        if (a.segment[i] == "transverse") {
+            if (first < 0) first = double(i) * a.stepMm;
+            last = double(i) * a.stepMm;
+        }
+    if (first < 0) throw std::logic_error("phantom anatomy: no transverse colon for the stricture");
+    constexpr double SHOULDER_MM = 3.0;  // abrupt: the narrowing is nearly all reached in 3 mm
+    for (int attempt = 0; attempt < 20000; ++attempt) {
+        const double halfFlat = std::round(uniform(rng, 4.0, 6.0));
+        const double halfWidth = halfFlat + SHOULDER_MM;
+        const double mid = std::round(uniform(rng, first + 30.0 + halfWidth, last - 30.0 - halfWidth));
+        const double s0 = mid - halfWidth, s1 = mid + halfWidth;
+        bool ok = true;
+        for (const PhantomPolyp& p : a.polyps)
+            ok = ok && (p.arcMm < s0 - p.radiusMm - 10.0 || p.arcMm > s1 + p.radiusMm + 10.0);
+        for (const PhantomContact& k : a.contacts)
+            for (double arc : {k.arcAMm, k.arcBMm})
+                ok = ok && (arc < s0 - POLYP_CONTACT_CLEARANCE_MM || arc > s1 + POLYP_CONTACT_CLEARANCE_MM);
+        for (const PhantomCollapse& c : a.collapsed) ok = ok && (c.arcEndMm < s0 - 20.0 || c.arcStartMm > s1 + 20.0);
+        if (!ok) continue;
+        for (std::size_t i = 0; i < a.radiusMm.size(); ++i) {
+            const double off = std::abs(double(i) * a.stepMm - mid);
+            if (off >= halfWidth) continue;
+            const double u = std::max(0.0, off - halfFlat) / SHOULDER_MM, c = std::sin(0.5 * PI * u);
+            const double R = a.radiusMm[i];
+            a.radiusMm[i] = std::min(R, minRadius + (R - minRadius) * c * c);
+        }
+        std::vector<HaustralFold> folds;
+        for (const HaustralFold& f : a.folds)
+            if (f.arcMm + f.thicknessMm < s0 || f.arcMm - f.thicknessMm > s1) folds.push_back(f);
+        a.folds = std::move(folds);
+        a.strictures = {PhantomStricture{s0, s1, minRadius}};
+        return;
+    }
+    throw std::logic_error("phantom anatomy: could not place the stricture clear of the polyps and contacts");
+}
+
 void addFluidPools(PhantomAnatomy& a, uint64_t seed)
 {
     std::mt19937_64 rng(splitmix64(seed ^ 0xF1D0F1D0ull));

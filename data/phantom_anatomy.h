@@ -91,6 +91,7 @@ struct PhantomAnatomy {
 
     // Variants (empty for the default phantom): see addCollapses() and addFluidPools().
     std::vector<PhantomCollapse> collapsed;   ///< sorted by arc
+    std::vector<PhantomStricture> strictures; ///< sorted by arc
     std::vector<PhantomFluidPool> fluidPools; ///< sorted by arc
     std::vector<PhantomContact> contacts;     ///< sorted by arcAMm; see AnatomyOptions
     /// Arc half-widths (mm) of the bends that brought each contact's loops together:
@@ -144,6 +145,12 @@ PhantomRectalTube makeRectalTube(const PhantomAnatomy& anatomy);
 /// is 100-140 mm of sigmoid (about 60 mL). Drawn from a random stream of its own, so the
 /// rest of the anatomy does not change.
 void addCollapses(PhantomAnatomy& anatomy, uint64_t seed);
+
+/// The `stricture` variant: a stretch of the transverse colon, at least 10 mm (plus the polyp
+/// radius) from every polyp and 30 mm from every contact, narrows over 3 mm shoulders to a
+/// radius of max(3 mm, 1.6 x voxelMm) kept over 8-12 mm (anatomy.radiusMm follows it), and
+/// loses its haustral folds. Own random stream.
+void addStricture(PhantomAnatomy& anatomy, uint64_t seed, double voxelMm);
 
 /// The `fluid` variant: tagged fluid (+300..+600 HU) pools posterior of flat levels in the
 /// rectum, the descending colon and the ascending colon with the cecum, each 25-45% of the

@@ -72,6 +72,10 @@ int main(int argc, char** argv)
                                                   "(supine: posterior); truth lumen = air + fluid");
     phantomCmd->add_flag("--collapse", phantomCollapse, "one or two collapsed 20-40 mm stretches of the sigmoid "
                                                         "(2 or 3 lumen pieces); the truth lists them");
+    bool phantomStricture = false;
+    phantomCmd->add_flag("--stricture", phantomStricture, "the transverse colon narrowed abruptly to a radius of "
+                                                          "max(3 mm, 1.6 voxels) over 8-12 mm (one piece, its core "
+                                                          "split); the truth lists it");
     int phantomTouching = 0;
     bool phantomRedundant = false, phantomTube = false;
     std::string phantomSpacing;
@@ -281,6 +285,7 @@ int main(int argc, char** argv)
             pp.noiseHu = noiseHu;
             pp.fluid = phantomFluid;
             pp.collapse = phantomCollapse;
+            pp.stricture = phantomStricture;
             pp.touching = phantomTouching;
             pp.redundant = phantomRedundant;
             pp.rectalTube = phantomTube;

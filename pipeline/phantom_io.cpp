@@ -22,18 +22,24 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
 {
     const PhantomTruth& t = ph.truth;
     const bool anyNew = params.touching > 0 || params.redundant || params.rectalTube;
-    if (anyNew || params.fluid || params.collapse) {
+    if (anyNew || params.fluid || params.collapse || params.stricture) {
         double lengthMm = 0;
         for (std::size_t i = 1; i < t.centerlineMm.size(); ++i) lengthMm += distance(t.centerlineMm[i - 1], t.centerlineMm[i]);
         out["variants"] = json{{"touching", params.touching}, {"redundant", params.redundant},
                                {"rectal_tube", params.rectalTube}, {"fluid", params.fluid},
-                               {"collapse", params.collapse}};
+                               {"collapse", params.collapse}, {"stricture", params.stricture}};
         out["centerline"]["length_mm"] = lengthMm;
     }
     if (params.collapse) {
         json c = json::array();
         for (const auto& s : t.collapsed) c.push_back(json{{"arc_start_mm", s.arcStartMm}, {"arc_end_mm", s.arcEndMm}});
         out["collapsed"] = c;
+    }
+    if (params.stricture) {
+        json c = json::array();
+        for (const auto& s : t.strictures)
+            c.push_back(json{{"arc_start_mm", s.arcStartMm}, {"arc_end_mm", s.arcEndMm}, {"min_radius_mm", s.minRadiusMm}});
+        out["strictures"] = c;
     }
     if (params.fluid) {
         json f = json::array();
@@ -128,6 +134,9 @@ PhantomTruth phantomTruthFromJson(const json& j, const std::string& source)
     t.fluidVolumeMl = j.value("fluid_volume_ml", 0.0);
     for (const auto& c : j.value("collapsed", json::array()))
         t.collapsed.push_back({c.at("arc_start_mm").get<double>(), c.at("arc_end_mm").get<double>()});
+    for (const auto& c : j.value("strictures", json::array()))
+        t.strictures.push_back({c.at("arc_start_mm").get<double>(), c.at("arc_end_mm").get<double>(),
+                                c.at("min_radius_mm").get<double>()});
     for (const auto& p : j.value("fluid_pools", json::array()))
         t.fluidPools.push_back({p.at("arc_start_mm").get<double>(), p.at("arc_end_mm").get<double>(),
                                 p.at("level_y_mm").get<double>(), p.at("hu").get<double>()});

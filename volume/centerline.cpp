@@ -901,7 +901,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     // Where a narrowing splits a piece's core, the minimal route leaves the core only in the
     // narrowing and at the piece's ends (the cap walls it starts and ends on). So the route is
     // searched on the core plus corridors through those places: the piece's voxels within
-    // corridorMm (in steps) of where a route over the piece's voxels of even coordinates (an
+    // corridorMm (in steps, at least three) of where a route over the piece's voxels of even coordinates (an
     // eighth of them; each two-voxel step through the voxel between, at the two steps' cost)
     // runs outside the core, and of the two ends (the route over the core's voxels alone was
     // found not to exist). False when that lattice's route does not exist either (a passage the
@@ -938,13 +938,15 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
             const Slot m = index.stepSlot(r, lumen_index::stepIndex(d[0] / 2, d[1] / 2, d[2] / 2));
             if (m != NO_SLOT && !core[m]) queue.push_back(m);
         }
-        // Breadth-first from those voxels, corridorMm / voxelMm steps deep.
+        // Breadth-first from those voxels, corridorMm / voxelMm steps deep and at least three (on
+        // the small phantom's 2.5 mm voxels, two steps round a stricture gave another route than
+        // the whole piece's near the cecum's cap).
         lumen_index::SlotBits reached = holes;
         std::size_t kept = 0;
         for (Slot s : queue)
             if (!reached.testAndSet(s)) queue[kept++] = s;
         queue.resize(kept);
-        const int depthSteps = std::max(1, static_cast<int>(std::ceil(params.corridorMm / voxelMm)));
+        const int depthSteps = std::max(3, static_cast<int>(std::ceil(params.corridorMm / voxelMm)));
         std::size_t layerEnd = queue.size();
         int layer = 0;
         for (std::size_t head = 0; head < queue.size(); ++head) {

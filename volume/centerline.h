@@ -59,8 +59,8 @@ struct CenterlineParams {
     /// Path points closer than this to the wall outside bridges are reported (mm, >= 0).
     double nearWallMm = 1.0;
     /// Where a narrowing splits a piece's core, the route is searched on the core plus the
-    /// piece's voxels within this many millimetres (in steps) of the narrowings and the piece's
-    /// ends instead of on the whole piece (mm; 0: the whole piece). Not a stage parameter: the
+    /// piece's voxels within this many millimetres (in steps, at least three) of the narrowings
+    /// and the piece's ends instead of on the whole piece (mm; 0: the whole piece). Not a stage parameter: the
     /// tests and benches compare the two.
     double corridorMm = 5.0;
     static constexpr int VERSION = 6;
@@ -74,8 +74,9 @@ struct CenterlinePieceInfo {
     double pathLengthMm = 0;        ///< length of its own path (before resampling)
     Vec3d entryMm, exitMm;          ///< where the path enters and leaves it (LPS mm)
     /// Where its minimal path was searched, the first of these that joins its ends: "coarse
-    /// core" (the deep voxels' lattice of even coordinates), "core" (the deep voxels), "whole
-    /// piece" (the core split, e.g. by a narrowing); empty if unused.
+    /// core" (the deep voxels' lattice of even coordinates), "core" (the deep voxels), "core
+    /// and corridors" (the core split, e.g. by a narrowing: the core with the voxels round the
+    /// narrowing and the ends, CenterlineParams::corridorMm), "whole piece"; empty if unused.
     std::string routeSearchedOn;
 };
 

@@ -32,7 +32,7 @@ std::string describe(const PhantomParams& p)
     std::ostringstream s;
     s << "phantom size=" << phantomSizeName(p.size) << " seed=" << p.seed << " touching=" << p.touching
       << (p.redundant ? " redundant" : "") << (p.rectalTube ? " rectal-tube" : "") << (p.fluid ? " fluid" : "")
-      << (p.collapse ? " collapse" : "") << " spacing=" << p.spacingMm.x << "," << p.spacingMm.y << ","
+      << (p.collapse ? " collapse" : "") << (p.stricture ? " stricture" : "") << " spacing=" << p.spacingMm.x << "," << p.spacingMm.y << ","
       << p.spacingMm.z;
     return s.str();
 }
@@ -449,6 +449,63 @@ TEST(PhantomSpacing, AnisotropicVoxelsKeepTheWorldGeometry)
     EXPECT_THROW(parsePhantomSpacing("0.8,0.8,1.25,1"), ParameterError);
     EXPECT_THROW(parsePhantomSpacing("0.8,0.8,100"), ParameterError);
     EXPECT_TRUE(parsePhantomSpacing("0.8,0.8,1.25") == (Vec3d{0.8, 0.8, 1.25}));
+}
+
+// The stricture: the truth lists one narrowing of the transverse colon, the truth radii follow
+// it, and the truth mask narrows there to about the listed radius while the colon stays one
+// face-connected lumen through it; the truth JSON keeps it.
+TEST(PhantomStricture, NarrowsTheTransverseColonAndKeepsItOnePiece)
+{
+    for (uint64_t seed : {1u, 2u}) {
+        PhantomParams p;
+        p.seed = seed;
+        p.stricture = true;
+        SCOPED_TRACE(describe(p));
+        const Phantom phantom = makePhantom(p);
+        const PhantomTruth& t = phantom.truth;
+        ASSERT_EQ(t.strictures.size(), 1u);
+        const PhantomStricture& st = t.strictures[0];
+        const auto mid = std::size_t(std::lround(0.5 * (st.arcStartMm + st.arcEndMm)));
+        EXPECT_EQ(t.segment[mid], "transverse");
+        EXPECT_DOUBLE_EQ(st.minRadiusMm, 4.0) << "max(3 mm, 1.6 voxels of 2.5 mm)";
+        EXPECT_DOUBLE_EQ(t.radiusMm[mid], st.minRadiusMm);
+        EXPECT_GT(t.radiusMm[std::size_t(st.arcStartMm) - 5], 3.0 * st.minRadiusMm) << "the colon before it";
+        EXPECT_GT(t.radiusMm[std::size_t(st.arcEndMm) + 5], 3.0 * st.minRadiusMm) << "the colon after it";
+        EXPECT_LE(st.arcEndMm - st.arcStartMm, 18.0 + 1e-9);
+        EXPECT_GE(st.arcEndMm - st.arcStartMm, 14.0 - 1e-9);
+        // The truth mask across the middle: lumen voxels within 1.5 radii of the axis point, in
+        // the plane through it across the tube, against the disc of the listed radius.
+        const ImageGeometry& g = phantom.truthLumen.geometry;
+        const Vec3d c = t.centerlineMm[mid];
+        const Vec3d tangent = normalize(t.centerlineMm[mid + 2] - t.centerlineMm[mid - 2]);
+        int64_t across = 0, far = 0;
+        const double voxelMm = g.spacingMm.x;
+        for (int64_t k = 0; k < g.size[2]; ++k)
+            for (int64_t j = 0; j < g.size[1]; ++j)
+                for (int64_t i = 0; i < g.size[0]; ++i) {
+                    const Vec3d w = g.worldFromIndex(Vec3d{double(i), double(j), double(k)});
+                    const Vec3d d = w - c;
+                    if (std::abs(dot(d, tangent)) > 0.5 * voxelMm || length(d) > 6.0 * st.minRadiusMm) continue;
+                    if (!phantom.truthLumen.voxels[std::size_t(i + g.size[0] * (j + g.size[1] * k))]) continue;
+                    ++across;
+                    far += length(d) > st.minRadiusMm + voxelMm;
+                }
+        EXPECT_GT(across, 0) << "no lumen across the stricture's middle";
+        EXPECT_EQ(far, 0) << "lumen voxels in the stricture's plane beyond its radius plus a voxel";
+        // One lumen through it: face-connected from before the stricture to after it.
+        const Index before = nearestVoxel(g, t.centerlineMm[std::size_t(st.arcStartMm) - 10]);
+        const Index after = nearestVoxel(g, t.centerlineMm[std::size_t(st.arcEndMm) + 10]);
+        EXPECT_TRUE(faceConnected(g, before, after, [&](const Index& v) {
+            return phantom.truthLumen.voxels[std::size_t(v[0] + g.size[0] * (v[1] + g.size[1] * v[2]))] != 0;
+        })) << "the lumen before and after the stricture";
+        const PhantomTruth back = phantomTruthFromJson(phantomTruthToJson(phantom, p), "test");
+        ASSERT_EQ(back.strictures.size(), 1u);
+        EXPECT_EQ(back.strictures[0].arcStartMm, st.arcStartMm);
+        EXPECT_EQ(back.strictures[0].arcEndMm, st.arcEndMm);
+        EXPECT_EQ(back.strictures[0].minRadiusMm, st.minRadiusMm);
+    }
+    // Without the variant: none, and the default phantom is unchanged by the variant's code.
+    EXPECT_TRUE(makePhantom(PhantomParams{}).truth.strictures.empty());
 }
 
 TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
