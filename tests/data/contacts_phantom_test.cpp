@@ -181,10 +181,9 @@ TEST(ContactsPhantom, TouchingWithCollapseAndFluidFromTheCt)
 // gca-colon-00020's: the centerline searches the core with corridors through it and finds the
 // whole piece's route, from the truth mask and from the CT, with touching loops and fluid on
 // the CT. Not here: seed 1 from the truth mask alone, whose stricture the contact search cuts
-// as a contact between the sides of two tubes (its flat shoulders put the longest path of the
-// region tree past it into a corner of the tube's end, an arm of about a radius): an open
-// fault of the contact search (a direction test against the tube's axis there also dropped
-// true contacts on the collapsed phantoms), found with this phantom.
+// as a contact between the sides of two tubes (on each side the stricture's region joins the
+// side's longest path in the region tree about 20 mm from its end, over 15 mm needed): an open
+// fault of the contact search, found with this phantom (README, "Harder phantoms").
 TEST(ContactsPhantom, StrictureIsCrossedOnCorridors)
 {
     openvdb::initialize();
