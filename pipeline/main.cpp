@@ -265,6 +265,12 @@ int main(int argc, char** argv)
         }
         if (*phantomCmd && phantomPart) {
             if (!maskOut.empty()) throw ParameterError("--truth-mask: not available with --part");
+            // The colon's variants do not apply to a part: refused, not ignored.
+            for (const auto& [flag, given] : {std::pair<const char*, bool>{"--fluid", phantomFluid},
+                                              {"--collapse", phantomCollapse}, {"--stricture", phantomStricture},
+                                              {"--touching", phantomTouching != 0}, {"--redundant", phantomRedundant},
+                                              {"--rectal-tube", phantomTube}, {"--spacing", !phantomSpacing.empty()}})
+                if (given) throw ParameterError(std::string(flag) + ": a colon phantom's option, not available with --part");
             PartPhantomParams pp;
             pp.size = sizeName == "small" ? 128 : parsePartSize(sizeName);
             pp.seed = seed;

@@ -31,7 +31,7 @@ TEST(Cli, HelpDescribesEverySubcommand)
 
     const Result phantom = runFlyover("phantom --help");
     EXPECT_EQ(phantom.exitCode, 0);
-    for (const char* opt : {"--truth", "--truth-mask", "--size", "--seed", "small"})
+    for (const char* opt : {"--truth", "--truth-mask", "--size", "--seed", "small", "--stricture", "--collapse"})
         EXPECT_NE(phantom.out.find(opt), std::string::npos) << "phantom help lacks " << opt;
 
     const Result run = runFlyover("run --help");
@@ -60,7 +60,9 @@ TEST(Cli, BadCommandLinesGiveOneLineAndNonZeroExit)
     for (const char* args : {"", "frobnicate", "run", "run a.nii.gz", "phantom out.nii.gz",
                              "phantom out.nii.gz --truth t.json --size huge",
                              "run a.nii.gz --study s --set segment.nope=1",
-                             "run a.nii.gz --study s --set render.fov_deg=abc", "--threads -2 params"}) {
+                             "run a.nii.gz --study s --set render.fov_deg=abc", "--threads -2 params",
+                             "phantom out.nii --truth t.json --part --stricture",
+                             "phantom out.nii --truth t.json --part --touching 2"}) {
         const Result r = runFlyover(args);
         EXPECT_NE(r.exitCode, 0) << "flyover " << args;
         EXPECT_EQ(lineCount(r.err), 1) << "flyover " << args << "\nstderr: " << r.err;
@@ -68,6 +70,9 @@ TEST(Cli, BadCommandLinesGiveOneLineAndNonZeroExit)
     }
     const Result r = runFlyover("run a.nii.gz --study s --set segment.nope=1");
     EXPECT_NE(r.err.find("segment.nope"), std::string::npos) << r.err;
+    const Result part = runFlyover("phantom out.nii --truth t.json --part --stricture");
+    EXPECT_NE(part.err.find("--stricture"), std::string::npos) << part.err;
+    EXPECT_FALSE(fs::exists("out.nii")) << "a refused phantom wrote its file";
 }
 
 TEST(Cli, CorruptInputNamesTheFile)
