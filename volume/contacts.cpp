@@ -530,27 +530,59 @@ ContactReport cutContacts(openvdb::FloatGrid& sdf, openvdb::BoolGrid* mask,
             }
             return far;
         };
-        // The shorter arm of the side of `root` (see above).
-        auto shorterArm = [&](std::int32_t root, std::int32_t other) {
+        // The shorter arm of the side of `root` (see above), and whether the two arms leave the
+        // point nearest the link the same way (`hairpin`): from that point, the path's nodes
+        // about the shorter arm's length (at most two radii) along each hand lie within 90
+        // degrees of each other. A tube passes a contact on its side, so its arms leave in
+        // opposite directions; at a stricture the side's tube ends, and where its end holds two
+        // regions across it the longest path runs up the tube to the stricture's region and
+        // back down into the other one (a tube 20 mm in radius: an arm of 20 mm, over the
+        // 15 mm needed).
+        std::vector<std::int32_t> path;
+        auto shorterArm = [&](std::int32_t root, std::int32_t other, bool& hairpin) {
             const std::int32_t e1 = sweep(root, root, other, fromRoot);
             const std::int32_t e2 = sweep(e1, root, other, fromEnd);
             // Along the longest path e2 -> e1 (the second sweep's parents lead to e1).
+            path.clear();
+            for (std::int32_t u = e2; u >= 0; u = parent[u]) path.push_back(u);
             double best = std::numeric_limits<double>::infinity(), arm = 0;
-            for (std::int32_t u = e2; u >= 0; u = parent[u])
-                if (fromRoot[u] < best) {
-                    best = fromRoot[u];
-                    arm = std::min(fromEnd[u], fromEnd[e2] - fromEnd[u]);
+            std::size_t at = 0;
+            for (std::size_t i = 0; i < path.size(); ++i)
+                if (fromRoot[path[i]] < best) {
+                    best = fromRoot[path[i]];
+                    arm = std::min(fromEnd[path[i]], fromEnd[e2] - fromEnd[path[i]]);
+                    at = i;
                 }
+            // The node of each hand whose distance along the path from path[at] is nearest to
+            // `along` (hand -1: towards e2, the path's start; +1: towards e1).
+            const double along = std::min(arm, 2.0 * double(peak[path[at]]));
+            auto handNode = [&](int hand) {
+                std::size_t pick = at;
+                double miss = std::numeric_limits<double>::infinity();
+                for (std::size_t i = at;; i = hand < 0 ? i - 1 : i + 1) {
+                    const double d = std::abs(std::abs(fromEnd[path[i]] - fromEnd[path[at]]) - along);
+                    if (d < miss) {
+                        miss = d;
+                        pick = i;
+                    }
+                    if (hand < 0 ? i == 0 : i + 1 == path.size()) break;
+                }
+                return path[pick];
+            };
+            const Vec3d a = nodeMm[handNode(-1)] - nodeMm[path[at]];
+            const Vec3d b = nodeMm[handNode(+1)] - nodeMm[path[at]];
+            hairpin = length(a) > 0 && length(b) > 0 && dot(a, b) > 0;
             for (std::int32_t r : seen) fromRoot[r] = fromEnd[r] = -1.0;
             return arm;
         };
         for (std::size_t k = 0; k < narrowLinks.size(); ++k) {
             const Link& l = links[narrowLinks[k]];
             if (!l.tree) continue;
-            const double armA = shorterArm(l.a, l.b), armB = shorterArm(l.b, l.a);
+            bool hairpinA = false, hairpinB = false;
+            const double armA = shorterArm(l.a, l.b, hairpinA), armB = shorterArm(l.b, l.a, hairpinB);
             const double needA = std::max(params.minArmMm, params.minArmRadii * peak[l.a]);
             const double needB = std::max(params.minArmMm, params.minArmRadii * peak[l.b]);
-            if (armA < needA || armB < needB) continue;
+            if (armA < needA || armB < needB || hairpinA || hairpinB) continue;
             ContactInfo c = contactInfo(l);
             c.detourMm = std::numeric_limits<double>::infinity();
             c.reason = "narrow link between the sides of two tubes (no way round: a collapse lies between "

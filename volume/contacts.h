@@ -26,8 +26,11 @@
 ///       colon: the first version missed every such contact from the CT phantoms) and it meets
 ///       a tube from the side on both hands: on each side (the spanning tree without the link),
 ///       the longest path and the point of it nearest the link leave at least
-///       max(minArmMm, minArmRadii x radius) of tree on either hand. A collapse, stricture or
-///       fold lies across the tube: on one side it is the end of the longest path (arm ~0).
+///       max(minArmMm, minArmRadii x radius) of tree on either hand, and the two arms leave
+///       that point in opposite directions (a tube passing it, not a hairpin). A collapse,
+///       stricture or fold lies across the tube: on one side it is the end of the longest path
+///       (arm ~0), or, where the tube's end holds two regions across it, the path turns there
+///       (a hairpin).
 /// Links cut within the smaller side radius (>= 3 voxels) of each other are one contact.
 /// Cutting removes the voxels of both regions along their interface (a wall ~2 voxels thick)
 /// from the mask, sets the sdf there to +half a voxel and caps the depth of the lumen nearby
