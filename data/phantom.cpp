@@ -124,6 +124,17 @@ public:
                     best = f;
             mFoldAt[i] = best;
         }
+        // The centerline samples round each stricture, searched for the nearest one to a point.
+        for (const PhantomStricture& st : anatomy.strictures) {
+            const auto last = long(n) - 1;
+            StrictureSamples w;
+            w.stricture = &st;
+            w.first = std::clamp(long(std::floor(st.arcStartMm / anatomy.stepMm)) - 40, 0L, last);
+            w.last = std::clamp(long(std::ceil(st.arcEndMm / anatomy.stepMm)) + 40, 0L, last);
+            w.middleMm = anatomy.centerlineMm[std::size_t((w.first + w.last) / 2)];
+            w.reachMm = 0.5 * double(w.last - w.first) * anatomy.stepMm + 60.0;
+            mStrictures.push_back(w);
+        }
     }
 
     /// Fills slices [k0, k1) of `ct` and `truth`; counts[k] gets the voxel counts of slice k.
@@ -215,15 +226,11 @@ private:
         // than the narrowed radius there. (The tube's own distance is the union of its chords'
         // cones, whose round ends, a full radius wide, would fill a narrowing shorter than the
         // radius.)
-        for (const PhantomStricture& st : mAnatomy.strictures) {
-            const auto n = long(mAnatomy.centerlineMm.size());
-            const long i0 = std::clamp(long(std::floor(st.arcStartMm / mAnatomy.stepMm)) - 40, 0L, n - 1);
-            const long i1 = std::clamp(long(std::ceil(st.arcEndMm / mAnatomy.stepMm)) + 40, 0L, n - 1);
-            const Vec3d& middle = mAnatomy.centerlineMm[std::size_t((i0 + i1) / 2)];
-            if (distance(p, middle) > 0.5 * double(i1 - i0) * mAnatomy.stepMm + 60.0) continue;
-            long nearest = i0;
-            double nearestMm = distance(p, mAnatomy.centerlineMm[std::size_t(i0)]);
-            for (long i = i0 + 1; i <= i1; ++i) {
+        for (const StrictureSamples& w : mStrictures) {
+            if (distance(p, w.middleMm) > w.reachMm) continue;
+            long nearest = w.first;
+            double nearestMm = distance(p, mAnatomy.centerlineMm[std::size_t(w.first)]);
+            for (long i = w.first + 1; i <= w.last; ++i) {
                 const double d = distance(p, mAnatomy.centerlineMm[std::size_t(i)]);
                 if (d < nearestMm) {
                     nearestMm = d;
@@ -231,7 +238,7 @@ private:
                 }
             }
             const double at = double(nearest) * mAnatomy.stepMm;
-            if (at > st.arcStartMm && at < st.arcEndMm)
+            if (at > w.stricture->arcStartMm && at < w.stricture->arcEndMm)
                 sd = std::max(sd, nearestMm - mAnatomy.radiusMm[std::size_t(nearest)]);
         }
         return sd;
@@ -391,6 +398,13 @@ private:
     double mVoxelMm = 1, mInvVoxelMm = 1;
     std::vector<TubeSegment> mSegments;
     std::vector<int> mFoldAt;
+    struct StrictureSamples {
+        const PhantomStricture* stricture = nullptr;
+        long first = 0, last = 0;  ///< centerline samples searched (40 mm either side)
+        Vec3d middleMm;
+        double reachMm = 0;        ///< points farther than this from middleMm are not near it
+    };
+    std::vector<StrictureSamples> mStrictures;
 };
 
 } // namespace

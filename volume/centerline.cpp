@@ -83,28 +83,46 @@ Pieces labelPieces(const LumenIndex& index, const SlotBits& holes, Progress* pro
     return c;
 }
 
+/// Breadth-first search from the distinct `seeds` (the queue's start) over their pieces, at most
+/// `maxSteps` 26-neighbour steps deep: calls reach(slot, steps) for each slot reached, seeds
+/// with 0, and leaves the slots in the order reached in `queue`. `holes`: holeBits(index).
+template<typename Reach>
+void breadthFirst(const LumenIndex& index, const SlotBits& holes, std::vector<Slot>& queue, std::int32_t maxSteps,
+                  Reach&& reach, Progress* progress)
+{
+    SlotBits reached = holes;  // a bit per slot: a copy is a few MB at most
+    std::size_t kept = 0;
+    for (Slot s : queue)
+        if (!reached.testAndSet(s)) queue[kept++] = s;
+    queue.resize(kept);
+    for (Slot s : queue) reach(s, 0);
+    std::size_t layerEnd = queue.size();
+    std::int32_t layer = 0;
+    for (std::size_t head = 0; head < queue.size(); ++head) {
+        if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
+        if (head == layerEnd) {
+            if (++layer == maxSteps) break;
+            layerEnd = queue.size();
+        }
+        const std::int32_t next = layer + 1;
+        forEachClearNeighbour(index, reached, queue[head], [&](Slot t) {
+            reached.set(t);
+            reach(t, next);
+            queue.push_back(t);
+        });
+    }
+}
+
 /// Breadth-first search from `source` over its piece: steps[s] = number of 26-neighbour steps
 /// from the source (slots of this piece only; others untouched). `holes`: holeBits(index).
 /// Returns the slot reached last, the farthest in steps (ties: the first found).
 Slot stepsFrom(const LumenIndex& index, const SlotBits& holes, Slot source, std::vector<std::int32_t>& steps,
                Progress* progress)
 {
-    SlotBits reached = holes;  // a bit per slot: a copy is a few MB at most
     std::vector<Slot> queue{source};
-    reached.set(source);
-    steps[source] = 0;
-    for (std::size_t head = 0; head < queue.size(); ++head) {
-        if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-        const Slot u = queue[head];
-        const std::int32_t next = steps[u] + 1;
-        forEachClearNeighbour(index, reached, u, [&](Slot t) {
-            reached.set(t);
-            steps[t] = next;
-            queue.push_back(t);
-        });
-    }
-    const Slot last = queue.back();
-    return last;
+    breadthFirst(index, holes, queue, std::numeric_limits<std::int32_t>::max(),
+                 [&](Slot s, std::int32_t n) { steps[s] = n; }, progress);
+    return queue.back();
 }
 
 Vec3d toVec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
@@ -912,7 +930,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     auto medialThrough = [&](Slot u, Slot v, int k) {
         const Slot m = index.stepSlot(u, k);
         if (m == NO_SLOT || !index.isLumen(m)) return std::numeric_limits<double>::infinity();
-        return stepMm[k] * (0.5 * double(weight[u]) + double(weight[m]) + 0.5 * double(weight[v]));
+        return medial(u, m, k) + medial(m, v, k);
     };
     auto searchCorridors = [&](Slot a, Slot b, std::vector<Slot>& route) {
         Slot ends[2] = {NO_SLOT, NO_SLOT};
@@ -941,24 +959,8 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         // Breadth-first from those voxels, corridorMm / voxelMm steps deep and at least three (on
         // the small phantom's 2.5 mm voxels, two steps round a stricture gave another route than
         // the whole piece's near the cecum's cap).
-        lumen_index::SlotBits reached = holes;
-        std::size_t kept = 0;
-        for (Slot s : queue)
-            if (!reached.testAndSet(s)) queue[kept++] = s;
-        queue.resize(kept);
         const int depthSteps = std::max(3, static_cast<int>(std::ceil(params.corridorMm / voxelMm)));
-        std::size_t layerEnd = queue.size();
-        int layer = 0;
-        for (std::size_t head = 0; head < queue.size(); ++head) {
-            if (head == layerEnd) {
-                if (++layer == depthSteps) break;
-                layerEnd = queue.size();
-            }
-            forEachClearNeighbour(index, reached, queue[head], [&](Slot t) {
-                reached.set(t);
-                queue.push_back(t);
-            });
-        }
+        breadthFirst(index, holes, queue, depthSteps, [](Slot, std::int32_t) {}, progress);
         std::vector<Slot> added;
         for (Slot s : queue)
             if (!core[s]) {

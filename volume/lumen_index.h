@@ -62,20 +62,27 @@ struct LumenIndex {
                Coord(off >> (2 * LEAF_LOG2), (off >> LEAF_LOG2) & (LEAF_DIM - 1), off & (LEAF_DIM - 1));
     }
 
+    /// The slot of the voxel at leaf-local (nx, ny, nz), each in [-8, 15], of block `block`
+    /// (a neighbouring leaf's when outside [0, 7]), or NO_SLOT where no block holds it.
+    Slot slotAt(std::size_t block, int nx, int ny, int nz) const
+    {
+        // The arithmetic shift gives -1, 0 or +1 for the neighbouring leaf.
+        const int b = neighbour[block][std::size_t(((nx >> LEAF_LOG2) + 1) * 9 + ((ny >> LEAF_LOG2) + 1) * 3 +
+                                                   ((nz >> LEAF_LOG2) + 1))];
+        if (b < 0) return NO_SLOT;
+        return static_cast<Slot>(b) * LEAF_VOXELS +
+               static_cast<Slot>(((nx & (LEAF_DIM - 1)) << (2 * LEAF_LOG2)) | ((ny & (LEAF_DIM - 1)) << LEAF_LOG2) |
+                                 (nz & (LEAF_DIM - 1)));
+    }
+
     /// The slot of the 26-neighbour of `s` one step STEPS[k] away (a lumen voxel or a hole), or
     /// NO_SLOT where no block holds it.
     Slot stepSlot(Slot s, int k) const
     {
         const int off = static_cast<int>(s % LEAF_VOXELS);
         const Step& st = STEPS[std::size_t(k)];
-        const int nx = (off >> (2 * LEAF_LOG2)) + st.dx, ny = ((off >> LEAF_LOG2) & (LEAF_DIM - 1)) + st.dy,
-                  nz = (off & (LEAF_DIM - 1)) + st.dz;
-        const int b = neighbour[s / LEAF_VOXELS][std::size_t(((nx >> LEAF_LOG2) + 1) * 9 +
-                                                             ((ny >> LEAF_LOG2) + 1) * 3 + ((nz >> LEAF_LOG2) + 1))];
-        if (b < 0) return NO_SLOT;
-        return static_cast<Slot>(b) * LEAF_VOXELS +
-               static_cast<Slot>(((nx & (LEAF_DIM - 1)) << (2 * LEAF_LOG2)) | ((ny & (LEAF_DIM - 1)) << LEAF_LOG2) |
-                                 (nz & (LEAF_DIM - 1)));
+        return slotAt(s / LEAF_VOXELS, (off >> (2 * LEAF_LOG2)) + st.dx, ((off >> LEAF_LOG2) & (LEAF_DIM - 1)) + st.dy,
+                      (off & (LEAF_DIM - 1)) + st.dz);
     }
 
     /// Calls fn(neighbourSlot, stepIndex) for each 26-neighbour of `s` that is a lumen voxel;
@@ -111,18 +118,10 @@ struct LumenIndex {
             }
             return;
         }
-        const auto& nb = neighbour[block];
         for (int k = 0; k < 26; ++k) {
             const Step& st = STEPS[k];
-            const int nx = x + STRIDE * st.dx, ny = y + STRIDE * st.dy, nz = z + STRIDE * st.dz;
-            // nx in [-2, 9]: the arithmetic shift gives -1, 0 or +1 for the neighbouring leaf.
-            const int b = nb[((nx >> LEAF_LOG2) + 1) * 9 + ((ny >> LEAF_LOG2) + 1) * 3 +
-                             ((nz >> LEAF_LOG2) + 1)];
-            if (b < 0) continue;
-            const Slot t = static_cast<Slot>(b) * LEAF_VOXELS +
-                           static_cast<Slot>(((nx & (LEAF_DIM - 1)) << (2 * LEAF_LOG2)) |
-                                             ((ny & (LEAF_DIM - 1)) << LEAF_LOG2) |
-                                             (nz & (LEAF_DIM - 1)));
+            const Slot t = slotAt(block, x + STRIDE * st.dx, y + STRIDE * st.dy, z + STRIDE * st.dz);
+            if (t == NO_SLOT) continue;
             fn(t, k);
         }
     }
