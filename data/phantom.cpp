@@ -225,8 +225,11 @@ private:
         // A stricture: where the nearest centerline sample lies in it, the lumen is no wider
         // than the narrowed radius there. (The tube's own distance is the union of its chords'
         // cones, whose round ends, a full radius wide, would fill a narrowing shorter than the
-        // radius.)
+        // radius.) Only for points of the tube round it (their nearest chord's arc within the
+        // samples searched): the nearest of those samples to a point of another loop nearby
+        // may lie in the stricture too, and that loop lost a slab of its lumen.
         for (const StrictureSamples& w : mStrictures) {
+            if (arc < double(w.first) * mAnatomy.stepMm || arc > double(w.last) * mAnatomy.stepMm) continue;
             if (distance(p, w.middleMm) > w.reachMm) continue;
             long nearest = w.first;
             double nearestMm = distance(p, mAnatomy.centerlineMm[std::size_t(w.first)]);

@@ -182,16 +182,18 @@ TEST(RectalTubePhantom, FollowedToItsTipFromTheMaskWithTouchingLoops) { touching
 // tube, anisotropic slices. The real scans' 0.8 x 0.8 x 1.25 mm make a 500 x 500 x 300 phantom
 // (minutes); the same anisotropy at twice the size, 1.6 x 1.6 x 2.5 mm, keeps each seed's test
 // short (10-20 s).
-void allDifficultiesFromTheCt(uint64_t seed)
+void allDifficultiesFromTheCt(uint64_t seed, bool stricture = false)
 {
     openvdb::initialize();
     PhantomParams pp;
     pp.touching = 2;
     pp.redundant = true;
     pp.rectalTube = true;
+    pp.stricture = stricture;
     pp.spacingMm = {1.6, 1.6, 2.5};
     pp.seed = seed;
-    const std::string label = "all difficulties, 1.6 x 1.6 x 2.5 mm, seed " + std::to_string(seed);
+    const std::string label = std::string("all difficulties") + (stricture ? " and a stricture" : "") +
+                              ", 1.6 x 1.6 x 2.5 mm, seed " + std::to_string(seed);
     SCOPED_TRACE(label);
     const Phantom ph = makePhantom(pp);
     const Figures f = runFromCt(ph, label);
@@ -201,5 +203,12 @@ void allDifficultiesFromTheCt(uint64_t seed)
 TEST(AllDifficultiesPhantom, FromTheCtSeed1) { allDifficultiesFromTheCt(1); }
 TEST(AllDifficultiesPhantom, FromTheCtSeed2) { allDifficultiesFromTheCt(2); }
 TEST(AllDifficultiesPhantom, FromTheCtSeed3) { allDifficultiesFromTheCt(3); }
+// And a stricture: the core of the colon is split, so the route is searched on the core and
+// corridors. Defect found with it: the phantom's stricture took lumen from loops within reach
+// of it (seed 1: the path 11 mm off the truth over 100 mm of two other loops, mean 0.84 p95
+// 3.61 mm; now 0.48 / 1.42 mm; PhantomStricture.ChangesTheLumenOnlyWhereItIs).
+TEST(AllDifficultiesPhantom, WithStrictureFromTheCtSeed1) { allDifficultiesFromTheCt(1, true); }
+TEST(AllDifficultiesPhantom, WithStrictureFromTheCtSeed2) { allDifficultiesFromTheCt(2, true); }
+TEST(AllDifficultiesPhantom, WithStrictureFromTheCtSeed4) { allDifficultiesFromTheCt(4, true); }
 
 } // namespace

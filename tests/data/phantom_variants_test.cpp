@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <deque>
 #include <map>
@@ -506,6 +507,65 @@ TEST(PhantomStricture, NarrowsTheTransverseColonAndKeepsItOnePiece)
     }
     // Without the variant: none, and the default phantom is unchanged by the variant's code.
     EXPECT_TRUE(makePhantom(PhantomParams{}).truth.strictures.empty());
+}
+
+// Defect: the stricture narrowed the lumen wherever the nearest centerline sample *among
+// those round the stricture* lay in it, so a loop passing within reach of it lost a slab of
+// its lumen (seed 1 with the redundant colon at 1.6 x 1.6 x 2.5 mm: 7.3 k voxels of the loops
+// 66-85 mm away, at truth arcs 1200-1250 and 1800-1850; the path ran there 11 mm off the
+// truth and 4 mm from the wall). The stricture may change only the colon round it: the lumen
+// it takes lies nearest to the truth centerline within its arc (plus 3 mm and a voxel), and
+// the lumen it gives (the folds it removes, 3-5 mm thick, reaching up to twice that past it)
+// within 10 mm and a voxel of it.
+TEST(PhantomStricture, ChangesTheLumenOnlyWhereItIs)
+{
+    struct Case {
+        uint64_t seed;
+        bool redundant;
+        int touching;
+        Vec3d spacingMm;
+    };
+    for (const Case& c : {Case{1, true, 2, {1.6, 1.6, 2.5}}, Case{2, true, 2, {1.6, 1.6, 2.5}}, Case{1, false, 0, {}},
+                          Case{2, false, 0, {}}}) {
+        PhantomParams p;
+        p.seed = c.seed;
+        p.redundant = c.redundant;
+        p.touching = c.touching;
+        if (c.spacingMm.x > 0) p.spacingMm = c.spacingMm;
+        const Phantom plain = makePhantom(p);
+        p.stricture = true;
+        SCOPED_TRACE(describe(p));
+        const Phantom narrowed = makePhantom(p);
+        ASSERT_EQ(narrowed.truth.strictures.size(), 1u);
+        const PhantomStricture& st = narrowed.truth.strictures[0];
+        const ImageGeometry& g = narrowed.truthLumen.geometry;
+        ASSERT_EQ(plain.truthLumen.voxels.size(), narrowed.truthLumen.voxels.size());
+        const double voxelMm = std::max({g.spacingMm.x, g.spacingMm.y, g.spacingMm.z});
+        int64_t taken = 0, given = 0, takenElsewhere = 0, givenElsewhere = 0;
+        double takenArc = 0, givenArc = 0;
+        for (int64_t k = 0; k < g.size[2]; ++k)
+            for (int64_t j = 0; j < g.size[1]; ++j)
+                for (int64_t i = 0; i < g.size[0]; ++i) {
+                    const std::size_t v = std::size_t(i + g.size[0] * (j + g.size[1] * k));
+                    if (plain.truthLumen.voxels[v] == narrowed.truthLumen.voxels[v]) continue;
+                    const bool took = plain.truthLumen.voxels[v] != 0;
+                    const double margin = (took ? 3.0 : 10.0) + voxelMm;
+                    const double arc = test::nearestArcMm(narrowed.truth.centerlineMm,
+                                                          g.worldFromIndex(Vec3d{double(i), double(j), double(k)}));
+                    const bool away = arc < st.arcStartMm - margin || arc > st.arcEndMm + margin;
+                    (took ? taken : given) += 1;
+                    if (away) (took ? takenElsewhere : givenElsewhere) += 1;
+                    if (away) (took ? takenArc : givenArc) = arc;
+                }
+        EXPECT_GT(taken, 0) << "the stricture took no lumen";
+        EXPECT_EQ(takenElsewhere, 0) << "lumen voxels taken away from the stricture (arc " << st.arcStartMm << "-"
+                                     << st.arcEndMm << " mm), e.g. one nearest to truth arc " << takenArc << " mm";
+        EXPECT_EQ(givenElsewhere, 0) << "lumen voxels given away from the stricture (arc " << st.arcStartMm << "-"
+                                     << st.arcEndMm << " mm), e.g. one nearest to truth arc " << givenArc << " mm";
+        std::printf("[ %s ] stricture at arc %.0f-%.0f mm: %lld lumen voxels taken, %lld given (folds removed)\n",
+                    describe(p).c_str(), st.arcStartMm, st.arcEndMm, static_cast<long long>(taken),
+                    static_cast<long long>(given));
+    }
 }
 
 TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
