@@ -56,8 +56,9 @@ WORK=$(mktemp -d "${TMPDIR:-/tmp}/flyover-real-colons.XXXXXX")
 sets=()
 for a in $RENDER; do sets+=(--set "$a"); done
 
-# A variant is one of touching, redundant, tube, stricture, spacing, all, touchingN (N
-# contacts), or several joined by "+" (e.g. touching4+redundant+tube, all+stricture).
+# A variant is one of touching, redundant, tube, stricture, fluid, collapse, spacing, all,
+# touchingN (N contacts), or several joined by "+" (e.g. touching4+redundant+tube,
+# all+stricture+fluid+collapse).
 flags_of() {
   local part out=""
   for part in ${1//+/ }; do
@@ -67,6 +68,8 @@ flags_of() {
       redundant) out+=" --redundant" ;;
       tube) out+=" --rectal-tube" ;;
       stricture) out+=" --stricture" ;;
+      fluid) out+=" --fluid" ;;
+      collapse) out+=" --collapse" ;;
       spacing) out+=" --spacing 0.8,0.8,1.25" ;;
       all) out+=" --touching 2 --redundant --rectal-tube --spacing 0.8,0.8,1.25" ;;
       *) echo "real_colons: unknown variant $part in $1" >&2; return 1 ;;

@@ -565,92 +565,104 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         }
     }
 
-    // 5. The tube within the colon's air: along its axis, where the colon's air lies all
-    //    around beyond its wall, its lumen and wall (the lumen radius + TUBE_MAX_WALL_MM + a voxel) are
-    //    given to the lumen, so that the surface and the path see the rectum as if the tube
-    //    were not there (its rod would split the rectum's medial axis around it).
+    // 5. The tube within the colon's air (rectalTubeFill).
     if (fill) {
-        *fill = std::make_shared<BoolTree>(false);
-        // The wall's outside, and a voxel of its partial volume (a CT's rim of not-quite-air).
-        const double fillRadius = radius + TUBE_MAX_WALL_MM + h;
-        const double probe = fillRadius + h;
-        BoolConstAccessor cutRead(*cut);
-        auto colonAir = [&](const Vec3d& q) {
-            const Coord c = nearestIndex(xf, q);
-            return setAcc.isValueOn(c) && !cutRead.isValueOn(c);
-        };
-        openvdb::tree::ValueAccessor<BoolTree> fillAcc(**fill);
-        // The colon's air all round q, a probe radius out in the plane of u and v.
-        auto surrounded = [&](const Vec3d& q, const Vec3d& u, const Vec3d& v) {
-            int hits = 0;
-            for (int j = 0; j < RING_DIRECTIONS; ++j) {
-                const double t = 2.0 * PI * j / RING_DIRECTIONS;
-                hits += colonAir(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
-            }
-            return hits >= RING_MIN_HITS;
-        };
-        // A ball of fillRadius at q given to the lumen.
-        auto fillBall = [&](const Vec3d& q) {
-            const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
-            openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
-            box.expand(int(std::ceil(fillRadius / h)) + 1);
-            for (auto it = box.begin(); it; ++it)
-                if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
-        };
-        const std::vector<Vec3d>& ax = info.axisMm;
-        for (std::size_t i = 0; i + 1 < ax.size(); ++i) {
-            const double len = distance(ax[i], ax[i + 1]);
-            if (len <= 0) continue;
-            const Vec3d d = (ax[i + 1] - ax[i]) / len;
-            Vec3d u, v;
-            perpendiculars(d, u, v);
-            const int samples = std::max(1, int(std::ceil(len / (0.5 * h))));
-            bool previous = surrounded(ax[i], u, v);
-            Vec3d pu, pv;
-            const Vec3d pd = i > 0 ? normalize(ax[i] - ax[i - 1]) : d;
-            perpendiculars(pd, pu, pv);
-            if (previous && i > 0 && surrounded(ax[i] - pd * fillRadius, pu, pv) &&
-                surrounded(ax[i] + d * fillRadius, u, v)) {
-                // The joint with the previous stretch, well inside: a ball (no wedge left out
-                // on the outside of a bend).
-                fillBall(ax[i]);
-            }
-            for (int k = 0; k < samples; ++k) {
-                const Vec3d q0 = ax[i] + d * (len * k / samples);
-                const Vec3d q1 = ax[i] + d * (len * (k + 1) / samples);
-                const bool next = surrounded(q1, u, v);
-                const bool both = previous && next;
-                previous = next;
-                if (!both) continue;
-                // The voxels within fillRadius of [q0, q1] that project onto it.
-                openvdb::CoordBBox box;
-                for (const Vec3d& p : {q0, q1}) {
-                    const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z));
-                    box.expand(Coord::floor(ijk));
-                    box.expand(Coord::floor(ijk) + Coord(1));
-                }
-                box.expand(int(std::ceil(fillRadius / h)) + 1);
-                const double piece = distance(q0, q1);
-                for (auto it = box.begin(); it; ++it) {
-                    const Vec3d w = toWorld(xf, (*it).asVec3d());
-                    const double t = dot(w - q0, d);
-                    if (t < 0 || t > piece) continue;
-                    if (distance(w, q0 + d * t) <= fillRadius) fillAcc.setValueOn(*it, true);
-                }
-            }
-        }
-        // The tube's closed tip: its cap of wall lies beyond the last axis point. Where the
-        // colon's air surrounds the tip, a ball of fillRadius there gives the cap to the lumen.
-        if (ax.size() >= 2) {
-            const Vec3d& q = ax.back();
-            const Vec3d d = normalize(ax.back() - ax[ax.size() - 2]);
-            Vec3d u, v;
-            perpendiculars(d, u, v);
-            if (surrounded(q, u, v) && colonAir(q + d * probe)) fillBall(q);
-        }
+        *fill = rectalTubeFill(set, *cut, xf, info);
         info.filledMl = double((*fill)->activeVoxelCount()) * voxelMl;
     }
     return cut;
+}
+
+BoolTree::Ptr rectalTubeFill(const BoolTree& lumen, const BoolTree& cut, const openvdb::math::Transform& xf,
+                             const RectalTube& info)
+{
+    // Along the tube's axis, where the lumen lies all around beyond its wall, its lumen and
+    // wall (the lumen radius + TUBE_MAX_WALL_MM + a voxel) are given to the lumen, so that the
+    // surface and the path see the rectum as if the tube were not there (its rod would split
+    // the rectum's medial axis around it).
+    auto fill = std::make_shared<BoolTree>(false);
+    if (!info.found || info.axisMm.size() < 2) return fill;
+    const double h = xf.voxelSize()[0];
+    const double radius = 0.5 * info.diameterMm;
+    BoolConstAccessor setAcc(lumen);
+    // The wall's outside, and a voxel of its partial volume (a CT's rim of not-quite-air).
+    const double fillRadius = radius + TUBE_MAX_WALL_MM + h;
+    const double probe = fillRadius + h;
+    BoolConstAccessor cutRead(cut);
+    auto lumenAt = [&](const Vec3d& q) {
+        const Coord c = nearestIndex(xf, q);
+        return setAcc.isValueOn(c) && !cutRead.isValueOn(c);
+    };
+    openvdb::tree::ValueAccessor<BoolTree> fillAcc(*fill);
+    // The lumen all round q, a probe radius out in the plane of u and v.
+    auto surrounded = [&](const Vec3d& q, const Vec3d& u, const Vec3d& v) {
+        int hits = 0;
+        for (int j = 0; j < RING_DIRECTIONS; ++j) {
+            const double t = 2.0 * PI * j / RING_DIRECTIONS;
+            hits += lumenAt(q + (u * std::cos(t) + v * std::sin(t)) * probe) ? 1 : 0;
+        }
+        return hits >= RING_MIN_HITS;
+    };
+    // A ball of fillRadius at q given to the lumen.
+    auto fillBall = [&](const Vec3d& q) {
+        const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
+        openvdb::CoordBBox box(Coord::floor(ijk), Coord::floor(ijk) + Coord(1));
+        box.expand(int(std::ceil(fillRadius / h)) + 1);
+        for (auto it = box.begin(); it; ++it)
+            if (distance(toWorld(xf, (*it).asVec3d()), q) <= fillRadius) fillAcc.setValueOn(*it, true);
+    };
+    const std::vector<Vec3d>& ax = info.axisMm;
+    for (std::size_t i = 0; i + 1 < ax.size(); ++i) {
+        const double len = distance(ax[i], ax[i + 1]);
+        if (len <= 0) continue;
+        const Vec3d d = (ax[i + 1] - ax[i]) / len;
+        Vec3d u, v;
+        perpendiculars(d, u, v);
+        const int samples = std::max(1, int(std::ceil(len / (0.5 * h))));
+        bool previous = surrounded(ax[i], u, v);
+        Vec3d pu, pv;
+        const Vec3d pd = i > 0 ? normalize(ax[i] - ax[i - 1]) : d;
+        perpendiculars(pd, pu, pv);
+        if (previous && i > 0 && surrounded(ax[i] - pd * fillRadius, pu, pv) &&
+            surrounded(ax[i] + d * fillRadius, u, v)) {
+            // The joint with the previous stretch, well inside: a ball (no wedge left out
+            // on the outside of a bend).
+            fillBall(ax[i]);
+        }
+        for (int k = 0; k < samples; ++k) {
+            const Vec3d q0 = ax[i] + d * (len * k / samples);
+            const Vec3d q1 = ax[i] + d * (len * (k + 1) / samples);
+            const bool next = surrounded(q1, u, v);
+            const bool both = previous && next;
+            previous = next;
+            if (!both) continue;
+            // The voxels within fillRadius of [q0, q1] that project onto it.
+            openvdb::CoordBBox box;
+            for (const Vec3d& p : {q0, q1}) {
+                const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z));
+                box.expand(Coord::floor(ijk));
+                box.expand(Coord::floor(ijk) + Coord(1));
+            }
+            box.expand(int(std::ceil(fillRadius / h)) + 1);
+            const double piece = distance(q0, q1);
+            for (auto it = box.begin(); it; ++it) {
+                const Vec3d w = toWorld(xf, (*it).asVec3d());
+                const double t = dot(w - q0, d);
+                if (t < 0 || t > piece) continue;
+                if (distance(w, q0 + d * t) <= fillRadius) fillAcc.setValueOn(*it, true);
+            }
+        }
+    }
+    // The tube's closed tip: its cap of wall lies beyond the last axis point. Where the
+    // lumen surrounds the tip, a ball of fillRadius there gives the cap to the lumen.
+    if (ax.size() >= 2) {
+        const Vec3d& q = ax.back();
+        const Vec3d d = normalize(ax.back() - ax[ax.size() - 2]);
+        Vec3d u, v;
+        perpendiculars(d, u, v);
+        if (surrounded(q, u, v) && lumenAt(q + d * probe)) fillBall(q);
+    }
+    return fill;
 }
 
 } // namespace flyover::detail

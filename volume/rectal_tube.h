@@ -30,7 +30,8 @@
 ///    piece meets the wide part.
 /// 4. The tube's voxels (the piece, and the air within its lumen radius + one voxel of the
 ///    axis up to the tip) are taken out of the lumen.
-/// 5. Where the colon's air surrounds the tube (inside the rectum), the tube's lumen and wall
+/// 5. Where the colon's lumen (air, and from a CT the tagged fluid) surrounds the tube (inside
+///    the rectum), the tube's lumen and wall
 ///    (its lumen radius + TUBE_MAX_WALL_MM + a voxel) are given to the lumen: the surface shows the
 ///    rectum without the catheter, and its medial axis (the path) runs down the rectum's
 ///    middle instead of beside the tube.
@@ -103,6 +104,15 @@ bool nearInactive(const openvdb::BoolTree& set, const openvdb::FloatTree& hu, in
 openvdb::BoolTree::Ptr findRectalTube(const openvdb::BoolTree& set, const openvdb::math::Transform& xf,
                                       const TubeSearch& search, RectalTube& info,
                                       openvdb::BoolTree::Ptr* fill = nullptr);
+
+/// Step 5 of the file comment: the voxels to give to the lumen, the tube's lumen and wall
+/// where `lumen` surrounds it (a probe ring beyond its wall, in RING_MIN_HITS of 12
+/// directions). `lumen`: the colon's lumen without the tube (`cut`, findRectalTube's result;
+/// its voxels never count as lumen); from a CT, its air with the tagged fluid and the
+/// air-fluid rim, so that a tube lying against the fluid (supine: the posterior rectum) is
+/// filled as one in air is. An empty tree when `info` has no tube.
+openvdb::BoolTree::Ptr rectalTubeFill(const openvdb::BoolTree& lumen, const openvdb::BoolTree& cut,
+                                      const openvdb::math::Transform& xf, const RectalTube& info);
 
 } // namespace detail
 } // namespace flyover

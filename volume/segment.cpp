@@ -173,11 +173,12 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
 /// minComponentMl is searched for a tube
 /// (volume/rectal_tube.h); when one is found and the air left after cutting it has a piece
 /// of at least minComponentMl that no longer touches the outside, the component is replaced
-/// by the tube's air (marked rectalTube) and the pieces left. One tube at most. Keeps the
-/// lists sorted by volume, largest first.
+/// by the tube's air (marked rectalTube) and the pieces left; `tubeCut` receives the tube's
+/// voxels (what is given back to the lumen is decided once the tagged fluid is known). One
+/// tube at most. Keeps the lists sorted by volume, largest first.
 void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentStats>& stats, const FloatTree& hu,
                    const openvdb::math::Transform& xf, double voxelMl, const SegmentParams& params,
-                   RectalTube& found, BoolTree::Ptr& fill)
+                   RectalTube& found, BoolTree::Ptr& tubeCut)
 {
     FloatConstAccessor huAcc(hu);
     detail::TubeSearch search;
@@ -190,8 +191,7 @@ void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentSt
         if (stats[i].info.volumeMl < params.minComponentMl) continue;
         if (!stats[i].border && !detail::nearInactive(*segments[i], hu, search.outsideReachVoxels)) continue;
         RectalTube tube;
-        BoolTree::Ptr tubeFill;
-        BoolTree::Ptr cut = detail::findRectalTube(*segments[i], xf, search, tube, &tubeFill);
+        BoolTree::Ptr cut = detail::findRectalTube(*segments[i], xf, search, tube);
         if (cut->empty()) continue;
         BoolTree rest(*segments[i]);
         rest.topologyDifference(*cut);
@@ -224,7 +224,7 @@ void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentSt
         segments.swap(sortedSegments);
         stats.swap(sortedStats);
         found = tube;
-        fill = tubeFill;
+        tubeCut = cut;
         return;
     }
 }
@@ -500,8 +500,8 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     std::vector<ComponentStats> stats;
     stats.reserve(segments.size());
     for (const auto& seg : segments) stats.push_back(measureComponent(*seg, huTree, xf, voxelMl));
-    BoolTree::Ptr tubeFill;  // the tube inside the rectum, given to the lumen (rectal_tube.h)
-    cutRectalTube(segments, stats, huTree, xf, voxelMl, params, result.rectalTube, tubeFill);
+    BoolTree::Ptr tubeCut;  // the tube's voxels taken out of the colon's air (rectal_tube.h)
+    cutRectalTube(segments, stats, huTree, xf, voxelMl, params, result.rectalTube, tubeCut);
     std::size_t seeded = segments.size();
     if (params.seedMm) {
         seeded = seededComponent(segments, stats, xf, *params.seedMm);
@@ -546,6 +546,14 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     lumen.topologyUnion(*fluid.rim);
     result.fluidVolumeMl = double(lumen.activeVoxelCount()) * voxelMl;
     lumen.topologyUnion(kept);
+    // The tube is given to the lumen where the lumen surrounds it, tagged fluid included: from
+    // the air alone, a tube lying against the fluid stayed a hole in the rectum, and the path
+    // ran beside it, up to 18 mm off the rectum's axis (phantom --rectal-tube --fluid).
+    BoolTree::Ptr tubeFill;  // the tube inside the rectum, given to the lumen
+    if (tubeCut) {
+        tubeFill = detail::rectalTubeFill(lumen, *tubeCut, xf, result.rectalTube);
+        result.rectalTube.filledMl = double(tubeFill->activeVoxelCount()) * voxelMl;
+    }
     if (tubeFill) lumen.topologyUnion(*tubeFill);
     reportProgress(progress, 0.4, "lumen level set input");
 
