@@ -206,7 +206,13 @@ private:
         arcMm = arc;
         const auto sample = std::size_t(std::clamp<long>(std::lround(arc / mAnatomy.stepMm), 0L,
                                                           long(mFoldAt.size()) - 1));
-        if (const int fi = mFoldAt[sample]; fi >= 0) {
+        // A fold belongs to its own stretch of tube: beyond its rim it is a slab along its
+        // plane, which crossed other loops of the colon that the plane met (the rectum, whose
+        // nearest fold in arc is the sigmoid's first, 80-90 mm away, lost a slab across its
+        // whole lumen when --touching bent the sigmoid: the truth axis ran through tissue).
+        const int fi = mFoldAt[sample];
+        if (fi >= 0 && std::abs(arc - mAnatomy.folds[std::size_t(fi)].arcMm) <=
+                           mAnatomy.folds[std::size_t(fi)].tubeRadiusMm + mAnatomy.folds[std::size_t(fi)].thicknessMm) {
             const HaustralFold& f = mAnatomy.folds[std::size_t(fi)];
             const auto c = std::size_t(f.index);
             const Vec3d& centre = mAnatomy.centerlineMm[c];

@@ -65,8 +65,8 @@ json segmentationJson(const LumenSegmentation& seg)
         for (const Vec3d& p : t.axisMm) axis.push_back(vec3Json(p));
         tube = json{{"found", true},
                     {"handling", "left out of the lumen, the surface and the path: cut where it leaves the colon, "
-                                 "filled (given to the lumen) where the colon's air surrounds it; its tip is the "
-                                 "centerline's rectum hint unless rectum_mm is set"},
+                                 "filled (given to the lumen) where the colon's lumen (air or tagged fluid) "
+                                 "surrounds it; its tip is the centerline's rectum hint unless rectum_mm is set"},
                     {"tip_mm", vec3Json(t.tipMm)},
                     {"entry_mm", vec3Json(t.entryMm)},
                     {"outer_end_mm", vec3Json(t.outerEndMm)},

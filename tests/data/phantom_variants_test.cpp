@@ -568,6 +568,50 @@ TEST(PhantomStricture, ChangesTheLumenOnlyWhereItIs)
     }
 }
 
+// The truth centerline runs inside the truth lumen (but where the colon is collapsed): every
+// 1 mm sample's nearest voxel is lumen. Defect: a haustral fold is a slab along its plane
+// beyond its rim, and it was applied wherever it was the nearest fold in arc; with --touching
+// the bent sigmoid's first fold's plane crossed the rectum 80-90 mm further down the colon,
+// and a slab of tissue closed the whole rectum (truth arcs 61-65 in the wall on every seed;
+// the path squeezed through a gap beside it, up to 10 mm off the truth).
+TEST(PhantomTruth, CenterlineRunsInsideTheLumen)
+{
+    struct Case {
+        uint64_t seed;
+        bool redundant;
+        int touching;
+        bool tube, fluid, collapse, stricture;
+    };
+    for (const Case& c : {Case{1, false, 0, false, false, false, false}, Case{1, false, 2, false, false, false, false},
+                          Case{2, false, 2, true, true, false, false}, Case{3, false, 2, false, false, true, false},
+                          Case{1, true, 5, false, false, false, false}, Case{2, true, 2, true, true, false, true}}) {
+        PhantomParams p;
+        p.seed = c.seed;
+        p.redundant = c.redundant;
+        p.touching = c.touching;
+        p.rectalTube = c.tube;
+        p.fluid = c.fluid;
+        p.collapse = c.collapse;
+        p.stricture = c.stricture;
+        SCOPED_TRACE(describe(p));
+        const Phantom ph = makePhantom(p);
+        const ImageGeometry& g = ph.truthLumen.geometry;
+        int64_t outside = 0;
+        std::size_t firstOutside = 0;
+        for (std::size_t a = 0; a < ph.truth.centerlineMm.size(); ++a) {
+            bool collapsed = false;
+            for (const PhantomCollapse& cs : ph.truth.collapsed)
+                collapsed = collapsed || (double(a) >= cs.arcStartMm - 3.0 && double(a) <= cs.arcEndMm + 3.0);
+            if (collapsed) continue;
+            const Index v = nearestVoxel(g, ph.truth.centerlineMm[a]);
+            if (ph.truthLumen.voxels[std::size_t(v[0] + g.size[0] * (v[1] + g.size[1] * v[2]))]) continue;
+            if (outside++ == 0) firstOutside = a;
+        }
+        EXPECT_EQ(outside, 0) << "truth centerline samples outside the truth lumen, the first at arc " << firstOutside
+                              << " mm";
+    }
+}
+
 TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
 {
     PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
