@@ -449,7 +449,6 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         }
         return p;
     };
-    const Vec3d start = centreOnCore(tube.axis.front(), dir);
     // The last point of the straight run from `from` along `d` (misses of up to two steps
     // allowed), at most `maxMm` long.
     auto follow = [&](const Vec3d& from, const Vec3d& d, double maxMm) {
@@ -469,37 +468,37 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         return last;
     };
     // Straight runs, each from the end of the previous one along the direction (within the
-    // cone around the previous direction) that goes farthest: the followed polyline.
-    std::vector<Vec3d> followed{start};
-    double followedMm = 0;
-    Vec3d heading = dir;
-    for (int run = 0; run < FOLLOW_MAX_RUNS && followedMm < MAX_FOLLOW_MM; ++run) {
-        // Each run starts from the core's centre: a start off the axis leaves the core early.
-        const Vec3d from = followed.back() = centreOnCore(followed.back(), heading);
-        const double maxMm = MAX_FOLLOW_MM - followedMm;
-        Vec3d best = follow(from, heading, maxMm), bestDir = heading;
-        Vec3d u, v;
-        perpendiculars(heading, u, v);
-        for (int tilt = 1; tilt <= FOLLOW_CONE_STEPS; ++tilt) {
-            const double a = FOLLOW_CONE_DEG * PI / 180.0 * tilt / FOLLOW_CONE_STEPS;
-            for (int k = 0; k < FOLLOW_CONE_AZIMUTHS; ++k) {
-                const double b = 2.0 * PI * k / FOLLOW_CONE_AZIMUTHS;
-                const Vec3d d = normalize(heading * std::cos(a) + (u * std::cos(b) + v * std::sin(b)) * std::sin(a));
-                const Vec3d q = follow(from, d, maxMm);
-                if (distance(from, q) > distance(from, best) + h) {
-                    best = q;
-                    bestDir = d;
+    // cone around the previous direction) that goes farthest: the followed polyline, from
+    // `start` along `heading`, resampled every AXIS_BIN_MM and centred on the core.
+    auto followFrom = [&](const Vec3d& start, Vec3d heading) {
+        std::vector<Vec3d> followed{start};
+        double followedMm = 0;
+        for (int run = 0; run < FOLLOW_MAX_RUNS && followedMm < MAX_FOLLOW_MM; ++run) {
+            // Each run starts from the core's centre: a start off the axis leaves the core early.
+            const Vec3d from = followed.back() = centreOnCore(followed.back(), heading);
+            const double maxMm = MAX_FOLLOW_MM - followedMm;
+            Vec3d best = follow(from, heading, maxMm), bestDir = heading;
+            Vec3d u, v;
+            perpendiculars(heading, u, v);
+            for (int tilt = 1; tilt <= FOLLOW_CONE_STEPS; ++tilt) {
+                const double a = FOLLOW_CONE_DEG * PI / 180.0 * tilt / FOLLOW_CONE_STEPS;
+                for (int k = 0; k < FOLLOW_CONE_AZIMUTHS; ++k) {
+                    const double b = 2.0 * PI * k / FOLLOW_CONE_AZIMUTHS;
+                    const Vec3d d = normalize(heading * std::cos(a) + (u * std::cos(b) + v * std::sin(b)) * std::sin(a));
+                    const Vec3d q = follow(from, d, maxMm);
+                    if (distance(from, q) > distance(from, best) + h) {
+                        best = q;
+                        bestDir = d;
+                    }
                 }
             }
+            if (distance(from, best) < h) break;  // no run of a voxel or more: the tip
+            followedMm += distance(from, best);
+            followed.push_back(best);
+            heading = bestDir;
         }
-        if (distance(from, best) < h) break;  // no run of a voxel or more: the tip
-        followedMm += distance(from, best);
-        followed.push_back(best);
-        heading = bestDir;
-    }
-    // The followed axis: each run resampled every AXIS_BIN_MM, each sample moved to the
-    // core's centre (a run's ends are centred, its straight line need not be).
-    {
+        // Each run resampled every AXIS_BIN_MM, each sample moved to the core's centre (a
+        // run's ends are centred, its straight line need not be).
         std::vector<Vec3d> centred{followed.front()};
         for (std::size_t i = 0; i + 1 < followed.size(); ++i) {
             const double len = distance(followed[i], followed[i + 1]);
@@ -508,9 +507,27 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
             for (int k = 1; k <= samples; ++k)
                 centred.push_back(centreOnCore(followed[i] + d * (len * k / samples), d));
         }
-        followed.swap(centred);
-        followedMm = polylineLength(followed, 0, followed.size() - 1);
+        return centred;
+    };
+    std::vector<Vec3d> followed = followFrom(centreOnCore(tube.axis.front(), dir), dir);
+    // Where the thin piece meets the rectum its bins may stray from the tube (thin air beside
+    // it there: an air-fluid level, partial volume round the tube's wall), and a start there
+    // may lie off the tube's core: the run found no tube and stopped a millimetre into the
+    // rectum, 35 mm short of the tip (small phantom --rectal-tube seed 12 from the CT). So
+    // the tube is also followed from the piece's bin `back` (10 mm before the attachment,
+    // inside the anal canal, where tissue rings it); that run is taken, and the piece's bins
+    // after `back` are left out of the axis, when it reaches more than two voxels farther
+    // into the rectum (along `dir`, from the attachment).
+    std::size_t pieceBins = tube.axis.size();
+    if (back > 0 && huAcc) {
+        std::vector<Vec3d> fromBack = followFrom(centreOnCore(tube.axis[back], dir), dir);
+        auto reach = [&](const std::vector<Vec3d>& f) { return dot(f.back() - tube.axis.front(), dir); };
+        if (reach(fromBack) > reach(followed) + 2.0 * h) {
+            followed.swap(fromBack);
+            pieceBins = tube.axis.size() - back;
+        }
     }
+    const double followedMm = polylineLength(followed, 0, followed.size() - 1);
     const Vec3d tip = followed.back();
 
     // 4. The tube's voxels: the thin piece, and the set's voxels within its lumen radius + a
@@ -539,9 +556,9 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
     info.tipMm = tip;
     info.outerEndMm = tube.outerEnd;
     info.diameterMm = tube.diameterMm;
-    info.lengthMm = tube.lengthMm + followedMm;
+    info.lengthMm = polylineLength(tube.axis, tube.axis.size() - pieceBins, tube.axis.size() - 1) + followedMm;
     info.volumeMl = double(cut->activeVoxelCount()) * voxelMl;
-    info.axisMm.assign(tube.axis.rbegin(), tube.axis.rend());
+    info.axisMm.assign(tube.axis.rbegin(), tube.axis.rbegin() + std::ptrdiff_t(pieceBins));
     info.axisMm.insert(info.axisMm.end(), followed.begin() + 1, followed.end());
     // The body surface (CT): going inwards from the outer end, the first axis point with the
     // body all around (active voxels beyond the wall); from a mask: the outer end.
