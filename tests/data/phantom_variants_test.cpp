@@ -576,23 +576,23 @@ TEST(PhantomStricture, ChangesTheLumenOnlyWhereItIs)
 // the path squeezed through a gap beside it, up to 10 mm off the truth).
 TEST(PhantomTruth, CenterlineRunsInsideTheLumen)
 {
-    struct Case {
-        uint64_t seed;
-        bool redundant;
-        int touching;
-        bool tube, fluid, collapse, stricture;
-    };
-    for (const Case& c : {Case{1, false, 0, false, false, false, false}, Case{1, false, 2, false, false, false, false},
-                          Case{2, false, 2, true, true, false, false}, Case{3, false, 2, false, false, true, false},
-                          Case{1, true, 5, false, false, false, false}, Case{2, true, 2, true, true, false, true}}) {
+    // seed, redundant, touching, then the rectal tube, fluid, collapse and stricture
+    auto variant = [](uint64_t seed, bool redundant, int touching, bool tube, bool fluid, bool collapse,
+                      bool stricture) {
         PhantomParams p;
-        p.seed = c.seed;
-        p.redundant = c.redundant;
-        p.touching = c.touching;
-        p.rectalTube = c.tube;
-        p.fluid = c.fluid;
-        p.collapse = c.collapse;
-        p.stricture = c.stricture;
+        p.seed = seed;
+        p.redundant = redundant;
+        p.touching = touching;
+        p.rectalTube = tube;
+        p.fluid = fluid;
+        p.collapse = collapse;
+        p.stricture = stricture;
+        return p;
+    };
+    for (const PhantomParams& p :
+         {variant(1, false, 0, false, false, false, false), variant(1, false, 2, false, false, false, false),
+          variant(2, false, 2, true, true, false, false), variant(3, false, 2, false, false, true, false),
+          variant(1, true, 5, false, false, false, false), variant(2, true, 2, true, true, false, true)}) {
         SCOPED_TRACE(describe(p));
         const Phantom ph = makePhantom(p);
         const ImageGeometry& g = ph.truthLumen.geometry;
