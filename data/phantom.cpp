@@ -211,9 +211,9 @@ private:
         // nearest fold in arc is the sigmoid's first, 80-90 mm away, lost a slab across its
         // whole lumen when --touching bent the sigmoid: the truth axis ran through tissue).
         const int fi = mFoldAt[sample];
-        if (fi >= 0 && std::abs(arc - mAnatomy.folds[std::size_t(fi)].arcMm) <=
-                           mAnatomy.folds[std::size_t(fi)].tubeRadiusMm + mAnatomy.folds[std::size_t(fi)].thicknessMm) {
-            const HaustralFold& f = mAnatomy.folds[std::size_t(fi)];
+        const HaustralFold* fold = fi >= 0 ? &mAnatomy.folds[std::size_t(fi)] : nullptr;
+        if (fold && std::abs(arc - fold->arcMm) <= fold->tubeRadiusMm + fold->thicknessMm) {
+            const HaustralFold& f = *fold;
             const auto c = std::size_t(f.index);
             const Vec3d& centre = mAnatomy.centerlineMm[c];
             const double u = dot(p - centre, mAnatomy.tangent[c]);

@@ -703,20 +703,22 @@ BoolTree::Ptr rectalTubeFill(const BoolTree& lumen, const BoolTree& cut, const o
             for (const Coord& o : ball) zoneAcc.setValueOn(it.getCoord() + o, true);
     }
     BoolConstAccessor zoneRead(tubeZone);
+    std::vector<Vec3d> probes;  // the 26 neighbour directions, the probe's distance long
+    for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx)
+                if (dx != 0 || dy != 0 || dz != 0) probes.push_back(normalize(Vec3d{double(dx), double(dy), double(dz)}) * probe);
     for (auto it = cut.cbeginValueOn(); it; ++it) {
         const Coord c = it.getCoord();
         const Vec3d w = toWorld(xf, c.asVec3d());
         int hits = 0, seen = 0;
-        for (int dz = -1; dz <= 1; ++dz)
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    if (dx == 0 && dy == 0 && dz == 0) continue;
-                    const Coord q = nearestIndex(xf, w + normalize(Vec3d{double(dx), double(dy), double(dz)}) * probe);
-                    if (zoneRead.isValueOn(q)) continue;
-                    ++seen;
-                    hits += setAcc.isValueOn(q) ? 1 : 0;
-                }
-        if (2 * seen < 26 || hits * RING_DIRECTIONS < RING_MIN_HITS * seen) continue;
+        for (const Vec3d& e : probes) {
+            const Coord q = nearestIndex(xf, w + e);
+            if (zoneRead.isValueOn(q)) continue;
+            ++seen;
+            hits += setAcc.isValueOn(q) ? 1 : 0;
+        }
+        if (2 * seen < int(probes.size()) || hits * RING_DIRECTIONS < RING_MIN_HITS * seen) continue;
         for (const Coord& o : ball) fillAcc.setValueOn(c + o, true);
     }
     return fill;

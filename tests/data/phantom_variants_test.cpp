@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <sstream>
 #include <string>
@@ -554,8 +555,9 @@ TEST(PhantomStricture, ChangesTheLumenOnlyWhereItIs)
                                                           g.worldFromIndex(Vec3d{double(i), double(j), double(k)}));
                     const bool away = arc < st.arcStartMm - margin || arc > st.arcEndMm + margin;
                     (took ? taken : given) += 1;
-                    if (away) (took ? takenElsewhere : givenElsewhere) += 1;
-                    if (away) (took ? takenArc : givenArc) = arc;
+                    if (!away) continue;
+                    (took ? takenElsewhere : givenElsewhere) += 1;
+                    (took ? takenArc : givenArc) = arc;
                 }
         EXPECT_GT(taken, 0) << "the stricture took no lumen";
         EXPECT_EQ(takenElsewhere, 0) << "lumen voxels taken away from the stricture (arc " << st.arcStartMm << "-"
@@ -576,23 +578,18 @@ TEST(PhantomStricture, ChangesTheLumenOnlyWhereItIs)
 // the path squeezed through a gap beside it, up to 10 mm off the truth).
 TEST(PhantomTruth, CenterlineRunsInsideTheLumen)
 {
-    // seed, redundant, touching, then the rectal tube, fluid, collapse and stricture
-    auto variant = [](uint64_t seed, bool redundant, int touching, bool tube, bool fluid, bool collapse,
-                      bool stricture) {
+    auto variant = [](uint64_t seed, const std::function<void(PhantomParams&)>& set) {
         PhantomParams p;
         p.seed = seed;
-        p.redundant = redundant;
-        p.touching = touching;
-        p.rectalTube = tube;
-        p.fluid = fluid;
-        p.collapse = collapse;
-        p.stricture = stricture;
+        set(p);
         return p;
     };
     for (const PhantomParams& p :
-         {variant(1, false, 0, false, false, false, false), variant(1, false, 2, false, false, false, false),
-          variant(2, false, 2, true, true, false, false), variant(3, false, 2, false, false, true, false),
-          variant(1, true, 5, false, false, false, false), variant(2, true, 2, true, true, false, true)}) {
+         {variant(1, [](PhantomParams&) {}), variant(1, [](PhantomParams& v) { v.touching = 2; }),
+          variant(2, [](PhantomParams& v) { v.touching = 2, v.rectalTube = v.fluid = true; }),
+          variant(3, [](PhantomParams& v) { v.touching = 2, v.collapse = true; }),
+          variant(1, [](PhantomParams& v) { v.redundant = true, v.touching = 5; }),
+          variant(2, [](PhantomParams& v) { v.redundant = true, v.touching = 2, v.rectalTube = v.fluid = v.stricture = true; })}) {
         SCOPED_TRACE(describe(p));
         const Phantom ph = makePhantom(p);
         const ImageGeometry& g = ph.truthLumen.geometry;
