@@ -57,8 +57,9 @@ sets=()
 for a in $RENDER; do sets+=(--set "$a"); done
 
 # A variant is one of touching, redundant, tube, stricture, fluid, collapse, spacing, all,
-# touchingN (N contacts), or several joined by "+" (e.g. touching4+redundant+tube,
-# all+stricture+fluid+collapse).
+# touchingN (N contacts), prone (the fluid anterior; implies fluid), ras, las, slp (the voxels
+# stored in that order, the same world anatomy), or several joined by "+" (e.g.
+# touching4+redundant+tube, all+stricture+fluid+collapse, prone+tube+las).
 flags_of() {
   local part out=""
   for part in ${1//+/ }; do
@@ -71,6 +72,8 @@ flags_of() {
       fluid) out+=" --fluid" ;;
       collapse) out+=" --collapse" ;;
       spacing) out+=" --spacing 0.8,0.8,1.25" ;;
+      prone) out+=" --fluid --prone" ;;
+      ras|las|slp) out+=" --orientation ${part^^}" ;;
       all) out+=" --touching 2 --redundant --rectal-tube --spacing 0.8,0.8,1.25" ;;
       *) echo "real_colons: unknown variant $part in $1" >&2; return 1 ;;
     esac

@@ -13,6 +13,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <cctype>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -253,7 +255,7 @@ private:
         return sd;
     }
 
-    /// What fills the lumen at p: air, or tagged fluid posterior of its pool's level, with a
+    /// What fills the lumen at p: air, or tagged fluid below its pool's level, with a
     /// one-voxel partial-volume ramp across the level. `inFluid`: the point is in fluid.
     double lumenContentHu(const Vec3d& p, double arcMm, bool& inFluid) const
     {
@@ -261,7 +263,7 @@ private:
         for (const PhantomFluidPool& pool : mAnatomy.fluidPools) {
             if (arcMm < pool.arcStartMm || arcMm > pool.arcEndMm)
                 continue;
-            const double levelSd = pool.levelYMm - p.y;  // negative in the fluid (posterior)
+            const double levelSd = (pool.levelYMm - p.y) * pool.downY;  // negative in the fluid (below the level)
             inFluid = levelSd < 0;
             const double coverage = std::clamp(0.5 - levelSd * mInvVoxelMm, 0.0, 1.0);
             return AIR_HU + (pool.hu - AIR_HU) * coverage;
@@ -418,8 +420,78 @@ private:
 
 } // namespace
 
+namespace {
+
+/// The image stored with its index axes along the direction columns `dir` (each +-1 along
+/// one world axis), the world position of every voxel unchanged. `image` is the identity-
+/// direction image makePhantom voxelises.
+template <typename T>
+void reorient(Image3<T>& image, const Mat3d& dir)
+{
+    const ImageGeometry& from = image.geometry;
+    ImageGeometry to = from;
+    std::array<int, 3> axis{};     // world axis (= old index axis) of each new index axis
+    std::array<bool, 3> flip{};    // the new axis runs against it
+    for (int c = 0; c < 3; ++c) {
+        for (int r = 0; r < 3; ++r)
+            if (dir[std::size_t(r)][std::size_t(c)] != 0.0) axis[std::size_t(c)] = r;
+        const int a = axis[std::size_t(c)];
+        flip[std::size_t(c)] = dir[std::size_t(a)][std::size_t(c)] < 0.0;
+        to.size[std::size_t(c)] = from.size[std::size_t(a)];
+        to.spacingMm[c] = from.spacingMm[a];
+    }
+    to.direction = dir;
+    // The old index of new index n, along old axis a.
+    const auto oldIndex = [&](const std::array<int64_t, 3>& n) {
+        std::array<int64_t, 3> o{};
+        for (int c = 0; c < 3; ++c) {
+            const int a = axis[std::size_t(c)];
+            o[std::size_t(a)] = flip[std::size_t(c)] ? from.size[std::size_t(a)] - 1 - n[std::size_t(c)] : n[std::size_t(c)];
+        }
+        return o;
+    };
+    const std::array<int64_t, 3> o0 = oldIndex({0, 0, 0});
+    to.originMm = from.worldFromIndex(Vec3d{double(o0[0]), double(o0[1]), double(o0[2])});
+    std::vector<T> voxels(image.voxels.size());
+    tbb::parallel_for(int64_t(0), to.size[2], [&](int64_t k) {
+        for (int64_t j = 0; j < to.size[1]; ++j)
+            for (int64_t i = 0; i < to.size[0]; ++i) {
+                const std::array<int64_t, 3> o = oldIndex({i, j, k});
+                voxels[std::size_t(i + to.size[0] * (j + to.size[1] * k))] = image.at(o[0], o[1], o[2]);
+            }
+    });
+    image.voxels = std::move(voxels);
+    image.geometry = to;
+}
+
+} // namespace
+
+Mat3d orientationDirection(const std::string& code)
+{
+    Mat3d dir{};
+    std::array<bool, 3> used{};
+    bool ok = code.size() == 3;
+    for (std::size_t c = 0; ok && c < 3; ++c) {
+        const char letter = char(std::toupper(static_cast<unsigned char>(code[c])));
+        static const std::string letters = "LRPASI";  // + and - of LPS x, y, z
+        const std::size_t at = letters.find(letter);
+        ok = at != std::string::npos && !used[at / 2];
+        if (!ok) break;
+        used[at / 2] = true;
+        dir[at / 2][c] = at % 2 == 0 ? 1.0 : -1.0;
+    }
+    if (!ok)
+        throw ParameterError("phantom orientation: expected three letters naming where the index axes i, j, k "
+                             "point, one of L/R, one of P/A and one of S/I (e.g. LPS, RAS, LAS, SLP), got '" +
+                             code + "'");
+    return dir;
+}
+
 Phantom makePhantom(const PhantomParams& params)
 {
+    const Mat3d storedDirection = orientationDirection(params.orientation);
+    if (params.prone && !params.fluid)
+        throw ParameterError("phantom prone: only changes where the tagged fluid lies; give it with fluid");
     if (!(params.noiseHu >= 0.0) || !std::isfinite(params.noiseHu))
         throw ParameterError("phantom noiseHu: expected a finite value >= 0, got " +
                              std::to_string(params.noiseHu));
@@ -439,7 +511,7 @@ Phantom makePhantom(const PhantomParams& params)
         addStricture(anatomy, params.seed,
                      std::max({geometry.spacingMm.x, geometry.spacingMm.y, geometry.spacingMm.z}));
     if (params.fluid)
-        addFluidPools(anatomy, params.seed);
+        addFluidPools(anatomy, params.seed, params.prone);
 
     Phantom out;
     out.ct.geometry = out.truthLumen.geometry = geometry;
@@ -480,6 +552,10 @@ Phantom makePhantom(const PhantomParams& params)
     truth.fluidVolumeMl = double(total.fluid) * voxelMl;
     truth.colonLumenVolumeMl = double(total.colonLumen) * voxelMl;
     truth.tubeLumenVolumeMl = double(total.tubeLumen) * voxelMl;
+    if (storedDirection != identityMat3()) {
+        reorient(out.ct, storedDirection);
+        reorient(out.truthLumen, storedDirection);
+    }
     return out;
 }
 

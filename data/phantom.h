@@ -36,6 +36,11 @@
 ///   the anal verge into the rectum; its lumen joins the colon's air to the outside air.
 /// - spacingMm: other voxel sizes over the same field of view (anisotropic slices); the
 ///   world geometry of the anatomy is the same.
+/// - prone (with fluid): the fluid lies anterior of its levels, in the sigmoid and the
+///   transverse colon (each pool's arc range runs as far as the lumen reaches below its
+///   level); the rectum, posterior then, holds air.
+/// - orientation: the voxels stored in another order (e.g. "RAS", "LAS", "SLP"), the same
+///   world anatomy.
 #pragma once
 
 #include "volume/image.h"
@@ -67,7 +72,23 @@ struct PhantomParams {
     /// Voxel size (mm) along i, j, k; all zero: the size's own spacing. The field of view
     /// stays 400 x 400 x 375 mm centred on the origin (sizes rounded to whole voxels).
     Vec3d spacingMm{0, 0, 0};
+    /// With fluid: the patient lies prone, so the tagged fluid pools anterior (-y) of its
+    /// levels, in the stretches that hang lowest then (sigmoid, transverse colon).
+    bool prone = false;
+    /// How the voxels are stored: three letters naming where index axes i, j, k point
+    /// (towards), as nibabel's axis codes: "LPS" (the default: the identity in LPS world),
+    /// "RAS" (a prone DICOM's rows and columns, nibabel's canonical), "LAS" (mirrored,
+    /// FSL's radiological), or any permutation ("SLP": sagittal slices). The anatomy, the
+    /// truth and every world position are the same; only the voxel order and the geometry
+    /// change.
+    std::string orientation = "LPS";
 };
+
+/// The direction matrix (columns: world LPS directions of the index axes) of an orientation
+/// code such as "LPS", "RAS" or "SLP".
+/// @throw ParameterError naming the code unless it is three letters, one of L/R, one of P/A
+///        and one of S/I (case-insensitive).
+Mat3d orientationDirection(const std::string& code);
 
 /// Most contacts any colon takes: the default colon has room for 2, the redundant one for 5
 /// (makePhantom says so for more).
@@ -120,12 +141,14 @@ struct PhantomStricture {
 };
 
 /// A pool of tagged fluid: the lumen points whose nearest centerline arc is in
-/// [arcStartMm, arcEndMm] and that lie posterior of the level (y > levelYMm) hold fluid.
+/// [arcStartMm, arcEndMm] and that lie below the level (supine: posterior, y > levelYMm;
+/// prone: anterior, y < levelYMm) hold fluid.
 struct PhantomFluidPool {
     double arcStartMm = 0;
     double arcEndMm = 0;
     double levelYMm = 0;     ///< LPS y of the flat air-fluid level (mm)
     double hu = 0;           ///< fluid value (HU)
+    double downY = 1;        ///< LPS y of gravity's direction: +1 supine (posterior), -1 prone
 };
 
 struct PhantomTruth {

@@ -919,9 +919,51 @@ void addStricture(PhantomAnatomy& a, uint64_t seed, double voxelMm)
     throw std::logic_error("phantom anatomy: could not place the stricture clear of the polyps and contacts");
 }
 
-void addFluidPools(PhantomAnatomy& a, uint64_t seed)
+namespace {
+
+/// The prone pools: anterior of their levels, in the sigmoid and the transverse colon.
+void addProneFluidPools(PhantomAnatomy& a, std::mt19937_64& rng)
+{
+    const double ranges[2][2] = {
+        {double(firstIndexOf(a, "sigmoid")) * a.stepMm, double(firstIndexOf(a, "descending")) * a.stepMm},
+        {double(firstIndexOf(a, "transverse")) * a.stepMm, double(firstIndexOf(a, "ascending")) * a.stepMm},
+    };
+    // How far (mm, LPS y) the lumen's most anterior wall reaches at sample i.
+    const auto front = [&](std::size_t i) { return a.centerlineMm[i].y - a.radiusMm[i]; };
+    for (const auto& r : ranges) {
+        std::size_t deepest = sampleAt(a, r[0]);
+        for (std::size_t i = sampleAt(a, r[0]); i <= sampleAt(a, r[1]); ++i)
+            if (front(i) < front(deepest)) deepest = i;
+        PhantomFluidPool pool;
+        pool.downY = -1.0;
+        const double depthMm = uniform(rng, 0.25, 0.45) * 2.0 * a.radiusMm[deepest];
+        pool.levelYMm = front(deepest) + depthMm;
+        pool.hu = std::round(uniform(rng, 300.0, 600.0));
+        // The pool runs along the colon as far as its lumen reaches below the level, and ends
+        // where the lumen lies 2 mm clear of it (no vertical fluid face).
+        std::size_t lo = deepest, hi = deepest;
+        while (lo > 0 && front(lo - 1) < pool.levelYMm + 2.0) --lo;
+        while (hi + 1 < a.centerlineMm.size() && front(hi + 1) < pool.levelYMm + 2.0) ++hi;
+        pool.arcStartMm = double(lo) * a.stepMm;
+        pool.arcEndMm = double(hi) * a.stepMm;
+        bool overlaps = false;
+        for (const PhantomFluidPool& p : a.fluidPools)
+            overlaps = overlaps || (pool.arcStartMm <= p.arcEndMm && p.arcStartMm <= pool.arcEndMm);
+        if (!overlaps) a.fluidPools.push_back(pool);
+    }
+    std::sort(a.fluidPools.begin(), a.fluidPools.end(),
+              [](const PhantomFluidPool& x, const PhantomFluidPool& y) { return x.arcStartMm < y.arcStartMm; });
+}
+
+} // namespace
+
+void addFluidPools(PhantomAnatomy& a, uint64_t seed, bool prone)
 {
     std::mt19937_64 rng(splitmix64(seed ^ 0xF1D0F1D0ull));
+    if (prone) {
+        addProneFluidPools(a, rng);
+        return;
+    }
     const double end = a.lengthMm();
     // Arc ranges of the dependent (posterior-lying) stretches of a supine patient's colon.
     const double ranges[3][2] = {

@@ -155,7 +155,10 @@ void addStricture(PhantomAnatomy& anatomy, uint64_t seed, double voxelMm);
 /// The `fluid` variant: tagged fluid (+300..+600 HU) pools posterior of flat levels in the
 /// rectum, the descending colon and the ascending colon with the cecum, each 25-45% of the
 /// lumen diameter deep where the colon lies lowest (most posterior). Own random stream.
-void addFluidPools(PhantomAnatomy& anatomy, uint64_t seed);
+/// prone: the patient lies prone, so the pools lie anterior of their levels, in the sigmoid
+/// and the transverse colon, each from where its colon lies lowest (most anterior) along
+/// the arcs where the lumen reaches below the level; the same random draws.
+void addFluidPools(PhantomAnatomy& anatomy, uint64_t seed, bool prone = false);
 
 /// Image geometry of a phantom size: FOV 400 x 400 x 375 mm centred on the world origin.
 ImageGeometry phantomGeometry(PhantomSize size);

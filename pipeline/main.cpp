@@ -95,6 +95,15 @@ int main(int argc, char** argv)
         ->check(CLI::Range(0, 100000));
     phantomCmd->add_option("--spacing", phantomSpacing, "SX,SY,SZ voxel size in mm (same field of view), e.g. "
                                                         "0.8,0.8,1.25; default: the size's");
+    bool phantomProne = false;
+    std::string phantomOrientation = "LPS";
+    phantomCmd->add_flag("--prone", phantomProne, "with --fluid: the patient lies prone, the fluid pools anterior "
+                                                  "(sigmoid, transverse colon)");
+    phantomCmd->add_option("--orientation", phantomOrientation,
+                           "voxel order: three letters naming where index axes i, j, k point, as nibabel's axis "
+                           "codes (LPS: identity; RAS: a prone DICOM's; LAS: mirrored; SLP: sagittal); the same "
+                           "world anatomy")
+        ->capture_default_str();
 
     // flyover run
     auto* runCmd = app.add_subcommand("run", "run ingest -> segment -> centerline + mesh -> render into a study folder");
@@ -269,7 +278,8 @@ int main(int argc, char** argv)
             for (const auto& [flag, given] : {std::pair<const char*, bool>{"--fluid", phantomFluid},
                                               {"--collapse", phantomCollapse}, {"--stricture", phantomStricture},
                                               {"--touching", phantomTouching != 0}, {"--redundant", phantomRedundant},
-                                              {"--rectal-tube", phantomTube}, {"--spacing", !phantomSpacing.empty()}})
+                                              {"--rectal-tube", phantomTube}, {"--spacing", !phantomSpacing.empty()},
+                                              {"--prone", phantomProne}, {"--orientation", phantomOrientation != "LPS"}})
                 if (given) throw ParameterError(std::string(flag) + ": a colon phantom's option, not available with --part");
             PartPhantomParams pp;
             pp.size = sizeName == "small" ? 128 : parsePartSize(sizeName);
@@ -295,6 +305,8 @@ int main(int argc, char** argv)
             pp.touching = phantomTouching;
             pp.redundant = phantomRedundant;
             pp.rectalTube = phantomTube;
+            pp.prone = phantomProne;
+            pp.orientation = phantomOrientation;
             if (!phantomSpacing.empty()) pp.spacingMm = parsePhantomSpacing(phantomSpacing);
             if (!(noiseHu >= 0)) throw ParameterError("--noise-hu: must be >= 0");
             const auto t0 = std::chrono::steady_clock::now();

@@ -22,12 +22,15 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
 {
     const PhantomTruth& t = ph.truth;
     const bool anyNew = params.touching > 0 || params.redundant || params.rectalTube;
-    if (anyNew || params.fluid || params.collapse || params.stricture) {
+    const bool stored = params.orientation != "LPS";
+    if (anyNew || params.fluid || params.collapse || params.stricture || params.prone || stored) {
         double lengthMm = 0;
         for (std::size_t i = 1; i < t.centerlineMm.size(); ++i) lengthMm += distance(t.centerlineMm[i - 1], t.centerlineMm[i]);
         out["variants"] = json{{"touching", params.touching}, {"redundant", params.redundant},
                                {"rectal_tube", params.rectalTube}, {"fluid", params.fluid},
                                {"collapse", params.collapse}, {"stricture", params.stricture}};
+        if (params.prone) out["variants"]["prone"] = true;
+        if (stored) out["variants"]["orientation"] = params.orientation;
         out["centerline"]["length_mm"] = lengthMm;
     }
     if (params.collapse) {
@@ -43,9 +46,11 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
     }
     if (params.fluid) {
         json f = json::array();
-        for (const auto& p : t.fluidPools)
+        for (const auto& p : t.fluidPools) {
             f.push_back(json{{"arc_start_mm", p.arcStartMm}, {"arc_end_mm", p.arcEndMm},
                              {"level_y_mm", p.levelYMm}, {"hu", p.hu}});
+            if (params.prone) f.back()["gravity_lps"] = json::array({0.0, p.downY, 0.0});
+        }
         out["fluid_pools"] = f;
         out["fluid_volume_ml"] = t.fluidVolumeMl;
     }
@@ -139,7 +144,8 @@ PhantomTruth phantomTruthFromJson(const json& j, const std::string& source)
                                 c.at("min_radius_mm").get<double>()});
     for (const auto& p : j.value("fluid_pools", json::array()))
         t.fluidPools.push_back({p.at("arc_start_mm").get<double>(), p.at("arc_end_mm").get<double>(),
-                                p.at("level_y_mm").get<double>(), p.at("hu").get<double>()});
+                                p.at("level_y_mm").get<double>(), p.at("hu").get<double>(),
+                                p.contains("gravity_lps") ? p.at("gravity_lps").at(1).get<double>() : 1.0});
     for (const auto& c : j.value("contacts", json::array())) {
         PhantomContact k;
         k.positionMm = v3(c.at("position_mm"));

@@ -698,19 +698,18 @@ TEST(PhantomVariants, DefaultPhantomBytesUnchanged_GoldenRegression)
 
 using test::nearestArcMm;
 
-TEST(PhantomVariants, FluidLiesPosteriorOfFlatLevelsAndIsLumen)
+/// Voxels at least a voxel below their pool's level (along gravity: posterior supine,
+/// anterior prone) are fluid (its HU within noise), at least a voxel above are air; both are
+/// truth lumen, and the truth lumen is the colon's without fluid, voxel for voxel.
+void expectFluidBelowFlatLevels(const PhantomParams& p, std::size_t pools, double downY, int64_t minFluidVoxels)
 {
-    PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
-    p.fluid = true;
-    SCOPED_TRACE(describe(p.size, p.seed) + " fluid");
     const Phantom ph = makePhantom(p);
-    ASSERT_EQ(ph.truth.fluidPools.size(), 3u);
+    ASSERT_EQ(ph.truth.fluidPools.size(), pools);
     for (const PhantomFluidPool& pool : ph.truth.fluidPools) {
         EXPECT_GE(pool.hu, 300.0);
         EXPECT_LE(pool.hu, 600.0);
+        EXPECT_EQ(pool.downY, downY);
     }
-    // Voxels at least a voxel posterior of their pool's level are fluid (its HU within noise),
-    // at least a voxel anterior are air; both are truth lumen.
     const auto& g = ph.ct.geometry;
     const double h = g.spacingMm.y;
     int64_t fluid = 0, air = 0, wrong = 0;
@@ -730,24 +729,57 @@ TEST(PhantomVariants, FluidLiesPosteriorOfFlatLevelsAndIsLumen)
                 for (const PhantomFluidPool& pool : ph.truth.fluidPools) {
                     if (arc < pool.arcStartMm || arc > pool.arcEndMm) continue;
                     const double hu = ph.ct.at(i, j, k);
-                    if (w.y > pool.levelYMm + h) {
+                    const double below = (w.y - pool.levelYMm) * downY;
+                    if (below > h) {
                         ++fluid;
                         wrong += std::abs(hu - pool.hu) > 6 * NOISE_HU;
-                    } else if (w.y < pool.levelYMm - h) {
+                    } else if (below < -h) {
                         ++air;
                         wrong += std::abs(hu - ph::AIR_HU) > 6 * NOISE_HU;
                     }
                 }
             }
-    EXPECT_GT(fluid, 2000);
+    EXPECT_GT(fluid, minFluidVoxels);
     EXPECT_GT(air, 2000);
     EXPECT_EQ(wrong, 0);
-    EXPECT_GT(ph.truth.fluidVolumeMl, 50.0);
+    EXPECT_GT(ph.truth.fluidVolumeMl, 0.025 * double(minFluidVoxels));
     EXPECT_LT(ph.truth.fluidVolumeMl, 0.2 * ph.truth.lumenVolumeMl);
-    // The truth lumen is air + fluid: the same colon as without fluid, voxel for voxel.
     PhantomParams plain = p;
-    plain.fluid = false;
+    plain.fluid = plain.prone = false;
     EXPECT_TRUE(makePhantom(plain).truthLumen.voxels == ph.truthLumen.voxels);
+}
+
+TEST(PhantomVariants, FluidLiesPosteriorOfFlatLevelsAndIsLumen)
+{
+    PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
+    p.fluid = true;
+    SCOPED_TRACE(describe(p.size, p.seed) + " fluid");
+    expectFluidBelowFlatLevels(p, 3, 1.0, 2000);
+}
+
+TEST(PhantomVariants, ProneFluidLiesAnteriorInTheSigmoidAndTransverseColon)
+{
+    for (uint64_t seed : {1u, 2u, 3u}) {
+        PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+        p.fluid = p.prone = true;
+        SCOPED_TRACE(describe(p.size, p.seed) + " fluid prone");
+        expectFluidBelowFlatLevels(p, 2, -1.0, 800);  // two smaller pools
+        // The rectum, posterior in the pelvis, lies above the fluid: no pool reaches it; one
+        // pool lies in the sigmoid, one in the transverse colon.
+        const Phantom ph = makePhantom(p);
+        const auto arcOf = [&](const char* segment) {
+            const auto& names = ph.truth.segment;
+            return double(std::find(names.begin(), names.end(), segment) - names.begin());
+        };
+        ASSERT_EQ(ph.truth.fluidPools.size(), 2u);
+        EXPECT_GT(ph.truth.fluidPools[0].arcStartMm, 60.0);
+        EXPECT_LT(ph.truth.fluidPools[0].arcStartMm, arcOf("descending"));
+        EXPECT_GT(ph.truth.fluidPools[1].arcEndMm, arcOf("transverse"));
+        EXPECT_LT(ph.truth.fluidPools[1].arcStartMm, arcOf("ascending"));
+    }
+    PhantomParams dry{PhantomSize::Small, 1, NOISE_HU};
+    dry.prone = true;
+    EXPECT_THROW(makePhantom(dry), ParameterError);
 }
 
 TEST(PhantomVariants, CollapsedStretchesHaveNoLumen)

@@ -589,7 +589,8 @@ TEST(PhantomTruth, CenterlineRunsInsideTheLumen)
           variant(2, [](PhantomParams& v) { v.touching = 2, v.rectalTube = v.fluid = true; }),
           variant(3, [](PhantomParams& v) { v.touching = 2, v.collapse = true; }),
           variant(1, [](PhantomParams& v) { v.redundant = true, v.touching = 5; }),
-          variant(2, [](PhantomParams& v) { v.redundant = true, v.touching = 2, v.rectalTube = v.fluid = v.stricture = true; })}) {
+          variant(2, [](PhantomParams& v) { v.redundant = true, v.touching = 2, v.rectalTube = v.fluid = v.stricture = true; }),
+          variant(3, [](PhantomParams& v) { v.touching = 2, v.rectalTube = v.fluid = v.prone = true, v.orientation = "RAS"; })}) {
         SCOPED_TRACE(describe(p));
         const Phantom ph = makePhantom(p);
         const ImageGeometry& g = ph.truthLumen.geometry;
@@ -606,6 +607,55 @@ TEST(PhantomTruth, CenterlineRunsInsideTheLumen)
         }
         EXPECT_EQ(outside, 0) << "truth centerline samples outside the truth lumen, the first at arc " << firstOutside
                               << " mm";
+    }
+}
+
+TEST(PhantomOrientation, StoresTheSameWorldAnatomyInAnotherVoxelOrder)
+{
+    PhantomParams lps{PhantomSize::Small, 2, NOISE_HU};
+    lps.fluid = lps.rectalTube = true;
+    lps.spacingMm = {2.0, 2.5, 3.0};  // three sizes: a permuted axis shows in the spacing
+    const Phantom ref = makePhantom(lps);
+    const ImageGeometry& rg = ref.ct.geometry;
+    struct Expect {
+        const char* code;
+        Mat3d direction;
+    };
+    for (const Expect& e : {Expect{"RAS", {{{-1, 0, 0}, {0, -1, 0}, {0, 0, 1}}}},
+                            Expect{"las", {{{1, 0, 0}, {0, -1, 0}, {0, 0, 1}}}},
+                            Expect{"SLP", {{{0, 1, 0}, {0, 0, 1}, {1, 0, 0}}}},
+                            Expect{"IRA", {{{0, -1, 0}, {0, 0, -1}, {-1, 0, 0}}}}}) {
+        SCOPED_TRACE(e.code);
+        PhantomParams p = lps;
+        p.orientation = e.code;
+        const Phantom ph = makePhantom(p);
+        const ImageGeometry& g = ph.ct.geometry;
+        EXPECT_TRUE(g.direction == e.direction);
+        EXPECT_TRUE(ph.truthLumen.geometry.direction == e.direction);
+        EXPECT_EQ(g.voxelCount(), rg.voxelCount());
+        // Every voxel holds what the LPS phantom holds at the same world position.
+        int64_t differ = 0, off = 0;
+        for (int64_t k = 0; k < g.size[2]; ++k)
+            for (int64_t j = 0; j < g.size[1]; ++j)
+                for (int64_t i = 0; i < g.size[0]; ++i) {
+                    const Vec3d w = g.worldFromIndex({double(i), double(j), double(k)});
+                    const Vec3d r = rg.indexFromWorld(w);
+                    const Index v = nearestVoxel(rg, w);
+                    off += std::abs(r.x - double(v[0])) + std::abs(r.y - double(v[1])) + std::abs(r.z - double(v[2])) > 1e-6;
+                    differ += ph.ct.at(i, j, k) != ref.ct.at(v[0], v[1], v[2]) ||
+                              ph.truthLumen.at(i, j, k) != ref.truthLumen.at(v[0], v[1], v[2]);
+                }
+        EXPECT_EQ(off, 0) << "voxel centres off the LPS phantom's lattice";
+        EXPECT_EQ(differ, 0) << "voxels that differ from the LPS phantom's at the same world position";
+        EXPECT_TRUE(ph.truth.centerlineMm == ref.truth.centerlineMm);
+        EXPECT_EQ(ph.truth.lumenVolumeMl, ref.truth.lumenVolumeMl);
+        EXPECT_EQ(ph.truth.fluidVolumeMl, ref.truth.fluidVolumeMl);
+        EXPECT_EQ(phantomTruthToJson(ph, p).at("variants").at("orientation"), e.code);
+    }
+    for (const char* bad : {"LLS", "LP", "LPSX", "XPS", "LPA"}) {
+        PhantomParams p = lps;
+        p.orientation = bad;
+        EXPECT_THROW(makePhantom(p), ParameterError) << bad;
     }
 }
 

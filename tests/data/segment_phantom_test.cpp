@@ -177,10 +177,14 @@ TEST(SegmentPhantom, BoneFarFromTheColonIsNoFluidPool)
     EXPECT_EQ(seg.fluidVolumeMl, 0.0);
 }
 
-TEST(SegmentPhantom, TaggedFluidJoinsTheLumen)
+/// Tagged fluid found below its levels, along the gravity the truth pools give (supine: +y,
+/// prone: -y), and joined to the lumen, with no sheet left at the levels.
+void expectFluidJoinsTheLumen(const PhantomParams& params)
 {
-    const Case c = makeCase(variant(2, true, false));
-    SCOPED_TRACE(describe(c.params));
+    const Case c = makeCase(params);
+    SCOPED_TRACE(describe(c.params) + (params.prone ? " prone" : "") + " stored " + params.orientation);
+    ASSERT_FALSE(c.phantom.truth.fluidPools.empty());
+    const double downY = c.phantom.truth.fluidPools.front().downY;
     const LumenSegmentation seg = segmentLumen(*c.hu, SegmentParams{});
     SCOPED_TRACE(report(seg));
     const Overlap o = overlap(c.phantom, c.anatomy, *seg.sdf);
@@ -198,8 +202,8 @@ TEST(SegmentPhantom, TaggedFluidJoinsTheLumen)
     EXPECT_EQ(o.inPocket, 0);
     EXPECT_EQ(seg.pieces.size(), 1u);
 
-    // Supine: fluid settles posterior, +y in LPS.
-    EXPECT_NEAR(seg.gravityDirection.y, 1.0, 1e-9);
+    // Supine: fluid settles posterior, +y in LPS; prone: anterior, -y.
+    EXPECT_NEAR(seg.gravityDirection.y, downY, 1e-9);
     int joined = 0;  // pools of at least 1 mL (the rest: partial-volume fragments at a level)
     for (const FluidPool& p : seg.fluidPools) joined += p.joined && p.volumeMl >= 1.0;
     EXPECT_EQ(joined, int(c.phantom.truth.fluidPools.size()));
@@ -208,7 +212,7 @@ TEST(SegmentPhantom, TaggedFluidJoinsTheLumen)
             // Each joined pool's level matches one of the truth levels within a voxel.
             double nearest = 1e9;
             for (const PhantomFluidPool& t : c.phantom.truth.fluidPools)
-                nearest = std::min(nearest, std::abs(t.levelYMm - p.levelMm));
+                nearest = std::min(nearest, std::abs(t.levelYMm * t.downY - p.levelMm));
             EXPECT_LT(nearest, 2.5) << "level " << p.levelMm << " mm";
         }
     EXPECT_NEAR(seg.fluidVolumeMl, c.phantom.truth.fluidVolumeMl, 0.25 * c.phantom.truth.fluidVolumeMl);
@@ -249,6 +253,19 @@ TEST(SegmentPhantom, TaggedFluidJoinsTheLumen)
     std::cout << "[ measure  ] " << atLevel << " lumen voxels at the levels, " << missed << " outside the lumen\n";
     EXPECT_GT(atLevel, 500);
     EXPECT_EQ(missed, 0);
+}
+
+TEST(SegmentPhantom, TaggedFluidJoinsTheLumen) { expectFluidJoinsTheLumen(variant(2, true, false)); }
+
+// The prone scan of a CT colonography: the fluid pools anterior, and the scanner stores its
+// rows and columns the other way round (DICOM head-first-prone: i towards the patient's
+// right, j anterior; "RAS"). The levels are found along -y from the data alone.
+TEST(SegmentPhantom, ProneFluidStoredAsAProneScanJoinsTheLumen)
+{
+    PhantomParams p = variant(2, true, false);
+    p.prone = true;
+    p.orientation = "RAS";
+    expectFluidJoinsTheLumen(p);
 }
 
 TEST(SegmentPhantom, CollapsedColonKeepsEveryPieceInOrder)
