@@ -17,6 +17,8 @@
 # frames video); the coverage parameters are the defaults unless RENDER adds --set pairs.
 #
 # Definitions (the table's columns):
+#   variant       "(far tube left out)" when the centerline left a narrow tube at the lumen's
+#                 far end out (the terminal ileum off the cecum)
 #   err mean/p95  distance (mm) from each path point to the nearest point of the truth
 #                 centerline (phantoms) or of the published reference path (gca)
 #   len ratio     path length / truth length (gca: / reference arc from the anus to the point
@@ -58,7 +60,9 @@ for a in $RENDER; do sets+=(--set "$a"); done
 
 # A variant is one of touching, redundant, tube, stricture, fluid, collapse, spacing, all,
 # touchingN (N contacts), prone (the fluid anterior; implies fluid), ras, las, slp (the voxels
-# stored in that order, the same world anatomy), or several joined by "+" (e.g.
+# stored in that order, the same world anatomy), noiseN (Gaussian noise of N HU; 15 by
+# default, 40-80 in a low-dose CT colonography), ileum (gas in the terminal ileum, joined to
+# the cecum), or several joined by "+" (e.g.
 # touching4+redundant+tube, all+stricture+fluid+collapse, prone+tube+las).
 flags_of() {
   local part out=""
@@ -74,6 +78,8 @@ flags_of() {
       spacing) out+=" --spacing 0.8,0.8,1.25" ;;
       prone) out+=" --fluid --prone" ;;
       ras|las|slp) out+=" --orientation ${part^^}" ;;
+      noise[0-9]*) out+=" --noise-hu ${part#noise}" ;;
+      ileum) out+=" --ileal-reflux" ;;
       all) out+=" --touching 2 --redundant --rectal-tube --spacing 0.8,0.8,1.25" ;;
       *) echo "real_colons: unknown variant $part in $1" >&2; return 1 ;;
     esac
@@ -103,6 +109,8 @@ except Exception as e:  # the run failed or timed out: say so
     sys.exit(0)
 pts = cl["position_mm"]
 reports = {s["stage"]: s.get("report", {}) for s in man["stages"]}
+if reports.get("centerline", {}).get("far_branch_left_out"):  # a narrow tube at the far end left out
+    label += " (far tube left out)"
 
 if kind == "gca":
     ref = load(truth_path)

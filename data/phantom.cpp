@@ -84,6 +84,7 @@ struct SliceCounts {
     int64_t fluid = 0;
     int64_t colonLumen = 0;
     int64_t tubeLumen = 0;
+    int64_t ileumLumen = 0;   ///< the terminal ileum's gas (not in the mask)
 };
 
 class Voxeliser {
@@ -114,6 +115,20 @@ public:
             t.zMax = std::max(t.a.z, t.a.z + t.d.z);
             t.reachMm = std::max(t.radiusA, t.radiusB) + COLON_WALL_MM + PERICOLIC_FAT_MM + mVoxelMm;
             mSegments.push_back(t);
+        }
+        // The terminal ileum's chords (variant), splatted apart from the colon's.
+        for (std::size_t i = 0; i + 1 < anatomy.ileumMm.size(); i += 2) {
+            const std::size_t j = std::min(i + 2, anatomy.ileumMm.size() - 1);
+            TubeSegment t;
+            t.a = anatomy.ileumMm[i];
+            t.d = anatomy.ileumMm[j] - t.a;
+            t.invLength2 = 1.0 / dot(t.d, t.d);
+            t.radiusA = t.radiusB = anatomy.ileumRadiusMm;
+            t.arcA = t.arcB = -1.0;
+            t.zMin = std::min(t.a.z, t.a.z + t.d.z);
+            t.zMax = std::max(t.a.z, t.a.z + t.d.z);
+            t.reachMm = t.radiusA + COLON_WALL_MM + PERICOLIC_FAT_MM + mVoxelMm;
+            mIleum.push_back(t);
         }
         // Nearest fold for every centerline sample.
         mFoldAt.assign(n, -1);
@@ -147,25 +162,33 @@ public:
         std::vector<float> bestSd(sliceVoxels);
         std::vector<int32_t> bestSegment(sliceVoxels);
         std::vector<float> bestT(sliceVoxels);
+        std::vector<float> ileumSd, ileumT;
+        std::vector<int32_t> ileumSegment;
+        if (!mIleum.empty()) {
+            ileumSd.resize(sliceVoxels);
+            ileumT.resize(sliceVoxels);
+            ileumSegment.resize(sliceVoxels);
+        }
         for (int64_t k = k0; k < k1; ++k) {
-            splatColon(k, bestSd, bestSegment, bestT);
-            counts[k] = shadeSlice(k, bestSd, bestSegment, bestT, ct, truth);
+            splatTube(mSegments, k, bestSd, bestSegment, bestT);
+            if (!mIleum.empty()) splatTube(mIleum, k, ileumSd, ileumSegment, ileumT);
+            counts[k] = shadeSlice(k, bestSd, bestSegment, bestT, ileumSd, ct, truth);
         }
     }
 
 private:
-    /// For every voxel of slice k within reach of the colon: the least (distance to the
-    /// centerline - radius) over the segments, and where on the curve it is reached.
-    /// Iterates segments and touches only the voxels in their bounding boxes.
-    void splatColon(int64_t k, std::vector<float>& bestSd, std::vector<int32_t>& bestSegment,
-                    std::vector<float>& bestT) const
+    /// For every voxel of slice k within reach of a tube (the colon, or the ileum): the least
+    /// (distance to its axis - radius) over its segments, and where on the curve it is
+    /// reached. Iterates segments and touches only the voxels in their bounding boxes.
+    void splatTube(const std::vector<TubeSegment>& segments, int64_t k, std::vector<float>& bestSd,
+                   std::vector<int32_t>& bestSegment, std::vector<float>& bestT) const
     {
         std::fill(bestSd.begin(), bestSd.end(), FAR_MM);
         const auto& g = mGeometry;
         const int64_t nx = g.size[0], ny = g.size[1];
         const double z = g.originMm.z + double(k) * g.spacingMm.z;
-        for (std::size_t si = 0; si < mSegments.size(); ++si) {
-            const TubeSegment& t = mSegments[si];
+        for (std::size_t si = 0; si < segments.size(); ++si) {
+            const TubeSegment& t = segments[si];
             const double dz = std::max({0.0, t.zMin - z, z - t.zMax});
             if (dz >= t.reachMm)
                 continue;
@@ -273,7 +296,8 @@ private:
 
     /// Shades slice k; returns its voxel counts.
     SliceCounts shadeSlice(int64_t k, const std::vector<float>& bestSd, const std::vector<int32_t>& bestSegment,
-                           const std::vector<float>& bestT, Image3<int16_t>& ct, Image3<uint8_t>& truth) const
+                           const std::vector<float>& bestT, const std::vector<float>& ileumSds,
+                           Image3<int16_t>& ct, Image3<uint8_t>& truth) const
     {
         SliceCounts counts;
         const auto& g = mGeometry;
@@ -335,7 +359,12 @@ private:
                     const Vec3d p{x, y, z};
                     paint(hu, SOFT_TISSUE_HU, skinSd, invH);
                     paint(hu, FAT_HU, std::max(skinSd, -bodyInnerSignedDistanceMm(x, y)), invH);
-                    const double tubeSd = bestSd[v2];
+                    // The colon's tube, or the ileum's where that lies nearer (variant): one
+                    // wall round both, the colon's lumen (folds, polyps, fluid) and the
+                    // ileum's air joined through the valve.
+                    const double colonSd = bestSd[v2];
+                    const double ileumSd = ileumSds.empty() ? double(FAR_MM) : double(ileumSds[v2]);
+                    const double tubeSd = std::min(colonSd, ileumSd);
                     paint(hu, FAT_HU, tubeSd - (COLON_WALL_MM + PERICOLIC_FAT_MM), invH);
 
                     const double spineSd = std::hypot(x, y - SPINE_CENTER_Y_MM) - SPINE_RADIUS_MM;
@@ -351,11 +380,17 @@ private:
                         paint(hu, SOFT_TISSUE_HU, tubeSd - COLON_WALL_MM, invH);
                         if (tubeSd < h) {
                             double arc = 0;
-                            const double lumenSd = lumenSignedDistanceMm(p, tubeSd, bestSegment[v2], bestT[v2], arc);
+                            const double lumenSd = colonSd < h ? lumenSignedDistanceMm(p, colonSd, bestSegment[v2],
+                                                                                        bestT[v2], arc)
+                                                               : colonSd;
                             bool inFluid = false;
-                            paint(hu, lumenContentHu(p, arc, inFluid), lumenSd, invH);
+                            if (lumenSd <= ileumSd)
+                                paint(hu, lumenContentHu(p, arc, inFluid), lumenSd, invH);
+                            else
+                                paint(hu, AIR_HU, ileumSd, invH);
                             inLumen = lumenSd < 0 ? 1 : 0;
                             counts.fluid += inLumen && inFluid ? 1 : 0;
+                            counts.ileumLumen += !inLumen && ileumSd < 0 ? 1 : 0;
                         }
                     }
                     // A contact: a channel of air through both walls. Voxels whose centre is
@@ -408,6 +443,7 @@ private:
     uint64_t mSeedKey;
     double mVoxelMm = 1, mInvVoxelMm = 1;
     std::vector<TubeSegment> mSegments;
+    std::vector<TubeSegment> mIleum;   ///< the terminal ileum's chords (variant)
     std::vector<int> mFoldAt;
     struct StrictureSamples {
         const PhantomStricture* stricture = nullptr;
@@ -512,6 +548,8 @@ Phantom makePhantom(const PhantomParams& params)
                      std::max({geometry.spacingMm.x, geometry.spacingMm.y, geometry.spacingMm.z}));
     if (params.fluid)
         addFluidPools(anatomy, params.seed, params.prone);
+    if (params.ilealReflux && params.colon)
+        addIleum(anatomy);
 
     Phantom out;
     out.ct.geometry = out.truthLumen.geometry = geometry;
@@ -539,6 +577,9 @@ Phantom makePhantom(const PhantomParams& params)
         truth.contacts = anatomy.contacts;
         truth.hasRectalTube = anatomy.hasRectalTube;
         truth.rectalTube = anatomy.rectalTube;
+        truth.ileumMm = anatomy.ileumMm;
+        truth.ileumRadiusMm = anatomy.ileumRadiusMm;
+        truth.ileumValveArcMm = anatomy.ileumValveArcMm;
     }
     const double voxelMl = g.spacingMm.x * g.spacingMm.y * g.spacingMm.z / 1000.0;
     const auto lumenVoxels = std::count(out.truthLumen.voxels.begin(), out.truthLumen.voxels.end(), uint8_t(1));
@@ -548,10 +589,12 @@ Phantom makePhantom(const PhantomParams& params)
         total.fluid += c.fluid;
         total.colonLumen += c.colonLumen;
         total.tubeLumen += c.tubeLumen;
+        total.ileumLumen += c.ileumLumen;
     }
     truth.fluidVolumeMl = double(total.fluid) * voxelMl;
     truth.colonLumenVolumeMl = double(total.colonLumen) * voxelMl;
     truth.tubeLumenVolumeMl = double(total.tubeLumen) * voxelMl;
+    truth.ileumLumenVolumeMl = double(total.ileumLumen) * voxelMl;
     if (storedDirection != identityMat3()) {
         reorient(out.ct, storedDirection);
         reorient(out.truthLumen, storedDirection);

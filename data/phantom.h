@@ -39,6 +39,8 @@
 /// - prone (with fluid): the fluid lies anterior of its levels, in the sigmoid and the
 ///   transverse colon (each pool's arc range runs as far as the lumen reaches below its
 ///   level); the rectum, posterior then, holds air.
+/// - ilealReflux: gas in the terminal ileum, joined to the cecum through the ileocecal
+///   valve 50 mm above the cecum's end, and running about 170 mm on into the right pelvis.
 /// - orientation: the voxels stored in another order (e.g. "RAS", "LAS", "SLP"), the same
 ///   world anatomy.
 #pragma once
@@ -75,6 +77,10 @@ struct PhantomParams {
     /// With fluid: the patient lies prone, so the tagged fluid pools anterior (-y) of its
     /// levels, in the stretches that hang lowest then (sigmoid, transverse colon).
     bool prone = false;
+    /// Gas refluxed through an open ileocecal valve into the terminal ileum: a small-bowel
+    /// tube joined to the cecum, whose far end lies farther along the lumen from the rectum
+    /// than the cecum's own end.
+    bool ilealReflux = false;
     /// How the voxels are stored: three letters naming where index axes i, j, k point
     /// (towards), as nibabel's axis codes: "LPS" (the default: the identity in LPS world),
     /// "RAS" (a prone DICOM's rows and columns, nibabel's canonical), "LAS" (mirrored,
@@ -162,6 +168,13 @@ struct PhantomTruth {
     std::vector<PhantomContact> contacts;     ///< sorted by arcAMm; empty unless touching
     bool hasRectalTube = false;
     PhantomRectalTube rectalTube;             ///< when hasRectalTube
+    /// With ilealReflux: the terminal ileum's axis (1 mm samples from inside the cecum at the
+    /// valve to its blind end), its radius and the colon arc of the valve. Its gas is not in
+    /// the truth mask (it is small bowel), it is in the CT, joined to the cecum's.
+    std::vector<Vec3d> ileumMm;
+    double ileumRadiusMm = 0;
+    double ileumValveArcMm = 0;
+    double ileumLumenVolumeMl = 0;
     double lumenVolumeMl = 0;          ///< volume of the true lumen mask (air and fluid)
     double fluidVolumeMl = 0;          ///< part of it whose voxel centres hold fluid
     /// The colon's lumen alone: the mask less the rectal tube's air lumen and with the

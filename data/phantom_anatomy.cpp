@@ -996,6 +996,77 @@ void addFluidPools(PhantomAnatomy& a, uint64_t seed, bool prone)
     }
 }
 
+void addIleum(PhantomAnatomy& a)
+{
+    constexpr double RADIUS_MM = 11.0, VALVE_ABOVE_END_MM = 50.0;
+    const std::size_t n = a.centerlineMm.size();
+    const auto valve = std::size_t(double(n - 1) - VALVE_ABOVE_END_MM / a.stepMm);
+    const Vec3d c = a.centerlineMm[valve];
+    // From the cecum's axis out through its medial wall (+x: towards the patient's left),
+    // then down into the right pelvis and back towards the right side wall.
+    const std::vector<Vec3d> control = {c,
+                                        c + Vec3d{38.0, 0.0, 0.0},
+                                        {-45.0, 10.0, -84.0},
+                                        {-47.0, 10.0, -106.0},
+                                        {-55.0, 8.0, -126.0},
+                                        {-70.0, 4.0, -138.0},
+                                        {-86.0, 0.0, -143.0}};
+    // Catmull-Rom through the control points, resampled every 1 mm of arc.
+    std::vector<Vec3d> dense;
+    for (std::size_t k = 0; k + 1 < control.size(); ++k) {
+        const Vec3d& p0 = control[k == 0 ? 0 : k - 1];
+        const Vec3d& p1 = control[k];
+        const Vec3d& p2 = control[k + 1];
+        const Vec3d& p3 = control[std::min(k + 2, control.size() - 1)];
+        for (int t = 0; t < 200; ++t) {
+            const double u = double(t) / 200.0, u2 = u * u, u3 = u2 * u;
+            dense.push_back((p1 * 2.0 + (p2 - p0) * u + (p0 * 2.0 - p1 * 5.0 + p2 * 4.0 - p3) * u2 +
+                             (p1 * 3.0 - p0 - p2 * 3.0 + p3) * u3) * 0.5);
+        }
+    }
+    dense.push_back(control.back());
+    a.ileumMm = {dense.front()};
+    double carried = 0;
+    for (std::size_t k = 1; k < dense.size(); ++k) {
+        const double d = distance(dense[k - 1], dense[k]);
+        carried += d;
+        while (carried >= 1.0) {
+            carried -= 1.0;
+            const double f = d > 0 ? 1.0 - carried / d : 1.0;
+            a.ileumMm.push_back(dense[k - 1] + (dense[k] - dense[k - 1]) * f);
+        }
+    }
+    a.ileumRadiusMm = RADIUS_MM;
+    a.ileumValveArcMm = double(valve) * a.stepMm;
+    // Clear of every other loop of the colon (the cecum round the valve aside), of the spine
+    // and of the skin.
+    const double wallGap = 2.0 * COLON_WALL_MM + 4.0;
+    for (std::size_t s = 0; s < a.ileumMm.size(); ++s) {
+        const Vec3d& q = a.ileumMm[s];
+        for (std::size_t i = 0; i < n; ++i) {
+            const bool nearValve = double(i) * a.stepMm > a.ileumValveArcMm - 120.0 && s < 70;
+            if (nearValve) continue;
+            const double gap = distance(q, a.centerlineMm[i]) - a.radiusMm[i] - RADIUS_MM;
+            if (gap < wallGap)
+                throw std::logic_error("phantom anatomy: the ileum comes within " + std::to_string(gap) +
+                                       " mm of the colon at colon arc " + std::to_string(i) + ", ileum arc " +
+                                       std::to_string(s));
+        }
+        if (std::hypot(q.x, q.y - SPINE_CENTER_Y_MM) - SPINE_RADIUS_MM - RADIUS_MM < 10.0 ||
+            bodySignedDistanceMm(q.x, q.y) > -(RADIUS_MM + COLON_WALL_MM + 10.0))
+            throw std::logic_error("phantom anatomy: the ileum runs into the spine or the skin at ileum arc " +
+                                   std::to_string(s));
+    }
+    std::vector<Ellipsoid> pockets;
+    for (const Ellipsoid& e : a.gasPockets) {
+        bool clear = true;
+        for (const Vec3d& q : a.ileumMm)
+            clear = clear && e.signedDistanceMm(q) > RADIUS_MM + wallGap;
+        if (clear) pockets.push_back(e);
+    }
+    a.gasPockets = std::move(pockets);
+}
+
 double Ellipsoid::volumeMl() const
 {
     return 4.0 / 3.0 * PI * semiAxesMm.x * semiAxesMm.y * semiAxesMm.z / 1000.0;

@@ -99,6 +99,11 @@ struct PhantomAnatomy {
     std::vector<double> contactWindowMm;
     bool hasRectalTube = false;
     PhantomRectalTube rectalTube;
+    /// The `ilealReflux` variant: the gas-filled terminal ileum (1 mm samples from inside the
+    /// cecum at the ileocecal valve to its blind end; empty without it).
+    std::vector<Vec3d> ileumMm;
+    double ileumRadiusMm = 0;
+    double ileumValveArcMm = 0;  ///< arc of the colon centerline sample it leaves from
     /// The redundant or touching colon: its bends may be a little tighter (curvature times
     /// outer radius up to 0.95 instead of 0.8; the wall still never folds over).
     bool variantPath = false;
@@ -159,6 +164,14 @@ void addStricture(PhantomAnatomy& anatomy, uint64_t seed, double voxelMm);
 /// and the transverse colon, each from where its colon lies lowest (most anterior) along
 /// the arcs where the lumen reaches below the level; the same random draws.
 void addFluidPools(PhantomAnatomy& anatomy, uint64_t seed, bool prone = false);
+
+/// The `ilealReflux` variant: gas refluxed through an open ileocecal valve fills the
+/// terminal ileum, a tube of radius 11 mm and about 170 mm that leaves the cecum's medial
+/// wall 50 mm above its end and loops down into the right pelvis, clear of the rest of the
+/// colon (the same cecum on every colon variant); small-bowel gas pockets in its way are
+/// dropped. Deterministic.
+/// @throw std::logic_error when it would come near another loop, the spine or the skin.
+void addIleum(PhantomAnatomy& anatomy);
 
 /// Image geometry of a phantom size: FOV 400 x 400 x 375 mm centred on the world origin.
 ImageGeometry phantomGeometry(PhantomSize size);

@@ -95,7 +95,9 @@ int main(int argc, char** argv)
         ->check(CLI::Range(0, 100000));
     phantomCmd->add_option("--spacing", phantomSpacing, "SX,SY,SZ voxel size in mm (same field of view), e.g. "
                                                         "0.8,0.8,1.25; default: the size's");
-    bool phantomProne = false;
+    bool phantomProne = false, phantomIleum = false;
+    phantomCmd->add_flag("--ileal-reflux", phantomIleum, "gas refluxed through the ileocecal valve fills ~170 mm of "
+                                                         "terminal ileum joined to the cecum (not in the truth mask)");
     std::string phantomOrientation = "LPS";
     phantomCmd->add_flag("--prone", phantomProne, "with --fluid: the patient lies prone, the fluid pools anterior "
                                                   "(sigmoid, transverse colon)");
@@ -279,7 +281,8 @@ int main(int argc, char** argv)
                                               {"--collapse", phantomCollapse}, {"--stricture", phantomStricture},
                                               {"--touching", phantomTouching != 0}, {"--redundant", phantomRedundant},
                                               {"--rectal-tube", phantomTube}, {"--spacing", !phantomSpacing.empty()},
-                                              {"--prone", phantomProne}, {"--orientation", phantomOrientation != "LPS"}})
+                                              {"--prone", phantomProne}, {"--orientation", phantomOrientation != "LPS"},
+                                              {"--ileal-reflux", phantomIleum}})
                 if (given) throw ParameterError(std::string(flag) + ": a colon phantom's option, not available with --part");
             PartPhantomParams pp;
             pp.size = sizeName == "small" ? 128 : parsePartSize(sizeName);
@@ -306,6 +309,7 @@ int main(int argc, char** argv)
             pp.redundant = phantomRedundant;
             pp.rectalTube = phantomTube;
             pp.prone = phantomProne;
+            pp.ilealReflux = phantomIleum;
             pp.orientation = phantomOrientation;
             if (!phantomSpacing.empty()) pp.spacingMm = parsePhantomSpacing(phantomSpacing);
             if (!(noiseHu >= 0)) throw ParameterError("--noise-hu: must be >= 0");

@@ -23,13 +23,14 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
     const PhantomTruth& t = ph.truth;
     const bool anyNew = params.touching > 0 || params.redundant || params.rectalTube;
     const bool stored = params.orientation != "LPS";
-    if (anyNew || params.fluid || params.collapse || params.stricture || params.prone || stored) {
+    if (anyNew || params.fluid || params.collapse || params.stricture || params.prone || stored || params.ilealReflux) {
         double lengthMm = 0;
         for (std::size_t i = 1; i < t.centerlineMm.size(); ++i) lengthMm += distance(t.centerlineMm[i - 1], t.centerlineMm[i]);
         out["variants"] = json{{"touching", params.touching}, {"redundant", params.redundant},
                                {"rectal_tube", params.rectalTube}, {"fluid", params.fluid},
                                {"collapse", params.collapse}, {"stricture", params.stricture}};
         if (params.prone) out["variants"]["prone"] = true;
+        if (params.ilealReflux) out["variants"]["ileal_reflux"] = true;
         if (stored) out["variants"]["orientation"] = params.orientation;
         out["centerline"]["length_mm"] = lengthMm;
     }
@@ -73,6 +74,16 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
                                   {"wall_hu", tube.wallHu},
                                   {"tip_mm", v3(tube.tipMm())},
                                   {"lumen_in_mask_volume_ml", t.tubeLumenVolumeMl}};
+    }
+    if (!t.ileumMm.empty()) {
+        json axis = json::array();
+        for (const auto& p : t.ileumMm) axis.push_back(v3(p));
+        out["ileum"] = json{{"axis_mm", axis},
+                            {"axis_order", "from inside the cecum at the ileocecal valve to the blind end"},
+                            {"radius_mm", t.ileumRadiusMm},
+                            {"valve_colon_arc_mm", t.ileumValveArcMm},
+                            {"lumen_volume_ml", t.ileumLumenVolumeMl},
+                            {"in_truth_mask", false}};
     }
     if (anyNew) out["colon_lumen_volume_ml"] = t.colonLumenVolumeMl;
 }
@@ -146,6 +157,13 @@ PhantomTruth phantomTruthFromJson(const json& j, const std::string& source)
         t.fluidPools.push_back({p.at("arc_start_mm").get<double>(), p.at("arc_end_mm").get<double>(),
                                 p.at("level_y_mm").get<double>(), p.at("hu").get<double>(),
                                 p.contains("gravity_lps") ? p.at("gravity_lps").at(1).get<double>() : 1.0});
+    if (j.contains("ileum")) {
+        const json& il = j.at("ileum");
+        for (const auto& p : il.at("axis_mm")) t.ileumMm.push_back(v3(p));
+        t.ileumRadiusMm = il.at("radius_mm").get<double>();
+        t.ileumValveArcMm = il.at("valve_colon_arc_mm").get<double>();
+        t.ileumLumenVolumeMl = il.value("lumen_volume_ml", 0.0);
+    }
     for (const auto& c : j.value("contacts", json::array())) {
         PhantomContact k;
         k.positionMm = v3(c.at("position_mm"));

@@ -64,6 +64,28 @@ json runCenterline(StudyRun& run, Progress* progress)
                               {"path_length_mm", p->pathLengthMm},
                               {"route_searched_on", p->routeSearchedOn}});
     const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
+    json farBranch;  // null: none left out
+    if (const auto& f = cr.farBranchLeftOut) {
+        farBranch = json{{"handling", "a narrow tube off the wide lumen at the far end (the terminal ileum, gas-filled "
+                                      "through an open ileocecal valve, off the cecum) is left out: the path ends at "
+                                      "the wide lumen's own end"},
+                         {"mouth_mm", vec3Json(f->mouthMm)},
+                         {"tube_end_mm", vec3Json(f->endMm)},
+                         {"tube_length_mm", f->lengthMm},
+                         {"tube_radius_mm", f->depthMm},
+                         {"wide_radius_mm", f->wideDepthMm},
+                         {"wide_end_beyond_mouth_mm", f->wideEndBeyondMouthMm}};
+        if (run.opt.log) {
+            std::ostringstream line;
+            line << std::fixed << std::setprecision(0) << "centerline: a narrow tube (radius " << f->depthMm
+                 << " mm, " << f->lengthMm << " mm followed) leaves the wide lumen (radius " << f->wideDepthMm
+                 << " mm) near its far end at (" << f->mouthMm.x << ", " << f->mouthMm.y << ", " << f->mouthMm.z
+                 << ") LPS mm, as the terminal ileum leaves the cecum; left out: the path ends at the wide lumen's "
+                    "own end, "
+                 << f->wideEndBeyondMouthMm << " mm beyond it";
+            run.opt.log->message(line.str());
+        }
+    }
     return json{{"traced_beside_contact_cut", bool(speculative)},
                 {"points", pts.size()},
                 {"length_mm", cl.lengthMm()},
@@ -76,6 +98,7 @@ json runCenterline(StudyRun& run, Progress* progress)
                 {"pieces", pieces},
                 {"bridges", bridges},
                 {"near_wall", nearWall},
+                {"far_branch_left_out", farBranch},
                 {"contacts", contactsAlongPath(*sdf, cl)}};
 }
 

@@ -15,6 +15,7 @@
 #include "volume/centerline.h"
 
 #include "volume/centerline_bridge.h"
+#include "volume/centerline_far_end.h"
 #include "volume/error.h"
 #include "volume/lumen_index.h"
 #include "volume/route_search.h"
@@ -937,7 +938,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         std::vector<std::uint8_t>& even = coarse;  // the core's even voxels, restored below
         for (Slot s : pieceSlots) {
             even[s] = isEven(s);
-            if (!even[s]) continue;
+            if (!even[s] || steps[s] < 0) continue;
             if (ends[0] == NO_SLOT || steps[s] < steps[ends[0]]) ends[0] = s;
             if (ends[1] == NO_SLOT || steps[s] > steps[ends[1]]) ends[1] = s;
         }
@@ -972,18 +973,25 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         return routed;
     };
     // One piece's path; from the end of the tube nearest to `seed` when one is given.
-    auto tracePiece = [&](std::int32_t label, Slot seed) {
+    // `from`: start there instead (with `plugged`, the piece's holes plus voxels that end
+    // the search there: the far end is then the farthest voxel reached without crossing them).
+    auto tracePiece = [&](std::int32_t label, Slot seed, Slot from = NO_SLOT, const SlotBits* plugged = nullptr) {
         // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches
         // the other end last. Both lie on the wall of the blind ends; the path runs between
         // the core voxels nearest to them in steps.
         Slot a = pieces.lastReached[label];
-        if (seed != NO_SLOT) {
+        if (from != NO_SLOT) {
+            a = from;
+        } else if (seed != NO_SLOT) {
             // The end of the tube nearest to the seed: the voxel farthest from the seed's
             // farthest voxel (the seed itself when it lies at an end).
             const Slot far = stepsFrom(index, holes, seed, steps, progress);
             a = stepsFrom(index, holes, far, steps, progress);
         }
-        const Slot b = stepsFrom(index, holes, a, steps, progress);
+        if (plugged)  // voxels past the plug are not reached: no end may lie there
+            for (Slot s = 0; s < index.slotCount(); ++s)
+                if (pieces.label[s] == label) steps[s] = -1;
+        const Slot b = stepsFrom(index, plugged ? *plugged : holes, a, steps, progress);
         // The search runs on the coarsest set that connects the ends: the core's voxels of even
         // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
         // whole piece (a stricture, or a piece next to a much deeper one, can break the core:
@@ -997,7 +1005,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         for (Slot s = 0; s < index.slotCount(); ++s) {
             if (pieces.label[s] != label) continue;
             pieceSlots.push_back(s);
-            if (!core[s]) continue;
+            if (!core[s] || steps[s] < 0) continue;
             for (int level = 0; level < 2; ++level) {
                 if (level == 0 && !isEven(s)) continue;
                 Slot* e = ends[level];
@@ -1098,6 +1106,64 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     }
     const PieceChain chain = orderPieces(ends, first, firstReversed, params.bridgeTurnMmPerRad);
 
+    // 4b. The far end (centerline_far_end.h): when the last piece's path ends in a narrow tube
+    // off a wide lumen (the terminal ileum off the cecum), the tube is plugged past its mouth
+    // and the farthest voxel from the piece's near end is searched again. When that lies well
+    // beyond the mouth (FAR_SAC_DEPTHS wide depths, in steps), the wide lumen has an end of its
+    // own that the path skipped (the cecum below the valve): the piece is traced to it. Else
+    // (a narrow cecum, no wide end beyond its mouth) the path stays.
+    std::optional<CenterlineFarBranch> farBranch;
+    {
+        const std::size_t lastPos = chain.order.size() - 1;
+        const int last = chain.order[lastPos];
+        const bool reversed = chain.reversed[lastPos];
+        std::vector<Vec3d> pts = paths[std::size_t(last)].pointsMm;
+        if (reversed) std::reverse(pts.begin(), pts.end());
+        if (const auto narrow = narrowFarEnd(pts, [&](const Vec3d& p) { return depthAt(p); })) {
+            const std::int32_t label = paths[std::size_t(last)].label;
+            const Vec3d mouth = pts[narrow->mouthIndex];
+            Slot nearSlot = NO_SLOT, mouthSlot = NO_SLOT, farSlot = NO_SLOT;
+            double nearMm = std::numeric_limits<double>::infinity(), mouthMm = nearMm, farMm = nearMm;
+            SlotBits plugged = holes;
+            for (Slot s = 0; s < index.slotCount(); ++s) {
+                if (pieces.label[s] != label) continue;
+                const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
+                const auto nearest = [&](const Vec3d& p, Slot& slot, double& best) {
+                    const double d = distance(w, p);
+                    if (d < best) {
+                        best = d;
+                        slot = s;
+                    }
+                };
+                nearest(pts.front(), nearSlot, nearMm);
+                nearest(mouth, mouthSlot, mouthMm);
+                nearest(pts.back(), farSlot, farMm);
+                if (distance(w, narrow->plugMm) <= narrow->plugRadiusMm) plugged.set(s);
+            }
+            if (!plugged.test(nearSlot) && !plugged.test(mouthSlot)) {
+                for (Slot s = 0; s < index.slotCount(); ++s)
+                    if (pieces.label[s] == label) steps[s] = -1;
+                const Slot end = stepsFrom(index, plugged, nearSlot, steps, progress);
+                const double beyondMm = double(steps[end] - steps[mouthSlot]) * voxelMm;
+                if (steps[farSlot] < 0 && beyondMm >= FAR_SAC_DEPTHS * narrow->wideDepthMm) {
+                    PiecePath traced = tracePiece(label, NO_SLOT, nearSlot, &plugged);
+                    CenterlineFarBranch info;
+                    info.mouthMm = mouth;
+                    info.endMm = pts.back();
+                    info.lengthMm = narrow->lengthMm;
+                    info.depthMm = narrow->narrowDepthMm;
+                    info.wideDepthMm = narrow->wideDepthMm;
+                    info.wideEndBeyondMouthMm = beyondMm;
+                    farBranch = info;
+                    if (reversed) std::reverse(traced.pointsMm.begin(), traced.pointsMm.end());
+                    const auto& p = traced.pointsMm;
+                    ends[std::size_t(last)] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+                    paths[std::size_t(last)] = std::move(traced);
+                }
+            }
+        }
+    }
+
     // 5. One polyline: pieces in chain order, bridges between them.
     struct Bridge {
         double startArc, endArc, startDepth, endDepth;
@@ -1192,6 +1258,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                                              : "lowest end";
         report->lowestLumenMm = lowestMm;
         report->nearWall = nearWall;
+        report->farBranchLeftOut = farBranch;
         std::vector<int> infoOf(pieces.size.size(), -1);
         for (std::size_t r = 0; r < bySize.size(); ++r) {
             CenterlinePieceInfo info;

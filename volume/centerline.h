@@ -63,7 +63,7 @@ struct CenterlineParams {
     /// and the piece's ends instead of on the whole piece (mm; 0: the whole piece). Not a stage parameter: the
     /// tests and benches compare the two.
     double corridorMm = 5.0;
-    static constexpr int VERSION = 6;
+    static constexpr int VERSION = 7;
 };
 
 /// One lumen piece as the centerline saw it.
@@ -96,6 +96,22 @@ struct CenterlineNearWall {
     Vec3d positionMm;                   ///< where D is smallest (LPS mm)
 };
 
+/// A narrow tube at the lumen's far end that the path leaves out (centerline_far_end.h): the
+/// terminal ileum, gas-filled through an open ileocecal valve, off the cecum.
+struct CenterlineFarBranch {
+    Vec3d mouthMm;                ///< where the tube leaves the wide lumen (on the old path)
+    Vec3d endMm;                  ///< where the old path ended, in the tube
+    double lengthMm = 0;          ///< the old path from the mouth to that end
+    double depthMm = 0;           ///< the tube's depth (radius)
+    double wideDepthMm = 0;       ///< the wide lumen's
+    double wideEndBeyondMouthMm = 0;  ///< how far (26-neighbour steps x voxel) the wide lumen's own end lies beyond the mouth
+};
+
+/// The far end is traced to the wide lumen's own end when it lies at least this many wide
+/// depths beyond the mouth of a narrow tube (the cecum's end 5-8 cm below the valve, its depth
+/// 2.5-4.5 cm; a narrow cecum off a wide ascending colon has no wide end beyond its mouth).
+inline constexpr double FAR_SAC_DEPTHS = 1.5;
+
 struct CenterlineReport {
     std::vector<CenterlinePieceInfo> pieces;   ///< largest first
     std::vector<CenterlineBridgeInfo> bridges; ///< in travel order
@@ -104,6 +120,7 @@ struct CenterlineReport {
     std::string rectumRule;
     Vec3d lowestLumenMm;                       ///< the lowest lumen voxel in world z (LPS mm)
     std::vector<CenterlineNearWall> nearWall;  ///< in path order
+    std::optional<CenterlineFarBranch> farBranchLeftOut;
 };
 
 /// @param sdf      lumen signed distance grid in world mm, negative inside the lumen, with

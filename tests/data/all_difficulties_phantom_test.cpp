@@ -203,6 +203,38 @@ TEST(RectalTubePhantom, FollowedFromInsideTheAnalCanalWhenThePieceEndsOffItsCore
     }
 }
 
+// Gas refluxed through an open ileocecal valve fills ~170 mm of terminal ileum, off the cecum's
+// medial wall 50 mm above its end (the --ileal-reflux phantom): the ileum's end lies farther
+// along the lumen from the rectum than the cecum's own end, and the path ran into the small
+// bowel and skipped the cecum below the valve (seeds 1-3, with and without the rectal tube and
+// fluid: mean 5.2-5.4 mm, p95 49 mm, length ratio 1.11). Now the narrow tube at the far end is
+// plugged and the wide lumen's own end, 50 mm beyond the valve, is the path's end.
+TEST(IlealRefluxPhantom, PathEndsInTheCecumNotInTheIleum)
+{
+    openvdb::initialize();
+    struct Case {
+        uint64_t seed;
+        bool fluid;
+        int touching;
+        bool redundant;
+    };
+    for (const Case& c : {Case{1, false, 0, false}, Case{2, true, 0, false}, Case{3, true, 2, true}}) {
+        PhantomParams pp;
+        pp.seed = c.seed;
+        pp.rectalTube = pp.ilealReflux = true;
+        pp.fluid = c.fluid;
+        pp.touching = c.touching;
+        pp.redundant = c.redundant;
+        expectTubeCase(pp,
+                       "small (2.5 mm) ileal reflux and rectal tube, seed " + std::to_string(c.seed) +
+                           (c.fluid ? ", fluid" : "") + (c.redundant ? ", redundant colon, 2 contacts" : ""),
+                       false, false, "the path runs into the ileum", [](const Phantom& ph) {
+                           ASSERT_FALSE(ph.truth.ileumMm.empty());
+                           EXPECT_GT(ph.truth.ileumLumenVolumeMl, 30.0) << "the ileum holds gas";
+                       });
+    }
+}
+
 // Defect of issue 14: with two touching loops too (seeds 4-8), at 2.5 mm voxels, the tube was
 // followed only part of the way into the rectum. From the CT a straight run from the anal
 // canal started off the tube's axis (the thin piece's bin centroids stray by up to a voxel)

@@ -659,6 +659,48 @@ TEST(PhantomOrientation, StoresTheSameWorldAnatomyInAnotherVoxelOrder)
     }
 }
 
+TEST(PhantomIleum, GasJoinsTheCecumAndStaysOutOfTheMask)
+{
+    for (const bool redundant : {false, true}) {
+        PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
+        p.ilealReflux = true;
+        p.redundant = redundant;
+        p.touching = redundant ? 3 : 2;
+        SCOPED_TRACE(describe(p) + " ileal reflux");
+        const Phantom ph = makePhantom(p);
+        const PhantomTruth& t = ph.truth;
+        ASSERT_GT(t.ileumMm.size(), 150u);
+        EXPECT_EQ(t.ileumRadiusMm, 11.0);
+        const double colonLength = double(t.centerlineMm.size() - 1);
+        EXPECT_NEAR(t.ileumValveArcMm, colonLength - 50.0, 1.0);
+        const auto& g = ph.ct.geometry;
+        // Its gas: air in the CT along the axis past the valve, none of it in the truth mask,
+        // and face-connected (air below -500 HU) from its blind end to the cecum's axis.
+        int64_t air = 0, inMask = 0;
+        for (std::size_t s = 40; s < t.ileumMm.size(); s += 5) {
+            const Index v = nearestVoxel(g, t.ileumMm[s]);
+            air += ph.ct.at(v[0], v[1], v[2]) < -800;
+            inMask += ph.truthLumen.at(v[0], v[1], v[2]) != 0;
+        }
+        EXPECT_EQ(air, int64_t((t.ileumMm.size() - 41) / 5 + 1));
+        EXPECT_EQ(inMask, 0);
+        const auto isAir = [&](const Index& v) { return ph.ct.at(v[0], v[1], v[2]) < -500; };
+        EXPECT_TRUE(faceConnected(g, nearestVoxel(g, t.ileumMm[t.ileumMm.size() - 5]),
+                                  nearestVoxel(g, t.centerlineMm[t.centerlineMm.size() - 20]), isAir))
+            << "the ileum's gas does not reach the cecum's";
+        EXPECT_GT(t.ileumLumenVolumeMl, 30.0);
+        // The colon itself is the one without the ileum, voxel for voxel in the mask.
+        PhantomParams plain = p;
+        plain.ilealReflux = false;
+        EXPECT_TRUE(makePhantom(plain).truthLumen.voxels == ph.truthLumen.voxels);
+        // The truth JSON carries it and reads back.
+        const PhantomTruth back = phantomTruthFromJson(phantomTruthToJson(ph, p), "test");
+        EXPECT_EQ(back.ileumMm.size(), t.ileumMm.size());
+        EXPECT_EQ(back.ileumRadiusMm, t.ileumRadiusMm);
+        EXPECT_EQ(back.ileumValveArcMm, t.ileumValveArcMm);
+    }
+}
+
 TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
 {
     PhantomParams p{PhantomSize::Small, 2, NOISE_HU};

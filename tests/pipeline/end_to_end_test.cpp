@@ -4,6 +4,7 @@
 #include "data/phantom.h"
 #include "pipeline/artifact_io.h"
 #include "pipeline/phantom_io.h"
+#include "pipeline/run_log.h"
 #include "pipeline/study.h"
 #include "render/ray_scene.h"
 #include "surface/extract_surface.h"
@@ -13,6 +14,7 @@
 
 #include <filesystem>
 #include <limits>
+#include <sstream>
 
 namespace fs = std::filesystem;
 using namespace flyover;
@@ -228,5 +230,49 @@ TEST(EndToEnd, StorageOrientationChangesNoWorldResult)
         EXPECT_LT(mean, 0.2);
         EXPECT_LT(worst, 1.0);
     }
+    fs::remove_all(dir);
+}
+
+// The run says what the centerline left out: with gas in the terminal ileum the centerline
+// stage's report names the narrow tube at the far end (its radius, length and mouth), the
+// run log says it in a line, and the path ends in the cecum.
+TEST(EndToEnd, IlealRefluxLeftOutIsReported)
+{
+    openvdb::initialize();
+    const fs::path dir = fs::temp_directory_path() / ("flyover-e2e-ileum-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    PhantomParams pp;
+    pp.size = PhantomSize::Small;
+    pp.seed = 4;
+    pp.ilealReflux = true;
+    const Phantom phantom = makePhantom(pp);
+    writePhantom(phantom, pp, (dir / "ct.nii.gz").string(), (dir / "truth.json").string(), "");
+    RunOptions run;
+    run.ctPath = (dir / "ct.nii.gz").string();
+    run.studyDir = (dir / "study").string();
+    run.untilStage = "centerline";
+    std::ostringstream log;
+    RunLog runLog(RunLog::Mode::Plain, log);
+    run.log = &runLog;
+    const nlohmann::json manifest = runPipeline(run);
+    nlohmann::json report;
+    for (const auto& s : manifest.at("stages"))
+        if (s.at("stage") == "centerline") report = s.at("report");
+    ASSERT_TRUE(report.contains("far_branch_left_out"));
+    const nlohmann::json& f = report.at("far_branch_left_out");
+    ASSERT_TRUE(f.is_object()) << "the report does not name the tube left out: " << report.dump();
+    EXPECT_NEAR(f.at("tube_radius_mm").get<double>(), phantom.truth.ileumRadiusMm, 3.0);
+    EXPECT_GT(f.at("tube_length_mm").get<double>(), 100.0);
+    EXPECT_GT(f.at("wide_radius_mm").get<double>(), 18.0);
+    const Vec3d mouth{f.at("mouth_mm")[0].get<double>(), f.at("mouth_mm")[1].get<double>(), f.at("mouth_mm")[2].get<double>()};
+    const auto& truth = phantom.truth.centerlineMm;
+    EXPECT_LT(distance(mouth, truth[std::size_t(std::lround(phantom.truth.ileumValveArcMm))]), 30.0)
+        << "the mouth lies away from the ileocecal valve";
+    const Vec3d end{report.at("cecum_mm")[0].get<double>(), report.at("cecum_mm")[1].get<double>(),
+                    report.at("cecum_mm")[2].get<double>()};
+    EXPECT_LT(distance(end, truth.back()), 20.0) << "the path does not end at the cecum's end";
+    EXPECT_NE(log.str().find("as the terminal ileum leaves the cecum; left out"), std::string::npos)
+        << "no line in the run log:\n" << log.str();
     fs::remove_all(dir);
 }

@@ -1,6 +1,7 @@
 // Centerline extraction against tubes with a known axis (style.md §12): distance to the true
 // curve, length, endpoints, uniform step, frames.
 #include "volume/centerline.h"
+#include "volume/centerline_far_end.h"
 
 #include "test_shapes.h"
 #include "volume/error.h"
@@ -539,6 +540,96 @@ TEST(Centerline, AbruptThroatIsCrossedThroughCorridorsAsOnTheWholePiece)
     EXPECT_LT(f.throatMm, 0.8) << "mm between the path and the throat's centre";
     EXPECT_LT(f.zMin, 15 + 4.0) << "the path stops short of the first end";
     EXPECT_GT(f.zMax, 117 - 4.0) << "the path stops short of the other end";
+}
+
+/// Signed distance (mm) to a capsule: the segment a-b thickened by r.
+double capsuleSd(const Vec3d& p, const Vec3d& a, const Vec3d& b, double r)
+{
+    const Vec3d ab = b - a;
+    const double t = std::clamp(dot(p - a, ab) / dot(ab, ab), 0.0, 1.0);
+    return distance(p, a + ab * t) - r;
+}
+
+// The terminal ileum off the cecum (gas refluxed through an open ileocecal valve): a wide
+// lumen (radius 20 mm, the colon) with a narrow tube (radius 7 mm) leaving its side 60 mm
+// before its end and running on 230 mm, so that its end, not the wide lumen's, lies farthest
+// along the lumen from the rectum. The path must end in the wide lumen's end (the cecum below
+// the valve), not in the tube, and say what it left out.
+TEST(Centerline, NarrowTubeOffTheSideOfTheWideEndIsLeftOut)
+{
+    const Frame frame = test::makeFrame(1.5, true);
+    const double R = 20.0, r = 7.0;
+    const Vec3d a{0, 0, 0}, b{0, 0, 250}, valve{0, 0, 190}, bend{90, 0, 190}, tubeEnd{90, 0, 330};
+    auto sdfMm = [&](const Vec3d& p) {
+        return std::min({capsuleSd(p, a, b, R), capsuleSd(p, valve, bend, r), capsuleSd(p, bend, tubeEnd, r)});
+    };
+    auto sdf = sampledSdf(frame, {-R - 5, -R - 5, -R - 5}, {90 + r + 5, R + 5, 330 + r + 5}, sdfMm);
+    CenterlineParams params;
+    params.rectumMm = frame.worldFromLocal({0, 0, -R});
+    CenterlineReport report;
+    const Centerline cl = extractCenterline(*sdf, params, nullptr, &report);
+    ASSERT_GE(cl.points.size(), 100u);
+    double farthestX = 0;
+    for (const CenterlinePoint& p : cl.points) farthestX = std::max(farthestX, frame.localFromWorld(p.positionMm).x);
+    const Vec3d end = frame.localFromWorld(cl.points.back().positionMm);
+    std::cout << "[ far end ] length " << cl.lengthMm() << " mm, ends at (" << end.x << ", " << end.y << ", " << end.z
+              << "), at most " << farthestX << " mm towards the tube\n";
+    EXPECT_LT(farthestX, R) << "the path runs into the narrow tube";
+    EXPECT_GT(end.z, 250.0 - 10.0) << "the path stops short of the wide lumen's end";
+    EXPECT_LT(std::hypot(end.x, end.y), 5.0) << "the path's end lies off the wide lumen's axis";
+    ASSERT_TRUE(report.farBranchLeftOut.has_value()) << "the report does not say that the tube was left out";
+    const CenterlineFarBranch& f = *report.farBranchLeftOut;
+    EXPECT_NEAR(f.depthMm, r, 1.5);
+    EXPECT_NEAR(f.wideDepthMm, R, 2.0);
+    EXPECT_GT(f.lengthMm, 200.0);
+    EXPECT_GT(frame.localFromWorld(f.endMm).z, 300.0) << "the old far end was not the tube's end";
+}
+
+// A colon whose far end is itself narrow (a poorly distended cecum: radius 7 mm after 200 mm
+// of radius 20 mm) has no wide end beyond the narrow part's mouth: the path keeps to the end.
+TEST(Centerline, NarrowEndWithNoWideEndBeyondItsMouthIsKept)
+{
+    const Frame frame = test::makeFrame(1.5, true);
+    const double R = 20.0, r = 7.0;
+    const Vec3d a{0, 0, 0}, b{0, 0, 200}, tubeEnd{0, 0, 330};
+    auto sdfMm = [&](const Vec3d& p) { return std::min(capsuleSd(p, a, b, R), capsuleSd(p, b, tubeEnd, r)); };
+    auto sdf = sampledSdf(frame, {-R - 5, -R - 5, -R - 5}, {R + 5, R + 5, 330 + r + 5}, sdfMm);
+    CenterlineParams params;
+    params.rectumMm = frame.worldFromLocal({0, 0, -R});
+    CenterlineReport report;
+    const Centerline cl = extractCenterline(*sdf, params, nullptr, &report);
+    ASSERT_GE(cl.points.size(), 100u);
+    const Vec3d end = frame.localFromWorld(cl.points.back().positionMm);
+    EXPECT_GT(end.z, 330.0 - 10.0) << "the path left out the narrow end";
+    EXPECT_FALSE(report.farBranchLeftOut.has_value());
+}
+
+TEST(NarrowFarEnd, FindsANarrowTubeAtTheFarEndOnly)
+{
+    // A path along z: 300 mm at depth 20, then `narrowMm` at depth 7; the cap's last 10 mm fall
+    // to half depth.
+    auto run = [](double narrowMm) {
+        std::vector<Vec3d> path;
+        for (double z = 0; z <= 300.0 + narrowMm; z += 0.5) path.push_back({0, 0, z});
+        const double end = 300.0 + narrowMm;
+        return narrowFarEnd(path, [&](const Vec3d& p) {
+            const double d = p.z <= 300.0 ? 20.0 : 7.0;
+            return p.z > end - 10.0 ? d * (0.5 + 0.05 * (end - p.z)) : d;
+        });
+    };
+    const auto found = run(150.0);
+    ASSERT_TRUE(found.has_value());
+    EXPECT_NEAR(found->wideDepthMm, 20.0, 1e-9);
+    EXPECT_NEAR(found->narrowDepthMm, 7.0, 1e-9);
+    EXPECT_NEAR(found->lengthMm, 150.0, 1.0);
+    EXPECT_GT(found->plugMm.z, 300.0 + 10.0);
+    EXPECT_LT(found->plugMm.z + found->plugRadiusMm, 450.0);
+    EXPECT_FALSE(run(15.0).has_value()) << "a narrow stretch shorter than the wide depth and 30 mm";
+    EXPECT_FALSE(run(0.0).has_value()) << "only the cap's fall at the end";
+    // All narrow: no wide lumen to leave.
+    std::vector<Vec3d> path;
+    for (double z = 0; z <= 400.0; z += 0.5) path.push_back({0, 0, z});
+    EXPECT_FALSE(narrowFarEnd(path, [](const Vec3d&) { return 7.0; }).has_value());
 }
 
 TEST(Centerline, FromSegmentedNoisyTube)
