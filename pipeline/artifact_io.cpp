@@ -649,18 +649,28 @@ nlohmann::json centerlineToJson(const Centerline& c)
         rad.push_back(p.radiusMm);
         bridged.push_back(p.bridged);
     }
-    return json{{"schema", "flyover.centerline/1"},
-                {"world_frame", WORLD_FRAME},
-                {"units", "mm"},
-                {"order", "rectum to cecum"},
-                {"step_mm", c.stepMm},
-                {"length_mm", c.lengthMm()},
-                {"point_count", c.points.size()},
-                {"position_mm", pos},
-                {"tangent", tan},
-                {"normal", nor},
-                {"radius_mm", rad},
-                {"bridged", bridged}};
+    json out{{"schema", "flyover.centerline/1"},
+             {"world_frame", WORLD_FRAME},
+             {"units", "mm"},
+             {"order", "rectum to cecum"},
+             {"step_mm", c.stepMm},
+             {"length_mm", c.lengthMm()},
+             {"point_count", c.points.size()},
+             {"position_mm", pos},
+             {"tangent", tan},
+             {"normal", nor},
+             {"radius_mm", rad},
+             {"bridged", bridged}};
+    if (!c.leftOutBranchMm.empty()) {  // only then: other files stay byte for byte
+        json axis = json::array();
+        for (const Vec3d& p : c.leftOutBranchMm) axis.push_back(v3(p));
+        out["left_out_branch"] = json{{"meaning", "a narrow tube at the lumen's far end that the path leaves out "
+                                                  "(the terminal ileum off the cecum): its axis past the mouth and "
+                                                  "its radius; its wall is not counted in coverage"},
+                                      {"axis_mm", axis},
+                                      {"radius_mm", c.leftOutBranchRadiusMm}};
+    }
+    return out;
 }
 
 Centerline centerlineFromJson(const nlohmann::json& j, const std::string& source)
@@ -690,6 +700,15 @@ Centerline centerlineFromJson(const nlohmann::json& j, const std::string& source
         c.points[i].normal = v3(nor[i]);
         c.points[i].radiusMm = rad[i].get<double>();
         c.points[i].bridged = br[i].get<bool>();
+    }
+    if (j.contains("left_out_branch")) {
+        const auto& b = j.at("left_out_branch");
+        if (!b.is_object() || !b.contains("axis_mm") || !b.at("axis_mm").is_array())
+            fail("left_out_branch: expected an object with axis_mm");
+        for (const auto& a : b.at("axis_mm")) c.leftOutBranchMm.push_back(v3(a));
+        c.leftOutBranchRadiusMm = b.value("radius_mm", 0.0);
+        if (!(c.leftOutBranchRadiusMm >= 0) || !std::isfinite(c.leftOutBranchRadiusMm))
+            fail("left_out_branch: radius_mm must be a finite value >= 0");
     }
     return c;
 }

@@ -920,6 +920,12 @@ json runCoverage(StudyRun& run, Progress* progress)
                          {"one_way_backward", methodJson(cov.flythroughBackward, cp.minRegionMm2)},
                          {"two_way", methodJson(cov.flythroughTwoWay, cp.minRegionMm2)}}},
                        {"vertex_rule", "surface_seen.ply: a vertex is 1 when every triangle around it was seen"}};
+        if (cov.leftOutAreaMm2 > 0)  // only then: other studies' coverage.json stay byte for byte
+            coverageJson["left_out"] = json{{"area_mm2", cov.leftOutAreaMm2},
+                                            {"reason", "the wall round the narrow tube at the lumen's far end that "
+                                                       "the path leaves out (centerline.json left_out_branch: the "
+                                                       "terminal ileum off the cecum); not in total_area_mm2 nor in "
+                                                       "any fraction"}};
         for (auto it = reviewInfo.begin(); it != reviewInfo.end(); ++it) coverageJson[it.key()] = it.value();
         writeJson(coverage.path("coverage.json"), coverageJson);
         writeSurfaceSeen(coverage.path("surface_seen.ply"), scene, cov);

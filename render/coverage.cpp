@@ -169,7 +169,7 @@ void summarise(MethodCoverage& m, const RayScene::Impl& im, const VertexTriangle
 
 } // namespace
 
-TriangleGeometry triangleGeometry(const RayScene& scene)
+TriangleGeometry triangleGeometry(const RayScene& scene, const Centerline* centerline)
 {
     const RayScene::Impl& im = scene.impl();
     TriangleGeometry g;
@@ -183,6 +183,33 @@ TriangleGeometry triangleGeometry(const RayScene& scene)
         }
         g.areaMm2[f] = 0.5 * length(cross(c[1] - c[0], c[2] - c[0]));
         g.centroidMm[f] = (c[0] + c[1] + c[2]) / 3.0;
+    }
+    if (!centerline || centerline->leftOutBranchMm.empty() || centerline->points.empty()) return g;
+    // The branch's wall: nearer to its axis than to the path, within three of its radii.
+    const std::vector<Vec3d>& axis = centerline->leftOutBranchMm;
+    const double reach = 3.0 * std::max(centerline->leftOutBranchRadiusMm, 1.0);
+    Vec3d lo = axis.front(), hi = axis.front();
+    for (const Vec3d& a : axis)
+        for (int c = 0; c < 3; ++c) {
+            lo[c] = std::min(lo[c], a[c] - reach);
+            hi[c] = std::max(hi[c], a[c] + reach);
+        }
+    const CenterlineLocator locator(*centerline);
+    for (uint32_t f = 0; f < im.triangles; ++f) {
+        const Vec3d& p = g.centroidMm[f];
+        if (p.x < lo.x || p.y < lo.y || p.z < lo.z || p.x > hi.x || p.y > hi.y || p.z > hi.z) continue;
+        double toBranch = std::numeric_limits<double>::infinity();
+        for (std::size_t i = 0; i < axis.size(); ++i) {
+            const Vec3d a = axis[i], ab = (i + 1 < axis.size() ? axis[i + 1] : a) - a;
+            const double len2 = dot(ab, ab);
+            const double t = len2 > 0 ? std::clamp(dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
+            toBranch = std::min(toBranch, distance(p, a + ab * t));
+        }
+        if (toBranch > reach) continue;
+        if (toBranch < distance(p, centerline->points[locator.nearest(p)].positionMm)) {
+            g.leftOutAreaMm2 += g.areaMm2[f];
+            g.areaMm2[f] = 0.0;
+        }
     }
     return g;
 }
@@ -379,7 +406,7 @@ void summariseCoverage(MethodCoverage& m, const RayScene& scene, const Centerlin
     if (m.seen.size() != scene.triangleCount())
         throw ParameterError("summariseCoverage: " + std::to_string(m.seen.size()) + " seen flags for " +
                              std::to_string(scene.triangleCount()) + " triangles");
-    const TriangleGeometry geo = triangleGeometry(scene);
+    const TriangleGeometry geo = triangleGeometry(scene, &centerline);
     double total = 0;
     for (const double a : geo.areaMm2) total += a;
     const VertexTriangles vt(scene.impl(), false);  // summarise walks vertex rows only
@@ -395,11 +422,12 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
     if (!params.frameRadiiMm.empty() && params.frameRadiiMm.size() != centerline.points.size())
         throw ParameterError("CoverageParams.frameRadiiMm has " + std::to_string(params.frameRadiiMm.size()) +
                              " values for " + std::to_string(centerline.points.size()) + " centerline points");
-    const TriangleGeometry geo = triangleGeometry(scene);
+    const TriangleGeometry geo = triangleGeometry(scene, &centerline);
     const std::size_t nf = geo.areaMm2.size();
 
     CoverageResult result;
     for (const double a : geo.areaMm2) result.totalAreaMm2 += a;
+    result.leftOutAreaMm2 = geo.leftOutAreaMm2;
     for (MethodCoverage* m : {&result.flyover, &result.flythroughForward, &result.flythroughBackward})
         m->seen.assign(nf, 0);
 

@@ -63,7 +63,8 @@ struct MethodCoverage {
 };
 
 struct CoverageResult {
-    double totalAreaMm2 = 0;
+    double totalAreaMm2 = 0;    ///< the wall to see: without a left-out branch's
+    double leftOutAreaMm2 = 0;  ///< the wall round a left-out branch (triangleGeometry)
     std::size_t positions = 0;  ///< centerline points with views
     uint64_t rays = 0;          ///< all rays traced
     MethodCoverage flyover;            ///< both fly-over cameras
@@ -100,8 +101,13 @@ private:
 struct TriangleGeometry {
     std::vector<double> areaMm2;
     std::vector<Vec3d> centroidMm;
+    double leftOutAreaMm2 = 0;  ///< area of the triangles given 0 for a left-out branch
 };
-TriangleGeometry triangleGeometry(const RayScene& scene);
+/// With `centerline` holding a left-out branch (Centerline::leftOutBranchMm): the triangles
+/// whose centroid lies nearer to the branch's axis than to any centerline point, and within
+/// three branch radii of it, count 0 mm^2 (they are not the colon's wall: not in the totals,
+/// not in missed regions, nothing for a review view to add); their area is leftOutAreaMm2.
+TriangleGeometry triangleGeometry(const RayScene& scene, const Centerline* centerline = nullptr);
 
 /// The triangles one view shows, by computeCoverage's rule: each ray's triangle and, with
 /// `footprint`, those within its footprint (see the file comment). Keeps scratch buffers, so

@@ -261,7 +261,7 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         throw ParameterError("planReview: " + std::to_string(frameRadii.size()) + " frame radii for " +
                              std::to_string(cl.points.size()) + " centerline points");
 
-    const TriangleGeometry geo = triangleGeometry(scene);
+    const TriangleGeometry geo = triangleGeometry(scene, &cl);
     double total = 0;
     for (const double a : geo.areaMm2) total += a;
 

@@ -1113,6 +1113,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     // own that the path skipped (the cecum below the valve): the piece is traced to it. Else
     // (a narrow cecum, no wide end beyond its mouth) the path stays.
     std::optional<CenterlineFarBranch> farBranch;
+    std::vector<Vec3d> leftOutBranch;
     {
         const std::size_t lastPos = chain.order.size() - 1;
         const int last = chain.order[lastPos];
@@ -1147,6 +1148,15 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                 const double beyondMm = double(steps[end] - steps[mouthSlot]) * voxelMm;
                 if (steps[farSlot] < 0 && beyondMm >= FAR_SAC_DEPTHS * narrow->wideDepthMm) {
                     PiecePath traced = tracePiece(label, NO_SLOT, nearSlot, &plugged);
+                    // The tube's axis past the plug's centre, kept for coverage.
+                    leftOutBranch.clear();
+                    bool inTube = false;
+                    for (const Vec3d& q : pts) {
+                        inTube = inTube || distance(q, narrow->plugMm) < 0.5 * fineMm;
+                        if (inTube && (leftOutBranch.empty() || distance(leftOutBranch.back(), q) >= 2.0))
+                            leftOutBranch.push_back(q);
+                    }
+                    if (!leftOutBranch.empty() && leftOutBranch.back() != pts.back()) leftOutBranch.push_back(pts.back());
                     CenterlineFarBranch info;
                     info.mouthMm = mouth;
                     info.endMm = pts.back();
@@ -1230,6 +1240,10 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         }
     }
     computeTangentsAndNormals(cl);
+    if (farBranch) {
+        cl.leftOutBranchMm = leftOutBranch;
+        cl.leftOutBranchRadiusMm = farBranch->depthMm;
+    }
 
     // Stretches of the path closer to the wall than nearWallMm outside bridges.
     std::vector<CenterlineNearWall> nearWall;

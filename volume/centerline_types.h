@@ -21,6 +21,12 @@ struct CenterlinePoint {
 struct Centerline {
     std::vector<CenterlinePoint> points;  ///< ordered rectum -> cecum, uniform arc-length step
     double stepMm = 1.0;                  ///< arc-length step between consecutive points (mm)
+    /// A narrow tube at the lumen's far end that the path leaves out (the terminal ileum off
+    /// the cecum; centerline_far_end.h): its axis from inside the tube, past the mouth, to
+    /// its end, about 2 mm apart, and its radius. Empty when nothing was left out. The wall
+    /// round it is not the colon's: coverage leaves it out of the wall to see.
+    std::vector<Vec3d> leftOutBranchMm;
+    double leftOutBranchRadiusMm = 0;
 
     double lengthMm() const
     {

@@ -288,6 +288,19 @@ TEST(ArtifactIo, CenterlineJsonRoundTrip)
         EXPECT_EQ(back.points[i].bridged, c.points[i].bridged);
     }
     EXPECT_THROW(centerlineFromJson(nlohmann::json{{"schema", "other"}}, "x.json"), InputError);
+    EXPECT_FALSE(centerlineToJson(c).contains("left_out_branch")) << "written only when a branch was left out";
+
+    // A left-out branch (the terminal ileum) reads back; a broken one is refused.
+    c.leftOutBranchMm = {{1, 2, 3}, {1, 4, 3}, {1, 6, 2}};
+    c.leftOutBranchRadiusMm = 11.0;
+    nlohmann::json j = centerlineToJson(c);
+    const Centerline withBranch = centerlineFromJson(j, "test");
+    EXPECT_EQ(withBranch.leftOutBranchMm, c.leftOutBranchMm);
+    EXPECT_EQ(withBranch.leftOutBranchRadiusMm, 11.0);
+    j["left_out_branch"]["radius_mm"] = -1.0;
+    EXPECT_THROW(centerlineFromJson(j, "bad.json"), InputError);
+    j["left_out_branch"] = 3;
+    EXPECT_THROW(centerlineFromJson(j, "bad.json"), InputError);
 }
 
 TEST(ArtifactIo, FailedAtomicWriteLeavesNothingBehind)
