@@ -13,10 +13,11 @@ std::optional<NarrowFarEnd> narrowFarEnd(const std::vector<Vec3d>& path,
     for (std::size_t i = 1; i < path.size(); ++i) arc[i] = arc[i - 1] + distance(path[i - 1], path[i]);
     const double length = arc.back();
     if (length < 100.0) return std::nullopt;
+    const double window = std::max(FAR_WINDOW_MM, FAR_WINDOW_FRACTION * length);
     // Depths every ~1 mm of the far window (the samples are far closer; the depth is smooth).
     std::vector<std::size_t> at;
     for (std::size_t i = path.size(); i-- > 0;) {
-        if (arc[i] < length - FAR_WINDOW_MM) break;
+        if (arc[i] < length - window) break;
         if (at.empty() || arc[at.back()] - arc[i] >= 1.0) at.push_back(i);
     }
     std::vector<double> depth(at.size());

@@ -30,8 +30,11 @@ struct NarrowFarEnd {
     double plugRadiusMm = 0;     ///< a ball this wide round plugMm cuts the tube across
 };
 
-/// How much of the path's far end is searched for the wide lumen (mm).
+/// How much of the path's far end is searched for the wide lumen: this many mm, or
+/// FAR_WINDOW_FRACTION of the path when that is longer (a long gas-filled ileum must not fill
+/// the whole window).
 inline constexpr double FAR_WINDOW_MM = 600.0;
+inline constexpr double FAR_WINDOW_FRACTION = 0.6;
 /// A sample is in the wide lumen when at least this fraction of its depth deep.
 inline constexpr double WIDE_FRACTION = 0.6;
 

@@ -626,6 +626,15 @@ TEST(NarrowFarEnd, FindsANarrowTubeAtTheFarEndOnly)
     EXPECT_LT(found->plugMm.z + found->plugRadiusMm, 450.0);
     EXPECT_FALSE(run(15.0).has_value()) << "a narrow stretch shorter than the wide depth and 30 mm";
     EXPECT_FALSE(run(0.0).has_value()) << "only the cap's fall at the end";
+    // A long narrow tube (700 mm after 500 mm of wide lumen): the window reaches back to the
+    // wide lumen (60% of the path when that is more than 600 mm).
+    {
+        std::vector<Vec3d> path;
+        for (double z = 0; z <= 1200.0; z += 0.5) path.push_back({0, 0, z});
+        const auto longTube = narrowFarEnd(path, [](const Vec3d& p) { return p.z <= 500.0 ? 20.0 : 7.0; });
+        ASSERT_TRUE(longTube.has_value()) << "a 700 mm tube filled the window";
+        EXPECT_NEAR(longTube->lengthMm, 700.0, 1.0);
+    }
     // All narrow: no wide lumen to leave.
     std::vector<Vec3d> path;
     for (double z = 0; z <= 400.0; z += 0.5) path.push_back({0, 0, z});
