@@ -33,15 +33,30 @@ double distanceToPolyline(const Vec3d& p, const std::vector<Vec3d>& line)
     return best;
 }
 
+/// An empty folder of this test process under the temporary directory.
+fs::path freshTempDir(const std::string& name)
+{
+    const fs::path dir = fs::temp_directory_path() / ("flyover-e2e-" + name + "-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    return dir;
+}
+
+/// Small frames and a coarse coverage: what the tests of this file look at is not the images.
+void smallRender(RunOptions& run)
+{
+    run.params.render.widthPx = run.params.render.heightPx = 64;
+    run.params.render.frameStepMm = 200;
+    run.params.render.coveragePx = 48;
+}
+
 } // namespace
 
 TEST(EndToEnd, SmallPhantomMeetsFoundationTargets)
 {
     openvdb::initialize();
     const uint64_t seed = 7;
-    const fs::path dir = fs::temp_directory_path() / ("flyover-e2e-" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    const fs::path dir = freshTempDir("foundation");
 
     PhantomParams pp;
     pp.size = PhantomSize::Small;
@@ -150,9 +165,7 @@ TEST(EndToEnd, SmallPhantomMeetsFoundationTargets)
 TEST(EndToEnd, StorageOrientationChangesNoWorldResult)
 {
     openvdb::initialize();
-    const fs::path dir = fs::temp_directory_path() / ("flyover-e2e-orientation-" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    const fs::path dir = freshTempDir("orientation");
     struct Result {
         std::string code;
         Centerline centerline;
@@ -172,9 +185,7 @@ TEST(EndToEnd, StorageOrientationChangesNoWorldResult)
         run.ctPath = ct.string();
         run.studyDir = (dir / code).string();
         run.untilStage = "coverage";
-        run.params.render.widthPx = run.params.render.heightPx = 64;
-        run.params.render.frameStepMm = 200;
-        run.params.render.coveragePx = 48;
+        smallRender(run);
         run.params.render.coverageStepMm = 10;
         const nlohmann::json manifest = runPipeline(run);
         Result r;
@@ -241,9 +252,7 @@ TEST(EndToEnd, StorageOrientationChangesNoWorldResult)
 TEST(EndToEnd, IlealRefluxLeftOutIsReported)
 {
     openvdb::initialize();
-    const fs::path dir = fs::temp_directory_path() / ("flyover-e2e-ileum-" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    const fs::path dir = freshTempDir("ileum");
     PhantomParams pp;
     pp.size = PhantomSize::Small;
     pp.seed = 4;
@@ -254,9 +263,7 @@ TEST(EndToEnd, IlealRefluxLeftOutIsReported)
     run.ctPath = (dir / "ct.nii.gz").string();
     run.studyDir = (dir / "study").string();
     run.untilStage = "coverage";
-    run.params.render.widthPx = run.params.render.heightPx = 64;
-    run.params.render.frameStepMm = 200;
-    run.params.render.coveragePx = 48;
+    smallRender(run);
     run.params.render.coverageStepMm = 5;
     std::ostringstream log;
     RunLog runLog(RunLog::Mode::Plain, log);
