@@ -60,6 +60,32 @@ struct TubeSegment {
     double reachMm;      ///< farthest distance from the segment where the colon shows
 };
 
+/// The two-sample chords of a tube's axis (the first n of `axis`, 1 mm apart): their sagitta is
+/// far below a voxel for the colon's bend radii, and they halve the distance work.
+/// radius(i) and arc(i): the tube's radius and arc length (mm) at sample i.
+template <typename Radius, typename Arc>
+std::vector<TubeSegment> chordsOf(const std::vector<Vec3d>& axis, std::size_t n, const Radius& radius,
+                                  const Arc& arc, double voxelMm)
+{
+    std::vector<TubeSegment> out;
+    for (std::size_t i = 0; i + 1 < n; i += 2) {
+        const std::size_t j = std::min(i + 2, n - 1);
+        TubeSegment t;
+        t.a = axis[i];
+        t.d = axis[j] - t.a;
+        t.invLength2 = 1.0 / dot(t.d, t.d);
+        t.radiusA = radius(i);
+        t.radiusB = radius(j);
+        t.arcA = arc(i);
+        t.arcB = arc(j);
+        t.zMin = std::min(t.a.z, t.a.z + t.d.z);
+        t.zMax = std::max(t.a.z, t.a.z + t.d.z);
+        t.reachMm = std::max(t.radiusA, t.radiusB) + COLON_WALL_MM + PERICOLIC_FAT_MM + voxelMm;
+        out.push_back(t);
+    }
+    return out;
+}
+
 /// Partial-volume painting: blend towards `hu` by the fraction of the voxel inside
 /// the region whose signed distance at the voxel centre is `sdMm` (a linear ramp one
 /// voxel wide, the box filter of a planar boundary).
@@ -101,35 +127,11 @@ public:
         // voxel for the colon's bend radii, and they halve the distance work. Without a
         // colon there are none, and nothing of it is painted.
         const std::size_t n = params.colon ? anatomy.centerlineMm.size() : 0;
-        for (std::size_t i = 0; i + 1 < n; i += 2) {
-            const std::size_t j = std::min(i + 2, n - 1);
-            TubeSegment t;
-            t.a = anatomy.centerlineMm[i];
-            t.d = anatomy.centerlineMm[j] - t.a;
-            t.invLength2 = 1.0 / dot(t.d, t.d);
-            t.radiusA = anatomy.radiusMm[i];
-            t.radiusB = anatomy.radiusMm[j];
-            t.arcA = double(i) * anatomy.stepMm;
-            t.arcB = double(j) * anatomy.stepMm;
-            t.zMin = std::min(t.a.z, t.a.z + t.d.z);
-            t.zMax = std::max(t.a.z, t.a.z + t.d.z);
-            t.reachMm = std::max(t.radiusA, t.radiusB) + COLON_WALL_MM + PERICOLIC_FAT_MM + mVoxelMm;
-            mSegments.push_back(t);
-        }
-        // The terminal ileum's chords (variant), splatted apart from the colon's.
-        for (std::size_t i = 0; i + 1 < anatomy.ileumMm.size(); i += 2) {
-            const std::size_t j = std::min(i + 2, anatomy.ileumMm.size() - 1);
-            TubeSegment t;
-            t.a = anatomy.ileumMm[i];
-            t.d = anatomy.ileumMm[j] - t.a;
-            t.invLength2 = 1.0 / dot(t.d, t.d);
-            t.radiusA = t.radiusB = anatomy.ileumRadiusMm;
-            t.arcA = t.arcB = -1.0;
-            t.zMin = std::min(t.a.z, t.a.z + t.d.z);
-            t.zMax = std::max(t.a.z, t.a.z + t.d.z);
-            t.reachMm = t.radiusA + COLON_WALL_MM + PERICOLIC_FAT_MM + mVoxelMm;
-            mIleum.push_back(t);
-        }
+        mSegments = chordsOf(anatomy.centerlineMm, n, [&](std::size_t i) { return anatomy.radiusMm[i]; },
+                             [&](std::size_t i) { return double(i) * anatomy.stepMm; }, mVoxelMm);
+        // The terminal ileum's chords (variant), splatted apart from the colon's; no arc.
+        mIleum = chordsOf(anatomy.ileumMm, anatomy.ileumMm.size(), [&](std::size_t) { return anatomy.ileumRadiusMm; },
+                          [](std::size_t) { return -1.0; }, mVoxelMm);
         // Nearest fold for every centerline sample.
         mFoldAt.assign(n, -1);
         for (std::size_t i = 0; i < n && !anatomy.folds.empty(); ++i) {

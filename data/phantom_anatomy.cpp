@@ -1011,31 +1011,21 @@ void addIleum(PhantomAnatomy& a)
                                         {-55.0, 8.0, -126.0},
                                         {-70.0, 4.0, -138.0},
                                         {-86.0, 0.0, -143.0}};
-    // Catmull-Rom through the control points, resampled every 1 mm of arc.
+    // The colon's spline through the control points, sampled every 1 mm of arc.
+    const ChordCubicSpline spline(control);
     std::vector<Vec3d> dense;
-    for (std::size_t k = 0; k + 1 < control.size(); ++k) {
-        const Vec3d& p0 = control[k == 0 ? 0 : k - 1];
-        const Vec3d& p1 = control[k];
-        const Vec3d& p2 = control[k + 1];
-        const Vec3d& p3 = control[std::min(k + 2, control.size() - 1)];
-        for (int t = 0; t < 200; ++t) {
-            const double u = double(t) / 200.0, u2 = u * u, u3 = u2 * u;
-            dense.push_back((p1 * 2.0 + (p2 - p0) * u + (p0 * 2.0 - p1 * 5.0 + p2 * 4.0 - p3) * u2 +
-                             (p1 * 3.0 - p0 - p2 * 3.0 + p3) * u3) * 0.5);
+    std::vector<double> denseArc;
+    constexpr int DENSE_PER_SPAN = 256;
+    for (std::size_t span = 0; span + 1 < control.size(); ++span)
+        for (int k = span == 0 ? 0 : 1; k <= DENSE_PER_SPAN; ++k) {
+            const Vec3d p = spline.at(span, double(k) / DENSE_PER_SPAN);
+            denseArc.push_back(dense.empty() ? 0.0 : denseArc.back() + distance(dense.back(), p));
+            dense.push_back(p);
         }
-    }
-    dense.push_back(control.back());
-    a.ileumMm = {dense.front()};
-    double carried = 0;
-    for (std::size_t k = 1; k < dense.size(); ++k) {
-        const double d = distance(dense[k - 1], dense[k]);
-        carried += d;
-        while (carried >= 1.0) {
-            carried -= 1.0;
-            const double f = d > 0 ? 1.0 - carried / d : 1.0;
-            a.ileumMm.push_back(dense[k - 1] + (dense[k] - dense[k - 1]) * f);
-        }
-    }
+    a.ileumMm.resize(std::size_t(std::floor(denseArc.back())) + 1);
+    forEachArcSample(denseArc, 1.0, a.ileumMm.size(), [&](std::size_t i, std::size_t d, double w, double) {
+        a.ileumMm[i] = dense[d] * (1.0 - w) + dense[d + 1] * w;
+    });
     a.ileumRadiusMm = RADIUS_MM;
     a.ileumValveArcMm = double(valve) * a.stepMm;
     // Clear of every other loop of the colon (the cecum round the valve aside), of the spine

@@ -972,6 +972,12 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         for (Slot s : added) core[s] = 0;
         return routed;
     };
+    // No voxel of the piece reached yet (before a search that must not find ends left over from
+    // an earlier one: one that stops at a plug).
+    auto unreached = [&](std::int32_t label) {
+        for (Slot s = 0; s < index.slotCount(); ++s)
+            if (pieces.label[s] == label) steps[s] = -1;
+    };
     // One piece's path; from the end of the tube nearest to `seed` when one is given.
     // `from`: start there instead (with `plugged`, the piece's holes plus voxels that end
     // the search there: the far end is then the farthest voxel reached without crossing them).
@@ -988,9 +994,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
             const Slot far = stepsFrom(index, holes, seed, steps, progress);
             a = stepsFrom(index, holes, far, steps, progress);
         }
-        if (plugged)  // voxels past the plug are not reached: no end may lie there
-            for (Slot s = 0; s < index.slotCount(); ++s)
-                if (pieces.label[s] == label) steps[s] = -1;
+        if (plugged) unreached(label);  // voxels past the plug are not reached: no end may lie there
         const Slot b = stepsFrom(index, plugged ? *plugged : holes, a, steps, progress);
         // The search runs on the coarsest set that connects the ends: the core's voxels of even
         // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
@@ -1142,8 +1146,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
                 if (distance(w, narrow->plugMm) <= narrow->plugRadiusMm) plugged.set(s);
             }
             if (!plugged.test(nearSlot) && !plugged.test(mouthSlot)) {
-                for (Slot s = 0; s < index.slotCount(); ++s)
-                    if (pieces.label[s] == label) steps[s] = -1;
+                unreached(label);
                 const Slot end = stepsFrom(index, plugged, nearSlot, steps, progress);
                 const double beyondMm = double(steps[end] - steps[mouthSlot]) * voxelMm;
                 if (steps[farSlot] < 0 && beyondMm >= FAR_SAC_DEPTHS * narrow->wideDepthMm) {
