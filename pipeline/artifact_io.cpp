@@ -24,6 +24,7 @@
 #include <new>
 #include <stdexcept>
 #include <system_error>
+#include <fcntl.h>
 #include <unistd.h>
 #include <vector>
 
@@ -244,17 +245,131 @@ void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids)
     writeGrids(path, grids, VdbValues::Blosc);
 }
 
+namespace {
+
+/// An output stream buffer on a file descriptor that buffers every write, however large, in
+/// 1 MB (std::filebuf hands any write of 1 KB or more to the kernel at once) and seeks.
+class FileWriteBuffer : public std::streambuf {
+public:
+    explicit FileWriteBuffer(int fd) : mFd(fd), mBuffer(std::size_t(1) << 20) { resetPut(); }
+    /// The errno of the first failed write or seek; 0 when none failed.
+    int error() const { return mError; }
+
+protected:
+    int_type overflow(int_type ch) override
+    {
+        if (!drain()) return traits_type::eof();
+        if (!traits_type::eq_int_type(ch, traits_type::eof())) {
+            *pptr() = traits_type::to_char_type(ch);
+            pbump(1);
+        }
+        return traits_type::not_eof(ch);
+    }
+    std::streamsize xsputn(const char* s, std::streamsize n) override
+    {
+        std::streamsize done = 0;
+        while (done < n) {
+            if (pptr() == epptr() && !drain()) break;
+            const std::streamsize k = std::min<std::streamsize>(epptr() - pptr(), n - done);
+            std::memcpy(pptr(), s + done, std::size_t(k));
+            pbump(int(k));
+            done += k;
+        }
+        return done;
+    }
+    int sync() override { return drain() ? 0 : -1; }
+    pos_type seekoff(off_type off, std::ios_base::seekdir dir, std::ios_base::openmode which) override
+    {
+        if (!(which & std::ios_base::out)) return pos_type(off_type(-1));
+        if (off == 0 && dir == std::ios_base::cur) return pos_type(mFileOffset + (pptr() - pbase()));
+        if (!drain()) return pos_type(off_type(-1));
+        const int whence = dir == std::ios_base::beg ? SEEK_SET : dir == std::ios_base::cur ? SEEK_CUR : SEEK_END;
+        const off_t at = ::lseek(mFd, off_t(off), whence);
+        if (at < 0) {
+            mError = mError ? mError : errno;
+            return pos_type(off_type(-1));
+        }
+        mFileOffset = at;
+        return pos_type(off_type(at));
+    }
+    pos_type seekpos(pos_type pos, std::ios_base::openmode which) override
+    {
+        return seekoff(off_type(pos), std::ios_base::beg, which);
+    }
+
+private:
+    void resetPut() { setp(mBuffer.data(), mBuffer.data() + mBuffer.size()); }
+    bool drain()
+    {
+        const char* p = pbase();
+        std::size_t n = std::size_t(pptr() - pbase());
+        while (n > 0) {
+            const ssize_t w = ::write(mFd, p, n);
+            if (w < 0 && errno == EINTR) continue;
+            if (w <= 0) {
+                mError = mError ? mError : (w < 0 ? errno : EIO);
+                return false;
+            }
+            p += w;
+            n -= std::size_t(w);
+            mFileOffset += w;
+        }
+        resetPut();
+        return true;
+    }
+
+    int mFd;
+    off_t mFileOffset = 0;
+    int mError = 0;
+    std::vector<char> mBuffer;
+};
+
+/// Writes what openvdb::io::File::write writes (a seekable archive: the same bytes) through a
+/// FileWriteBuffer. io::File's own std::ofstream makes a write() per leaf (2 KB of a float
+/// leaf), and at that size the kernel's page cache bookkeeping costs five times the copy: for
+/// ct.vdb of the full phantom (224 MB) 0.26 s of system CPU on the way to the first pair.
+class BufferedVdbWriter : public openvdb::io::Archive {
+public:
+    void write(const std::string& path, const openvdb::GridPtrVec& grids) const
+    {
+        const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+        if (fd < 0) throw std::system_error(errno, std::generic_category(), path + ": cannot open for writing");
+        int error = 0;
+        {
+            FileWriteBuffer buffer(fd);
+            std::ostream out(&buffer);
+            try {
+                Archive::write(out, grids, /*seekable=*/true);
+                out.flush();
+            } catch (...) {
+                ::close(fd);
+                throw;
+            }
+            error = buffer.error();
+            if (!error && !out) error = EIO;
+        }
+        if (::close(fd) != 0 && !error) error = errno;
+        if (error) throw std::system_error(error, std::generic_category(), path + ": cannot write");
+    }
+};
+
+} // namespace
+
+void writeVdbFile(const std::string& file, const openvdb::GridPtrVec& grids, VdbValues values)
+{
+    BufferedVdbWriter writer;
+    uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
+    if (values == VdbValues::Blosc)
+        compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
+                                                                   : openvdb::io::COMPRESS_ZIP;
+    writer.setCompression(compression);
+    writer.write(file, grids);
+}
+
 void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids, VdbValues values)
 {
     writeAtomically(path, [&](const std::string& tmp) {
-        openvdb::io::File file(tmp);
-        uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
-        if (values == VdbValues::Blosc)
-            compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
-                                                                       : openvdb::io::COMPRESS_ZIP;
-        file.setCompression(compression);
-        file.write(grids);
-        file.close();
+        writeVdbFile(tmp, grids, values);
         makeVdbUuidDeterministic(tmp);
     });
 }

@@ -17,4 +17,9 @@ enum class VdbValues { Blosc, Raw };
 /// writeGrids(path, grids) with the given value compression (Blosc there).
 void writeGrids(const std::string& path, const openvdb::GridPtrVec& grids, VdbValues values);
 
+/// The bytes io::File::write writes (but in 1 MB writes: io::File's stream makes a write() per
+/// leaf), straight into `file` (no temporary, OpenVDB's random UUID): writeGrids' writer.
+/// @throw std::system_error with the errno of a failed open, write, seek or close.
+void writeVdbFile(const std::string& file, const openvdb::GridPtrVec& grids, VdbValues values);
+
 } // namespace flyover

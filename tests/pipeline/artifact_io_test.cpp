@@ -1,5 +1,6 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/deferred_writes.h"
+#include "pipeline/grid_write.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>
@@ -476,4 +477,71 @@ TEST(ArtifactIo, MeshFilesHaveTheBytesOfOpenMeshsPlyWriter)
     EXPECT_EQ(back.n_faces(), mesh.n_faces());
     EXPECT_EQ(back.n_vertices(), mesh.n_vertices());
     fs::remove_all(d);
+}
+
+TEST(ArtifactIo, VdbFilesHaveTheBytesOfOpenVdbsFileWriterButTheirUuid)
+{
+    // writeGrids writes through its own buffered stream, not io::File's: the bytes must be
+    // io::File's (the seeked-back grid offsets included) but for the content-derived UUID.
+    openvdb::initialize();
+    const fs::path d = tempDir("vdb-bytes");
+    auto hu = openvdb::FloatGrid::create(-1000.f);
+    hu->setName("ct_hu");
+    std::mt19937 random(7);
+    std::uniform_real_distribution<float> value(-1000.f, 1500.f);
+    for (int z = 0; z < 96; ++z)  // 96^3 voxels, 3.5 MB of values: the 1 MB buffer drains often
+        for (int y = 0; y < 96; ++y)
+            for (int x = 0; x < 96; ++x) hu->tree().setValue(openvdb::Coord(x, y, z), value(random));
+    auto mask = openvdb::BoolGrid::create(false);
+    mask->setName("lumen_mask");
+    mask->tree().topologyUnion(hu->tree());
+    for (const VdbValues values : {VdbValues::Raw, VdbValues::Blosc}) {
+        const openvdb::GridPtrVec grids{hu, mask};
+        writeGrids((d / "ours.vdb").string(), grids, values);
+        openvdb::io::File file((d / "openvdb.vdb").string());
+        file.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK |
+                            (values == VdbValues::Raw ? 0u : openvdb::io::COMPRESS_BLOSC));
+        file.write(grids);
+        file.close();
+        std::string ours = fileBytes(d / "ours.vdb"), reference = fileBytes(d / "openvdb.vdb");
+        const char* which = values == VdbValues::Raw ? "raw values" : "Blosc";
+        ASSERT_GT(reference.size(), std::size_t(3) << 20) << which;
+        ASSERT_EQ(ours.size(), reference.size()) << which;
+        constexpr std::size_t UUID_OFFSET = 21, UUID_LENGTH = 36;
+        ours.replace(UUID_OFFSET, UUID_LENGTH, reference, UUID_OFFSET, UUID_LENGTH);
+        EXPECT_TRUE(ours == reference) << "writeGrids' bytes differ from io::File's beyond the UUID (" << which << ")";
+        // The grid offsets it seeked back to write serve a delayed (random-access) read.
+        auto back = openvdb::gridPtrCast<openvdb::FloatGrid>(readGridDelayed((d / "ours.vdb").string(), "ct_hu"));
+        ASSERT_TRUE(back) << which;
+        EXPECT_EQ(back->activeVoxelCount(), hu->activeVoxelCount()) << which;
+        EXPECT_EQ(back->tree().getValue(openvdb::Coord(95, 40, 3)), hu->tree().getValue(openvdb::Coord(95, 40, 3)))
+            << which;
+    }
+    fs::remove_all(d);
+}
+
+TEST(ArtifactIo, VdbWriteToAFolderThatIsGoneFailsCleanly)
+{
+    openvdb::initialize();
+    const fs::path d = tempDir("vdb-gone");
+    auto g = openvdb::FloatGrid::create(0.f);
+    g->tree().setValue(openvdb::Coord(0, 0, 0), 1.f);
+    EXPECT_THROW(writeGrids((d / "missing" / "a.vdb").string(), {g}, VdbValues::Raw), std::exception);
+    EXPECT_FALSE(fs::exists(d / "missing"));
+    fs::remove_all(d);
+}
+
+TEST(ArtifactIo, VdbWriteErrorsKeepTheirCause)
+{
+    // A full disk is retryable (writeAtomically maps ENOSPC to a TransientError): the buffered
+    // writer must report the errno of the write that failed, not a bare "cannot write".
+    openvdb::initialize();
+    auto g = openvdb::FloatGrid::create(0.f);
+    for (int x = 0; x < 200; ++x) g->tree().setValue(openvdb::Coord(x, 0, 0), float(x));
+    try {
+        writeVdbFile("/dev/full", {g}, VdbValues::Raw);
+        FAIL() << "writing to /dev/full succeeded";
+    } catch (const std::system_error& e) {
+        EXPECT_EQ(e.code().value(), ENOSPC) << e.what();
+    }
 }
