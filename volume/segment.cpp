@@ -126,8 +126,24 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.leafCount(), 8),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         FloatConstAccessor huAcc(hu);
+        // Whether every voxel of the 8^3 block at `origin` is active in the HU grid: a leaf
+        // whose mask is full, or no leaf there and an active tile covering the block.
+        auto blockActive = [&huAcc](const Coord& origin) {
+            if (const auto* leaf = huAcc.probeConstLeaf(origin)) return leaf->getValueMask().isOn();
+            return huAcc.isValueOn(origin);
+        };
         for (std::size_t n = r.begin(); n != r.end(); ++n) {
             LeafStats& s = perLeaf[n];
+            // When the HU grid is active over this block and its six face-neighbour blocks,
+            // no voxel of it has an inactive face neighbour: the per-voxel test below can only
+            // say "not border" (the common case: colon, lungs and pockets lie inside the body).
+            const Coord origin = leaves.leaf(n).origin();
+            constexpr int DIM = int(BoolTree::LeafNodeType::DIM);
+            bool inside = blockActive(origin);
+            for (const Coord& d : FACE_NEIGHBOURS) {
+                if (!inside) break;
+                inside = blockActive(origin + Coord(d.x() * DIM, d.y() * DIM, d.z() * DIM));
+            }
             for (auto it = leaves.leaf(n).cbeginValueOn(); it; ++it) {
                 const Coord ijk = it.getCoord();
                 ++s.count;
@@ -138,7 +154,7 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
                 s.maxWorld = openvdb::math::maxComponent(s.maxWorld, w);
                 // Touching the outside: a face neighbour outside the body (inactive in the HU
                 // grid, which includes everything beyond the scanned box).
-                if (!s.border)
+                if (!s.border && !inside)
                     for (const Coord& d : FACE_NEIGHBOURS)
                         if (!huAcc.isValueOn(ijk + d)) {
                             s.border = true;

@@ -829,5 +829,30 @@ TEST(LumenPieces, TheLogLineListsThePiecesTheCenterlineTakesAndCountsTheCrumbs)
     EXPECT_EQ(describeLumenPieces({pieces[0]}, rule).find("smaller"), std::string::npos);
 }
 
+TEST(SegmentLumen, AirAgainstTheBodysEdgeAtABlockFaceIsBorder)
+{
+    // measureComponent skips the per-voxel "touches the outside" test for a block when the HU
+    // grid is active over it and its six face-neighbour blocks. Here a pocket fills one whole
+    // 8^3 block whose +x face is the body's edge (the next block is outside): only the
+    // neighbour block says so. The same pocket one block further in is merely small.
+    for (const int x0 : {56, 48}) {
+        auto hu = openvdb::FloatGrid::create(-1000.f);
+        hu->tree().fill(openvdb::CoordBBox({0, 0, 0}, {63, 63, 63}), 40.f, /*active=*/true);
+        hu->tree().voxelizeActiveTiles();
+        auto air = [&](const openvdb::Coord& lo, const openvdb::Coord& hi) {
+            for (auto it = openvdb::CoordBBox(lo, hi).begin(); it; ++it) hu->tree().setValueOn(*it, -1000.f);
+        };
+        air({16, 16, 8}, {47, 31, 55});           // 24.6 mL: the colon
+        air({x0, 40, 40}, {x0 + 7, 47, 47});      // 0.5 mL: one block
+        const LumenSegmentation seg = segmentLumen(*hu, midpointParams());
+        SCOPED_TRACE(listComponents(seg));
+        const AirComponent* pocket = nullptr;
+        for (const AirComponent& c : seg.components)
+            if (std::abs(c.centroidMm[0] - (x0 + 3.5)) < 0.5 && std::abs(c.centroidMm[1] - 43.5) < 0.5) pocket = &c;
+        ASSERT_NE(pocket, nullptr) << "no component at x " << x0;
+        EXPECT_EQ(pocket->reason, x0 == 56 ? "border" : "small") << "the pocket at x " << x0 << ".." << x0 + 7;
+    }
+}
+
 } // namespace
 } // namespace flyover
