@@ -316,7 +316,11 @@ openvdb::FloatGrid::Ptr ingestImage(ImageSource& source, const IngestParams& par
             bracket(z, k, wz);
             anyResampled = wz != 0.0f;
         }
-        if (anyResampled) slab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), background);
+        // Resampled only between slices, every value of a resampled slice is written below: no
+        // fill (8 MB a slab of the full phantom, 0.03 CPU s a run). Resampled in the plane, the
+        // voxels outside the scanned stack keep the background.
+        if (anyResampled && inPlaneCopy) slab.resize(sliceSize * static_cast<std::size_t>(z1 - z0));
+        else if (anyResampled) slab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), background);
         outsideSlab.assign(sliceSize * static_cast<std::size_t>(z1 - z0), 0);
         tbb::parallel_for(z0, z1, [&](int z) {
             float* dst = anyResampled ? slab.data() + sliceSize * static_cast<std::size_t>(z - z0) : nullptr;
