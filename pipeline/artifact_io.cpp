@@ -4,6 +4,7 @@
 #include "pipeline/grid_write.h"
 
 #include "volume/error.h"
+#include "volume/fd_write.h"
 #include "volume/image.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
@@ -301,19 +302,12 @@ private:
     void resetPut() { setp(mBuffer.data(), mBuffer.data() + mBuffer.size()); }
     bool drain()
     {
-        const char* p = pbase();
-        std::size_t n = std::size_t(pptr() - pbase());
-        while (n > 0) {
-            const ssize_t w = ::write(mFd, p, n);
-            if (w < 0 && errno == EINTR) continue;
-            if (w <= 0) {
-                mError = mError ? mError : (w < 0 ? errno : EIO);
-                return false;
-            }
-            p += w;
-            n -= std::size_t(w);
-            mFileOffset += w;
+        const std::size_t n = std::size_t(pptr() - pbase());
+        if (const int error = writeFully(mFd, pbase(), n)) {
+            mError = mError ? mError : error;
+            return false;
         }
+        mFileOffset += off_t(n);
         resetPut();
         return true;
     }
@@ -326,8 +320,9 @@ private:
 
 /// Writes what openvdb::io::File::write writes (a seekable archive: the same bytes) through a
 /// FileWriteBuffer. io::File's own std::ofstream makes a write() per leaf (2 KB of a float
-/// leaf), and at that size the kernel's page cache bookkeeping costs five times the copy: for
-/// ct.vdb of the full phantom (224 MB) 0.26 s of system CPU on the way to the first pair.
+/// leaf): for ct.vdb of the full phantom (224 MB) 0.26 s of system CPU on the way to the first
+/// pair, against ~0.05 s in 1 MB writes while the kernel's memory is not fragmented (README,
+/// "Where ingest's time goes": with a fragmented page cache both cost about the same).
 class BufferedVdbWriter : public openvdb::io::Archive {
 public:
     void write(const std::string& path, const openvdb::GridPtrVec& grids) const

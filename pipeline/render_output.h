@@ -6,6 +6,7 @@
 
 #include "render/camera.h"
 #include "render/render_view.h"
+#include "volume/fd_write.h"
 #include "volume/vec3.h"
 
 #include <nlohmann/json.hpp>
@@ -289,17 +290,8 @@ public:
                                         std::to_string(mWidth) + " x " + std::to_string(mHeight));
         if (mYuv) rgbToYuv420(frame.rgb.data(), frame.width, frame.height, mPlanes);
         const uint8_t* p = mYuv ? mPlanes.data() : frame.rgb.data();
-        std::size_t left = mYuv ? mPlanes.size() : frame.rgb.size();
-        while (left > 0 && !mBroken) {
-            const ssize_t n = ::write(mFd, p, left);
-            if (n < 0) {
-                if (errno == EINTR) continue;
-                mBroken = true;  // ffmpeg exited: finish() reports why
-                break;
-            }
-            p += n;
-            left -= std::size_t(n);
-        }
+        const std::size_t size = mYuv ? mPlanes.size() : frame.rgb.size();
+        if (!mBroken && writeFully(mFd, p, size) != 0) mBroken = true;  // ffmpeg exited: finish() reports why
     }
 
     /// Closes the stream, waits for ffmpeg. @throw std::runtime_error when it failed.

@@ -199,12 +199,8 @@ TriangleGeometry triangleGeometry(const RayScene& scene, const Centerline* cente
         const Vec3d& p = g.centroidMm[f];
         if (p.x < lo.x || p.y < lo.y || p.z < lo.z || p.x > hi.x || p.y > hi.y || p.z > hi.z) continue;
         double toBranch = std::numeric_limits<double>::infinity();
-        for (std::size_t i = 0; i < axis.size(); ++i) {
-            const Vec3d a = axis[i], ab = (i + 1 < axis.size() ? axis[i + 1] : a) - a;
-            const double len2 = dot(ab, ab);
-            const double t = len2 > 0 ? std::clamp(dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
-            toBranch = std::min(toBranch, distance(p, a + ab * t));
-        }
+        for (std::size_t i = 0; i < axis.size(); ++i)
+            toBranch = std::min(toBranch, distanceToSegment(p, axis[i], axis[std::min(i + 1, axis.size() - 1)]));
         if (toBranch > reach) continue;
         if (toBranch < distance(p, centerline->points[locator.nearest(p)].positionMm)) {
             g.leftOutAreaMm2 += g.areaMm2[f];

@@ -80,14 +80,6 @@ double polylineLength(const std::vector<Vec3d>& p, std::size_t from, std::size_t
     return s;
 }
 
-double distanceToSegment(const Vec3d& p, const Vec3d& a, const Vec3d& b)
-{
-    const Vec3d ab = b - a;
-    const double len2 = dot(ab, ab);
-    const double t = len2 > 0 ? std::clamp(dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
-    return distance(p, a + ab * t);
-}
-
 /// One thin piece, measured along its geodesic axis from where it meets the wide part.
 struct PieceAxis {
     std::vector<Vec3d> axis;   ///< bin centroids, from the attachment outwards

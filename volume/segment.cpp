@@ -126,6 +126,7 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.leafCount(), 8),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         FloatConstAccessor huAcc(hu);
+        constexpr int DIM = int(BoolTree::LeafNodeType::DIM);
         // Whether every voxel of the 8^3 block at `origin` is active in the HU grid: a leaf
         // whose mask is full, or no leaf there and an active tile covering the block.
         auto blockActive = [&huAcc](const Coord& origin) {
@@ -138,7 +139,6 @@ ComponentStats measureComponent(const BoolTree& component, const FloatTree& hu,
             // no voxel of it has an inactive face neighbour: the per-voxel test below can only
             // say "not border" (the common case: colon, lungs and pockets lie inside the body).
             const Coord origin = leaves.leaf(n).origin();
-            constexpr int DIM = int(BoolTree::LeafNodeType::DIM);
             bool inside = blockActive(origin);
             for (const Coord& d : FACE_NEIGHBOURS) {
                 if (!inside) break;

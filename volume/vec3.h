@@ -3,6 +3,7 @@
 ///        and directions. Deliberately free of OpenVDB so that render/ does not need it.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 
 namespace flyover {
@@ -36,6 +37,14 @@ constexpr Vec3d cross(const Vec3d& a, const Vec3d& b)
 }
 inline double length(const Vec3d& v) { return std::sqrt(dot(v, v)); }
 inline double distance(const Vec3d& a, const Vec3d& b) { return length(a - b); }
+/// Distance from `p` to the segment a-b (to a when the segment has no length).
+inline double distanceToSegment(const Vec3d& p, const Vec3d& a, const Vec3d& b)
+{
+    const Vec3d ab = b - a;
+    const double len2 = dot(ab, ab);
+    const double t = len2 > 0 ? std::clamp(dot(p - a, ab) / len2, 0.0, 1.0) : 0.0;
+    return distance(p, a + ab * t);
+}
 /// @return v / |v|, or the zero vector when |v| is zero.
 inline Vec3d normalize(const Vec3d& v)
 {

@@ -22,6 +22,8 @@
 
 #include <fcntl.h>
 #include <sys/resource.h>
+#include "volume/fd_write.h"
+
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -29,13 +31,7 @@ namespace flyover::imageio {
 
 void writeAll(int fd, const std::string& text)
 {
-    std::size_t done = 0;
-    while (done < text.size()) {
-        const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) return;
-        done += static_cast<std::size_t>(n);
-    }
+    (void)writeFully(fd, text.data(), text.size());  // a broken pipe: the parent sees a short answer
 }
 
 void capChildMemory(uint64_t extraBytes)
