@@ -3,6 +3,12 @@
 #include "volume/progress.h"
 #include "volume/segment.h"
 
+#include <tbb/task_arena.h>
+
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 namespace flyover {
 
 SpeculativeMesh::SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params, bool deferFinalChecks)
@@ -10,9 +16,16 @@ SpeculativeMesh::SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams
 {
 }
 
-SpeculativeMesh::SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks)
-    : mWork([this, copy, params, deferFinalChecks](Progress* progress) {
-          return makeLumenSurface(*copy, params, &mReport, progress, true, deferFinalChecks);
+SpeculativeMesh::SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks,
+                                 bool yielding)
+    : mWork([this, copy, params, deferFinalChecks, yielding](Progress* progress) {
+          if (!yielding) return makeLumenSurface(*copy, params, &mReport, progress, true, deferFinalChecks);
+          // This thread at nice 10 (Linux: a thread's own) and its parallel loops in a
+          // low-priority arena, whose tasks TBB's workers take only when no other arena has
+          // work: the mesh goes on in what the cut, the centerline and the first pair leave.
+          ::setpriority(PRIO_PROCESS, id_t(::syscall(SYS_gettid)), YIELDING_NICE);
+          tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
+          return arena.execute([&] { return makeLumenSurface(*copy, params, &mReport, progress, true, deferFinalChecks); });
       })
 {
 }
@@ -45,9 +58,24 @@ SpeculativeCenterline::SpeculativeCenterline(openvdb::FloatGrid::ConstPtr copy, 
 {
 }
 
+const Centerline& SpeculativeCenterline::result()
+{
+    if (!mResult && !mError) {
+        try {
+            mResult = mWork.get();
+        } catch (...) {
+            mError = std::current_exception();
+        }
+    }
+    if (mError) std::rethrow_exception(mError);
+    return *mResult;
+}
+
 Centerline SpeculativeCenterline::take(CenterlineReport& report, bool& fromTube)
 {
-    Centerline c = mWork.get();
+    result();  // waits; rethrows what tracing threw
+    Centerline c = std::move(*mResult);
+    mResult.reset();
     report = mReport;
     fromTube = mFromTube;
     return c;

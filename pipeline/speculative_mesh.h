@@ -18,7 +18,9 @@
 #include <openvdb/openvdb.h>
 
 #include <atomic>
+#include <exception>
 #include <future>
+#include <optional>
 #include <string>
 
 namespace flyover {
@@ -71,7 +73,12 @@ public:
     /// are left to the taker (makeLumenSurface's deferFinalChecks) when `deferFinalChecks`.
     SpeculativeMesh(const openvdb::FloatGrid& sdf, const MeshParams& params, bool deferFinalChecks = false);
     /// The same on `copy`, a level set nobody changes (shared with a SpeculativeCenterline).
-    SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks);
+    /// `yielding`: the mesh takes only the cores the rest of the run leaves idle (its thread
+    /// at nice YIELDING_NICE, its parallel loops in a low-priority TBB arena), for a run whose
+    /// first pair does not wait for it (local_first_pair.h). The mesh is the same.
+    SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks,
+                    bool yielding = false);
+    static constexpr int YIELDING_NICE = 10;
     SpeculativeMesh(const SpeculativeMesh&) = delete;
     SpeculativeMesh& operator=(const SpeculativeMesh&) = delete;
 
@@ -104,10 +111,15 @@ public:
     /// Waits for the centerline and returns it, its report in `report` and whether its rectum
     /// hint was the rectal tube's tip in `fromTube`; rethrows what tracing threw. Call once.
     Centerline take(CenterlineReport& report, bool& fromTube);
+    /// Waits for the centerline and returns it, kept for take() (the segment stage's local
+    /// first pair looks at it first). Rethrows what tracing threw.
+    const Centerline& result();
 
 private:
     CenterlineReport mReport;
     bool mFromTube = false;
+    std::optional<Centerline> mResult;
+    std::exception_ptr mError;  ///< what tracing threw, for take() after result()
     CancellableWork<Centerline> mWork;  ///< last: cancelled and waited for before mReport goes
 };
 

@@ -31,6 +31,7 @@
 namespace flyover {
 
 class RayScene;
+struct LocalFirstPair;
 class SpeculativeMesh;
 class SpeculativeCenterline;
 class SpeculativeSegmentation;
@@ -98,6 +99,15 @@ struct StudyState {
     std::shared_ptr<SpeculativeMesh> speculativeMesh;
     /// ... and its centerline of that lumen.
     std::shared_ptr<SpeculativeCenterline> speculativeCenterline;
+    /// Whether this run goes through the frames step with frames and a mesh that allow a first
+    /// pair from a local surface (local_first_pair.h; set by runPipeline): the segment stage
+    /// then makes it after the contact cut, and the whole mesh it begins beside the cut yields
+    /// the cores to the cut, the centerline and that pair (SpeculativeMesh's `yielding`).
+    bool localFirstPairWanted = false;
+    /// That pair, when it was certified (and announced), for the frames step.
+    std::shared_ptr<const LocalFirstPair> localFirstPair;
+    /// What the attempt found (null: none was made), for the frames step's report.
+    nlohmann::json localFirstPairReport;
 };
 
 class StudyRun {
@@ -205,6 +215,11 @@ nlohmann::json cutLumenContacts(StudyRun& run, LumenSegmentation& seg);
 /// of `centerline` nearest to their two sides; null when there are none recorded.
 nlohmann::json contactsAlongPath(const openvdb::FloatGrid& sdf, const Centerline& centerline);
 nlohmann::json runMesh(StudyRun& run, Progress* progress);
+/// The segment stage's first fly-over pair from the surface round the first centerline point
+/// of `centerline` (local_first_pair.h): when certified, written alone into frames/, announced
+/// (log line, JSON event "first_pair") and kept in run.state for the frames step. Returns what
+/// the attempt found (run.state.localFirstPairReport).
+nlohmann::json makeLocalFirstPair(StudyRun& run, const openvdb::FloatGrid& sdf, const Centerline& centerline);
 // The render steps: each its own cached step of the graph, side by side after the frames.
 /// Fly-over pairs in frames/; the first pair is rendered, written and announced before the
 /// rest (log line "first fly-over pair", JSON event "first_pair").

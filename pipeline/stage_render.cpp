@@ -14,7 +14,10 @@
 // study's frames/ at once and announced (report: first_pair_seconds).
 #include "pipeline/stage_context.h"
 
+#include "pipeline/local_first_pair.h"
+
 #include "pipeline/artifact_io.h"
+#include "pipeline/deferred_writes.h"
 #include "pipeline/render_output.h"
 #include "pipeline/render_settings.h"
 #include "render/camera.h"
@@ -554,6 +557,47 @@ json firstPairSceneJson(const std::optional<FirstPairFromSubset>& first)
 
 } // namespace
 
+json makeLocalFirstPair(StudyRun& run, const openvdb::FloatGrid& sdf, const Centerline& centerline)
+{
+    const auto t0 = Clock::now();
+    const RenderParams& rp = run.opt.params.render;
+    const std::size_t index0 = pathIndices(centerline, rp.frameStepMm).front();
+    auto made = std::make_shared<LocalFirstPair>(
+        localFirstPair(sdf, centerline, index0, run.opt.params.mesh, flyoverParamsOf(rp), frameOptionsOf(rp)));
+    json report{{"certified", made->certified},
+                {"clip_leaf_fraction", made->clipLeafFraction},
+                {"exact_box_mm", {vec3Json(made->exactBox.min), vec3Json(made->exactBox.max)}},
+                {"local_triangles", made->localTriangles},
+                {"checked_leaves", made->checkLeaves},
+                {"seconds",
+                 {{"mesh", made->meshSeconds},
+                  {"frame_radius", made->radiusSeconds},
+                  {"render", made->renderSeconds},
+                  {"check", made->checkSeconds}}}};
+    if (!made->certified) {
+        report["reason"] = made->reason;
+        run.state.localFirstPairReport = report;
+        return report;
+    }
+    // In the study's frames/ at once, alone (publishFirstPair), and announced.
+    const std::string staged = run.path(".tmp-" + std::to_string(::getpid()) + "-local-first-pair.png");
+    {
+        const DeferredWrites::Scope now(nullptr);  // written at once, not behind (the segment stage's are)
+        writePng(staged, made->pair);
+    }
+    publishFirstPair(run.dir, staged, pairName(0));
+    std::error_code ec;
+    fs::remove(staged, ec);
+    report["seconds_since_run_start"] = secondsSince(run.start);
+    report["seconds"]["total"] = secondsSince(t0);
+    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+    crashPoint("frames:first-pair");
+    run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
+    run.state.localFirstPair = std::move(made);
+    run.state.localFirstPairReport = report;
+    return report;
+}
+
 json runFrames(StudyRun& run, Progress* progress)
 {
     const auto tStart = Clock::now();
@@ -582,7 +626,13 @@ json runFrames(StudyRun& run, Progress* progress)
     // scene of the whole surface is not built yet, from scenes of only the triangles its rays
     // can meet (the same pixels: tested), the whole scene after it.
     std::optional<FirstPairFromSubset> first;
-    if (!run.renderInputsBuilt()) {
+    const std::shared_ptr<const LocalFirstPair> local = run.state.localFirstPair;
+    if (local) {
+        // Made, written and announced by the segment stage from a local surface
+        // (local_first_pair.h): into this step's folder, confirmed on the whole scene below.
+        writePng(frames.path(pairName(0)), local->pair);
+        firstShown = local->pair;
+    } else if (!run.renderInputsBuilt()) {
         const Centerline& cl = run.renderCenterline();
         const std::size_t index0 = pathIndices(cl, rp.frameStepMm).front();
         std::unique_ptr<RayScene> pairScene;
@@ -594,12 +644,15 @@ json runFrames(StudyRun& run, Progress* progress)
         renderFramePair(*in.scene, 0,
                         flyoverCameras(in.centerline->points[index0], flyoverParamsOf(rp), in.frameRadii[index0]));
     }
-    publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
-    const double firstPairSeconds = secondsSince(tStart);
-    const double firstPairSinceRunStart = secondsSince(run.start);
-    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
-    crashPoint("frames:first-pair");
-    run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
+    const double firstPairSeconds = local ? 0.0 : secondsSince(tStart);
+    const double firstPairSinceRunStart =
+        local ? run.state.localFirstPairReport.value("seconds_since_run_start", 0.0) : secondsSince(run.start);
+    if (!local) {
+        publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
+        if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+        crashPoint("frames:first-pair");
+        run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
+    }
 
     // The whole scene, before the work that waited for the first pair (the mesh checks, the
     // write-behind's fsyncs) starts: the BVH build's temporaries and theirs would add up.
@@ -615,13 +668,14 @@ json runFrames(StudyRun& run, Progress* progress)
     // confirmed on the whole scene (one pair, ~0.01 s) and, should it differ, replaced, so that
     // frames/ is always the whole scene's rendering; the log and the report say so.
     json firstConfirmed = json{{"confirmed_on_whole_scene", false}};
-    if (first) {
+    if (first || local) {
         const auto cams = flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]);
         const auto lease = buffers.take();
         RgbImage& whole = *lease;
         renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), whole);
         const std::size_t differing = differingPixels(firstShown, whole);
-        const bool sameRadius = first->frameRadiusMm == in.frameRadii[indices[0]];
+        const double shownRadius = local ? local->frameRadiusMm : first->frameRadiusMm;
+        const bool sameRadius = shownRadius == in.frameRadii[indices[0]];
         firstConfirmed = json{{"confirmed_on_whole_scene", true},
                               {"same_frame_radius", sameRadius},
                               {"differing_pixels", differing},
@@ -630,8 +684,13 @@ json runFrames(StudyRun& run, Progress* progress)
             writePng(frames.path(pairName(0)), whole);
             if (run.opt.log) {
                 std::ostringstream msg;
-                msg << "frames: the first pair shown (from its scene of " << first->pairTriangles << " of "
-                    << first->surfaceTriangles << " triangles) differed from the whole scene's in " << differing
+                if (local)
+                    msg << "frames: the first pair shown (from the local surface round its cameras, "
+                        << local->localTriangles << " triangles) differed from the whole scene's in " << differing;
+                else
+                    msg << "frames: the first pair shown (from its scene of " << first->pairTriangles << " of "
+                        << first->surfaceTriangles << " triangles) differed from the whole scene's in " << differing;
+                msg
                     << " pixels" << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
                     << " is now the whole scene's";
                 run.opt.log->message(msg.str());
@@ -679,8 +738,14 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"triangles", scene.triangleCount()},
                 {"first_pair_seconds", firstPairSeconds},
                 {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
-                {"first_pair_breakdown_seconds", firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
-                {"first_pair_scene", firstPairSceneJson(first)},
+                {"first_pair_breakdown_seconds",
+                 local ? run.state.localFirstPairReport["seconds"]
+                       : firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
+                {"first_pair_scene", local ? json{{"scene", "local surface round the first cameras (segment stage)"},
+                                                  {"local_triangles", local->localTriangles},
+                                                  {"frame_radius_mm", local->frameRadiusMm}}
+                                           : firstPairSceneJson(first)},
+                {"local_first_pair", run.state.localFirstPairReport},
                 {"first_pair_check", firstConfirmed},
                 {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
                 {"whole_scene_seconds",

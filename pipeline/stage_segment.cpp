@@ -102,19 +102,36 @@ json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
     // changes nothing (not with --threads 1: those threads would be more).
     std::shared_ptr<SpeculativeMesh> mesh;
     std::shared_ptr<SpeculativeCenterline> centerline;
+    openvdb::FloatGrid::ConstPtr copy;
     const bool threads = threadsThatMayRun() > 1;
+    // With a first pair from a local surface (local_first_pair.h) the whole mesh yields to the
+    // cut and the centerline, which that pair waits for, and to the pair itself; it still fills
+    // the cores they leave idle.
+    const bool localPair = threads && run.state.localFirstPairWanted && run.state.meshWanted &&
+                           run.state.centerlineWanted;
     if (threads && (run.state.meshWanted || run.state.centerlineWanted) && seg.sdf &&
         SpeculativeMesh::applicable(*seg.sdf)) {
         // One copy, read by both (neither changes it).
-        const openvdb::FloatGrid::ConstPtr copy = seg.sdf->deepCopy();
+        copy = seg.sdf->deepCopy();
         // The centerline first: the first pair waits for it, the mesh's checks wait for the pair.
         if (run.state.centerlineWanted)
             centerline = std::make_shared<SpeculativeCenterline>(copy, run.opt.params.centerline);
         // Its final checks are left to the mesh stage, which makes them behind the first pair.
-        if (run.state.meshWanted) mesh = std::make_shared<SpeculativeMesh>(copy, run.opt.params.mesh, true);
+        if (run.state.meshWanted)
+            mesh = std::make_shared<SpeculativeMesh>(copy, run.opt.params.mesh, true, localPair);
     }
     json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
     if (contacts.value("cut", -1) == 0) {
+        if (localPair && centerline) {
+            // The cut changed nothing: the centerline traced beside it is the centerline
+            // stage's. A failed trace is left for that stage to report.
+            const Centerline* traced = nullptr;
+            try {
+                traced = &centerline->result();
+            } catch (const std::exception&) {
+            }
+            if (traced && !traced->points.empty()) makeLocalFirstPair(run, *seg.sdf, *traced);
+        }
         run.state.speculativeMesh = std::move(mesh);
         run.state.speculativeCenterline = std::move(centerline);
     }

@@ -4,6 +4,8 @@
 #include "pipeline/artifact_store.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/digest_stamps.h"
+#include "pipeline/local_first_pair.h"
+#include "pipeline/render_settings.h"
 #include "pipeline/stage_context.h"
 #include "volume/error.h"
 
@@ -11,6 +13,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <exception>
 #include <future>
 #include <filesystem>
@@ -295,6 +298,12 @@ nlohmann::json runPipeline(const RunOptions& options)
     run.state.renderWanted = kind == StudyKind::Colon && std::any_of(specs.begin(), specs.end(), [&](const StageSpec& s) {
                                  return s.paramStage == RENDER_GROUP && wanted.count(s.name) > 0;
                              });
+    // Test hook (tests/pipeline): FLYOVER_TEST_NO_LOCAL_FIRST_PAIR=1 leaves the first pair to the
+    // frames step, to exercise its own ways (the frustum cull, its confirmation).
+    const char* noLocalPair = std::getenv("FLYOVER_TEST_NO_LOCAL_FIRST_PAIR");
+    run.state.localFirstPairWanted = kind == StudyKind::Colon && wanted.count("frames") > 0 &&
+                                     !(noLocalPair && std::string(noLocalPair) == "1") &&
+                                     localFirstPairApplies(options.params.mesh, frameOptionsOf(options.params.render));
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries

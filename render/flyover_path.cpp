@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <sstream>
 
@@ -30,7 +31,8 @@ double capOf(const CenterlinePoint& p) { return 2.0 * std::max(p.radiusMm, 0.0) 
 
 /// The half-width one cross-section needs, before the maximum and the Gaussian (with the margin).
 double needAt(const RayScene& scene, const CenterlinePoint& p, const FlyoverParams& params,
-              const FrameRadiusOptions& options, double tanHalf)
+              const FrameRadiusOptions& options, double tanHalf, const BoxMm* box = nullptr,
+              std::atomic<bool>* within = nullptr)
 {
     const double d = std::max(p.radiusMm, 0.0);
     double r = d;
@@ -42,6 +44,8 @@ double needAt(const RayScene& scene, const CenterlinePoint& p, const FlyoverPara
             const double ca = std::cos(a), sa = std::sin(a);
             const Vec3d dir = ax.b * ca + ax.n * sa;
             const RayHit hit = scene.intersect(p.positionMm, dir, 0.0, 4.0 * cap, false);
+            if (box && !(box->contains(p.positionMm) && box->contains(p.positionMm + dir * (hit.hit ? hit.t : 4.0 * cap))))
+                *within = false;
             if (!hit.hit) continue;  // an open end: nothing to frame that way
             const double lateral = hit.t * std::fabs(ca), depth = hit.t * std::fabs(sa);
             r = std::max(r, std::min(cap, lateral - depth * tanHalf));
@@ -146,8 +150,11 @@ std::pair<std::size_t, std::size_t> frameRadiusReach(const Centerline& centerlin
     return reachOf(centerline, index, Smoothing(centerline, options));
 }
 
-double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
-                            std::size_t index, const FrameRadiusOptions& options)
+namespace {
+
+/// flyoverFrameRadiusAt, with the fan rays checked against `box` when one is given.
+double frameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
+                     std::size_t index, const FrameRadiusOptions& options, const BoxMm* box, std::atomic<bool>* within)
 {
     const double tanHalf = checkedTanHalf(params, options);
     checkIndex(centerline, index, "flyoverFrameRadiusAt");
@@ -155,9 +162,26 @@ double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline,
     const auto [first, last] = reachOf(centerline, index, smoothing);
     std::vector<double> need(last - first + 1);
     tbb::parallel_for(first, last + 1, [&](std::size_t j) {
-        need[j - first] = needAt(scene, centerline.points[j], params, options, tanHalf);
+        need[j - first] = needAt(scene, centerline.points[j], params, options, tanHalf, box, within);
     });
     return smoothing.radiusAt(need, first, index, centerline);
+}
+
+} // namespace
+
+double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
+                            std::size_t index, const FrameRadiusOptions& options)
+{
+    return frameRadiusAt(scene, centerline, params, index, options, nullptr, nullptr);
+}
+
+double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
+                            std::size_t index, const FrameRadiusOptions& options, const BoxMm& box, bool& within)
+{
+    std::atomic<bool> inside{true};
+    const double r = frameRadiusAt(scene, centerline, params, index, options, &box, &inside);
+    within = inside.load();
+    return r;
 }
 
 std::vector<uint32_t> frameRadiusTriangles(const std::vector<float>& verticesXyz,

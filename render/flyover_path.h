@@ -47,6 +47,22 @@ std::vector<double> flyoverFrameRadii(const RayScene& scene, const Centerline& c
 double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
                             std::size_t index, const FrameRadiusOptions& options = {});
 
+/// An axis-aligned box in world mm (for FanRayCheck).
+struct BoxMm {
+    Vec3d min, max;
+    bool contains(const Vec3d& p) const
+    {
+        return p.x >= min.x && p.y >= min.y && p.z >= min.z && p.x <= max.x && p.y <= max.y && p.z <= max.z;
+    }
+};
+
+/// flyoverFrameRadiusAt, and whether every fan ray it cast started inside `box` and met the
+/// scene inside it, or spent its reach (4 * cap) without a hit and ended inside it: `within`.
+/// Then any scene holding the same triangles inside `box` gives the same R (each ray's segment
+/// up to its hit or end lies in the box, which is convex).
+double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
+                            std::size_t index, const FrameRadiusOptions& options, const BoxMm& box, bool& within);
+
 /// The first and last centerline index (inclusive) whose fan of rays R(index) depends on: the
 /// running maximum's window plus the Gaussian's reach (3 sigma) on either side.
 /// @throw ParameterError for an index past the centerline.

@@ -423,8 +423,10 @@ std::size_t differingPixels(const RgbImage& a, const RgbImage& b)
     return n;
 }
 
-void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
-                RgbImage& pair, int gapPx)
+namespace {
+
+void renderPairInto(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                    RgbImage& pair, HitImage* leftHits, HitImage* rightHits, int gapPx)
 {
     validate(left, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
     validate(right, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
@@ -439,8 +441,22 @@ void renderPair(const RayScene& scene, const Camera& left, const Camera& right, 
     const std::size_t row = 2 * w + gap;
     pair.rgb.resize(row * h * 3);  // every pixel is written
     for (std::size_t y = 0; y < h; ++y) fillSeparator(pair.rgb.data() + (y * row + w) * 3, gap);
-    renderInto(scene, left, options, pair.rgb.data(), row, nullptr);
-    renderInto(scene, right, options, pair.rgb.data() + (w + gap) * 3, row, nullptr);
+    renderInto(scene, left, options, pair.rgb.data(), row, leftHits);
+    renderInto(scene, right, options, pair.rgb.data() + (w + gap) * 3, row, rightHits);
+}
+
+} // namespace
+
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, int gapPx)
+{
+    renderPairInto(scene, left, right, options, pair, nullptr, nullptr, gapPx);
+}
+
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, HitImage& leftHits, HitImage& rightHits, int gapPx)
+{
+    renderPairInto(scene, left, right, options, pair, &leftHits, &rightHits, gapPx);
 }
 
 void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits)

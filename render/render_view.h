@@ -80,6 +80,9 @@ std::size_t differingPixels(const RgbImage& a, const RgbImage& b);
 /// @throw ParameterError as renderView, or for gapPx outside 0..65536
 void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
                 RgbImage& pair, int gapPx = PAIR_GAP_PX);
+/// The same, with each view's hit image (as renderView gives it) in `leftHits` and `rightHits`.
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, HitImage& leftHits, HitImage& rightHits, int gapPx = PAIR_GAP_PX);
 
 /// Only the hit image of the pixel-centre rays (no shading, no supersampling): the same rays
 /// and the same OST and near-plane rules as renderView. For coverage and picking.
