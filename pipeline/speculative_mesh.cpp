@@ -23,11 +23,20 @@ SpeculativeMesh::SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshPa
           // This thread at nice 10 (Linux: a thread's own) and its parallel loops in a
           // low-priority arena, whose tasks TBB's workers take only when no other arena has
           // work: the mesh goes on in what the cut, the centerline and the first pair leave.
-          ::setpriority(PRIO_PROCESS, id_t(::syscall(SYS_gettid)), YIELDING_NICE);
+          mThread = pid_t(::syscall(SYS_gettid));
+          ::setpriority(PRIO_PROCESS, id_t(mThread.load()), YIELDING_NICE);
           tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
           return arena.execute([&] { return makeLumenSurface(*copy, params, &mReport, progress, true, deferFinalChecks); });
       })
 {
+}
+
+void SpeculativeMesh::stopYielding()
+{
+    // Best effort: lowering a nice value needs CAP_SYS_NICE or RLIMIT_NICE (root has both);
+    // refused, the thread stays at nice 10, which matters only against other processes.
+    const pid_t thread = mThread.load();
+    if (thread > 0) ::setpriority(PRIO_PROCESS, id_t(thread), 0);
 }
 
 bool SpeculativeMesh::applicable(const openvdb::FloatGrid& sdf) { return !sdf.tree().hasActiveTiles(); }

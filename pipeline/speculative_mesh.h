@@ -23,6 +23,8 @@
 #include <optional>
 #include <string>
 
+#include <sys/types.h>
+
 namespace flyover {
 
 /// Work of type T on a thread of its own, given a Progress whose cancelled() turns true when
@@ -79,6 +81,9 @@ public:
     SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshParams& params, bool deferFinalChecks,
                     bool yielding = false);
     static constexpr int YIELDING_NICE = 10;
+    /// Back to nice 0 once the first pair no longer waits (when the system lets the process
+    /// lower a nice value: root, or RLIMIT_NICE); the TBB arena stays low-priority.
+    void stopYielding();
     SpeculativeMesh(const SpeculativeMesh&) = delete;
     SpeculativeMesh& operator=(const SpeculativeMesh&) = delete;
 
@@ -92,6 +97,7 @@ public:
 
 private:
     LumenSurfaceReport mReport;
+    std::atomic<pid_t> mThread{0};   ///< the yielding work's thread, once it runs
     CancellableWork<TriMesh> mWork;  ///< last: cancelled and waited for before mReport goes
 };
 

@@ -102,7 +102,6 @@ json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
     // changes nothing (not with --threads 1: those threads would be more).
     std::shared_ptr<SpeculativeMesh> mesh;
     std::shared_ptr<SpeculativeCenterline> centerline;
-    openvdb::FloatGrid::ConstPtr copy;
     const bool threads = threadsThatMayRun() > 1;
     // With a first pair from a local surface (local_first_pair.h) the whole mesh yields to the
     // cut and the centerline, which that pair waits for, and to the pair itself; it still fills
@@ -112,7 +111,7 @@ json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
     if (threads && (run.state.meshWanted || run.state.centerlineWanted) && seg.sdf &&
         SpeculativeMesh::applicable(*seg.sdf)) {
         // One copy, read by both (neither changes it).
-        copy = seg.sdf->deepCopy();
+        const openvdb::FloatGrid::ConstPtr copy = seg.sdf->deepCopy();
         // The centerline first: the first pair waits for it, the mesh's checks wait for the pair.
         if (run.state.centerlineWanted)
             centerline = std::make_shared<SpeculativeCenterline>(copy, run.opt.params.centerline);
@@ -131,6 +130,7 @@ json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
             } catch (const std::exception&) {
             }
             if (traced && !traced->points.empty()) makeLocalFirstPair(run, *seg.sdf, *traced);
+            if (mesh) mesh->stopYielding();  // the frames step's first pair, if any, waits for it now
         }
         run.state.speculativeMesh = std::move(mesh);
         run.state.speculativeCenterline = std::move(centerline);
