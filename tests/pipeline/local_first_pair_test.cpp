@@ -138,6 +138,24 @@ TEST(LocalFirstPair, ACertifiedPairHasTheWholeSurfacesPixels)
     EXPECT_GT(local.localTriangles, 0u);
 }
 
+// The fan rays' box check: the same R as without it; `within` only when every ray stays inside.
+TEST(LocalFirstPair, FanRaysAreCheckedAgainstTheBox)
+{
+    const auto sdf = tubesLevelSet({COLON, POUCH});
+    const Centerline cl = tubeCenterline(COLON);
+    const RayScene scene(makeLumenSurface(*sdf, MeshParams{}));
+    const FlyoverParams fp;
+    const double plain = flyoverFrameRadiusAt(scene, cl, fp, 0);
+    bool within = false;
+    const BoxMm large{Vec3d{-100, -100, -100}, Vec3d{100, 100, 200}};
+    EXPECT_EQ(flyoverFrameRadiusAt(scene, cl, fp, 0, {}, large, within), plain);
+    EXPECT_TRUE(within);
+    // The pouch reaches y = 26 mm: a box to y = 20 mm cuts the rays that find it.
+    const BoxMm cut{Vec3d{-100, -100, -100}, Vec3d{100, 20, 200}};
+    EXPECT_EQ(flyoverFrameRadiusAt(scene, cl, fp, 0, {}, cut, within), plain);
+    EXPECT_FALSE(within) << "fan rays that end beyond the box were taken as inside";
+}
+
 // A second loop behind the first, outside the box the pair is made in: rays that pass the first
 // tube's end meet it. The local surface does not hold it, so its pair differs from the whole
 // one's, and the check of the rays that met nothing refuses it.
