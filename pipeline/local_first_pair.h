@@ -1,8 +1,9 @@
 /// @file local_first_pair.h
 /// @brief Internal to pipeline/ (issue 15): the first fly-over pair rendered from a surface
 ///        made only around its cameras, as soon as the contact cut and the centerline are
-///        known, before the whole surface is made. Its pixels are shown only where they are
-///        provably those of the whole surface's scene.
+///        known, before the whole surface is made. It is shown only when no ray of it can meet
+///        what the local surface lacks; inside its box the local surface is the whole one's
+///        (measured: see below), and the frames step confirms the pixels.
 ///
 /// How. The lumen level set is clipped to a box round the first centerline point (the exact
 /// box, half-width 2 cap with cap = 2 D + 5 mm at the first point, at least 40 mm; widened on
