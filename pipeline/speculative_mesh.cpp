@@ -24,7 +24,10 @@ SpeculativeMesh::SpeculativeMesh(openvdb::FloatGrid::ConstPtr copy, const MeshPa
           // low-priority arena, whose tasks TBB's workers take only when no other arena has
           // work: the mesh goes on in what the cut, the centerline and the first pair leave.
           mThread = pid_t(::syscall(SYS_gettid));
-          ::setpriority(PRIO_PROCESS, id_t(mThread.load()), YIELDING_NICE);
+          if (!mYieldOver) {
+              ::setpriority(PRIO_PROCESS, id_t(mThread.load()), YIELDING_NICE);
+              if (mYieldOver) ::setpriority(PRIO_PROCESS, id_t(mThread.load()), 0);  // stopYielding came between
+          }
           tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
           return arena.execute([&] { return makeLumenSurface(*copy, params, &mReport, progress, true, deferFinalChecks); });
       })
@@ -35,6 +38,7 @@ void SpeculativeMesh::stopYielding()
 {
     // Best effort: lowering a nice value needs CAP_SYS_NICE or RLIMIT_NICE (root has both);
     // refused, the thread stays at nice 10, which matters only against other processes.
+    mYieldOver = true;
     const pid_t thread = mThread.load();
     if (thread > 0) ::setpriority(PRIO_PROCESS, id_t(thread), 0);
 }

@@ -98,6 +98,7 @@ public:
 private:
     LumenSurfaceReport mReport;
     std::atomic<pid_t> mThread{0};   ///< the yielding work's thread, once it runs
+    std::atomic<bool> mYieldOver{false};  ///< stopYielding() was called (even before the thread ran)
     CancellableWork<TriMesh> mWork;  ///< last: cancelled and waited for before mReport goes
 };
 

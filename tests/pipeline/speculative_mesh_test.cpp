@@ -10,6 +10,7 @@
 #include "study_fixture.h"
 
 #include <gtest/gtest.h>
+#include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 
 #include <atomic>
@@ -232,4 +233,29 @@ TEST(CancellableWork, DroppedWorkIsCancelledAndWaitedFor)
         });
     }
     EXPECT_TRUE(sawCancel) << "the destructor returned before the work saw its cancellation";
+}
+
+// A yielding mesh (nice 10, a low-priority TBB arena: the local first pair's runs) is the same
+// mesh, whether stopYielding() comes at once (before its thread may have started) or never.
+TEST(SpeculativeMesh, YieldingMakesTheSameMesh)
+{
+    const openvdb::FloatGrid::ConstPtr sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        20.0f, openvdb::Vec3f(0.0f), 0.8f);
+    const MeshParams params;
+    auto pointsOf = [](const TriMesh& m) {
+        std::vector<TriMesh::Point> p;
+        for (const auto v : m.vertices()) p.push_back(m.point(v));
+        return p;
+    };
+    LumenSurfaceReport r0, r1, r2;
+    SpeculativeMesh plain(sphere, params, true, false);
+    SpeculativeMesh yielding(sphere, params, true, true);
+    SpeculativeMesh stopped(sphere, params, true, true);
+    stopped.stopYielding();
+    const TriMesh a = plain.take(r0), b = yielding.take(r1), c = stopped.take(r2);
+    ASSERT_GT(a.n_faces(), 0u);
+    EXPECT_EQ(b.n_faces(), a.n_faces());
+    EXPECT_EQ(c.n_faces(), a.n_faces());
+    EXPECT_EQ(pointsOf(b), pointsOf(a)) << "the yielding mesh moved a vertex";
+    EXPECT_EQ(pointsOf(c), pointsOf(a));
 }
