@@ -7,9 +7,9 @@
 #include <openvdb/tools/Clip.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
-#include <exception>
 #include <vector>
 
 namespace flyover {
@@ -40,54 +40,27 @@ BoxMm boxAround(const Vec3d& c, double half)
     return BoxMm{c - Vec3d{half, half, half}, c + Vec3d{half, half, half}};
 }
 
-/// The four corners of the camera's near-plane rectangle (the rays of a w x h image start there).
+/// The four corners of the camera's near-plane rectangle, where the rays of a w x h image start
+/// (pixelDirection at the image's corners, at the near plane's depth).
 std::array<Vec3d, 4> nearCorners(const Camera& cam, int widthPx, int heightPx)
 {
-    const double tanHalf = std::tan(0.5 * cam.fovDeg * 3.14159265358979323846 / 180.0);
-    const double up = cam.nearMm * tanHalf, right = up * double(widthPx) / double(heightPx);
-    const Vec3d centre = cam.position + cam.forward * cam.nearMm;
-    return {centre + cam.right * right + cam.up * up, centre + cam.right * right - cam.up * up,
-            centre - cam.right * right + cam.up * up, centre - cam.right * right - cam.up * up};
+    std::array<Vec3d, 4> out;
+    for (int k = 0; k < 4; ++k)
+        out[std::size_t(k)] = cam.position + pixelDirection(cam, widthPx, heightPx, (k & 1) ? widthPx : 0,
+                                                              (k & 2) ? heightPx : 0) * cam.nearMm;
+    return out;
 }
 
-/// Whether all eight corners of `box` lie beyond one of the frustum's five planes (near, sides).
-bool outsideFrustum(const Camera& cam, double tanHalf, double aspect, const BoxMm& box)
-{
-    for (int plane = 0; plane < 5; ++plane) {
-        bool allOut = true;
-        for (int k = 0; k < 8 && allOut; ++k) {
-            const Vec3d c{(k & 1) ? box.max.x : box.min.x, (k & 2) ? box.max.y : box.min.y,
-                          (k & 4) ? box.max.z : box.min.z};
-            const Vec3d q = c - cam.position;
-            const double z = dot(q, cam.forward), x = dot(q, cam.right), y = dot(q, cam.up);
-            double s = 0;
-            switch (plane) {
-            case 0: s = cam.nearMm - z; break;
-            case 1: s = x - z * tanHalf * aspect; break;
-            case 2: s = -x - z * tanHalf * aspect; break;
-            case 3: s = y - z * tanHalf; break;
-            default: s = -y - z * tanHalf; break;
-            }
-            allOut = s > 0;
-        }
-        if (allOut) return true;
-    }
-    return false;
-}
-
-/// The boxes (widened active leaves of `sdf`) not wholly inside `exact` that a ray of one of
-/// `cams` may meet, as a scene of their faces (12 triangles each, in the order of `boxes`).
+/// A scene of the faces (12 triangles a box) of the active leaves of `sdf` not wholly inside
+/// `exact`, widened by LEAF_WIDENING_VOXELS, that a ray of `cams` may meet (frustumTriangles
+/// drops the others); `count` gets the number of boxes kept. Null when none is.
 std::unique_ptr<RayScene> leafBoxScene(const openvdb::FloatGrid& sdf, const BoxMm& exact,
-                                       const std::array<Camera, 2>& cams, const RenderOptions& ro,
-                                       std::vector<BoxMm>& boxes)
+                                       const std::array<Camera, 2>& cams, const RenderOptions& ro, std::size_t& count)
 {
     const openvdb::math::Transform& xf = sdf.transform();
     const double widen = LEAF_WIDENING_VOXELS * xf.voxelSize()[0];
-    const double tanHalf = std::tan(0.5 * cams[0].fovDeg * 3.14159265358979323846 / 180.0);
-    const double aspect = double(ro.widthPx) / double(ro.heightPx);
     std::vector<float> xyz;
     std::vector<uint32_t> tris;
-    boxes.clear();
     static constexpr int FACES[12][3] = {{0, 1, 3}, {0, 3, 2}, {4, 6, 7}, {4, 7, 5}, {0, 4, 5}, {0, 5, 1},
                                          {2, 3, 7}, {2, 7, 6}, {0, 2, 6}, {0, 6, 4}, {1, 5, 7}, {1, 7, 3}};
     for (auto leaf = sdf.tree().cbeginLeaf(); leaf; ++leaf) {
@@ -98,7 +71,6 @@ std::unique_ptr<RayScene> leafBoxScene(const openvdb::FloatGrid& sdf, const BoxM
         const BoxMm box{Vec3d{wb.min()[0] - widen, wb.min()[1] - widen, wb.min()[2] - widen},
                         Vec3d{wb.max()[0] + widen, wb.max()[1] + widen, wb.max()[2] + widen}};
         if (exact.contains(box.min) && exact.contains(box.max)) continue;
-        if (outsideFrustum(cams[0], tanHalf, aspect, box) && outsideFrustum(cams[1], tanHalf, aspect, box)) continue;
         const auto base = uint32_t(xyz.size() / 3);
         for (int k = 0; k < 8; ++k) {
             xyz.push_back(float((k & 1) ? box.max.x : box.min.x));
@@ -107,107 +79,16 @@ std::unique_ptr<RayScene> leafBoxScene(const openvdb::FloatGrid& sdf, const BoxM
         }
         for (const auto& f : FACES)
             for (int k = 0; k < 3; ++k) tris.push_back(base + uint32_t(f[k]));
-        boxes.push_back(box);  // its 12 faces are triangles 12 i .. 12 i + 11
     }
-    if (boxes.empty()) return nullptr;
+    count = 0;
+    if (tris.empty()) return nullptr;
+    std::vector<uint32_t> seen = frustumTriangles(xyz, tris, {cams[0], cams[1]}, ro.widthPx, ro.heightPx);
+    for (std::size_t i = 0; i < seen.size(); i += 3)  // a box's kept faces come together
+        count += (i == 0 || seen[i] / 8 != seen[i - 3] / 8) ? 1 : 0;
+    if (seen.empty()) return nullptr;
     SceneOptions fast;
     fast.fastBuild = true;
-    return std::make_unique<RayScene>(std::move(xyz), std::move(tris), fast);
-}
-
-/// The try with the exact box `exact`: `out` gets the pair and, when it is not certified, the
-/// reason.
-void attempt(const openvdb::FloatGrid& sdf, const Centerline& centerline, std::size_t index, const MeshParams& mesh,
-             const FlyoverParams& flyover, const RenderOptions& ro, const BoxMm& exact, LocalFirstPair& out)
-{
-    const CenterlinePoint& p = centerline.points[index];
-    const double margin = std::max(MARGIN_VOXELS * sdf.transform().voxelSize()[0], MIN_MARGIN_MM);
-    out.exactBox = exact;
-    out.clipBox = BoxMm{exact.min - Vec3d{margin, margin, margin}, exact.max + Vec3d{margin, margin, margin}};
-    out.uncertainPixels = 0;
-
-    // The surface in the clip box, made as the mesh stage makes the whole one.
-    auto t = Clock::now();
-    std::unique_ptr<RayScene> scene;
-    try {
-        const openvdb::BBoxd clip(openvdb::Vec3d(out.clipBox.min.x, out.clipBox.min.y, out.clipBox.min.z),
-                                  openvdb::Vec3d(out.clipBox.max.x, out.clipBox.max.y, out.clipBox.max.z));
-        const openvdb::FloatGrid::Ptr clipped = openvdb::tools::clip(sdf, clip);
-        LumenSurfaceReport report;
-        const TriMesh local = makeLumenSurface(*clipped, mesh, &report, nullptr, false, true);
-        std::vector<float> xyz;
-        std::vector<uint32_t> tris;
-        triMeshArrays(local, xyz, tris);
-        out.localTriangles = tris.size() / 3;
-        std::vector<float> normals = smoothVertexNormals(xyz, tris);
-        SceneOptions fast;
-        fast.fastBuild = true;
-        scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris), normals, fast);
-    } catch (const InputError& e) {  // no surface in the box
-        out.reason = std::string("no surface round the first point: ") + e.what();
-        return;
-    }
-    out.meshSeconds += secondsSince(t);
-
-    t = Clock::now();
-    bool fanWithin = false;
-    out.frameRadiusMm = flyoverFrameRadiusAt(*scene, centerline, flyover, index, {}, exact, fanWithin);
-    out.cameras = flyoverCameras(p, flyover, out.frameRadiusMm);
-    out.radiusSeconds += secondsSince(t);
-    if (!fanWithin) {
-        out.reason = "a fan ray of the frame radius leaves the exact box";
-        return;
-    }
-    for (const Camera& cam : out.cameras)
-        for (const Vec3d& c : nearCorners(cam, ro.widthPx, ro.heightPx))
-            if (!exact.contains(c)) {
-                out.reason = "a near plane reaches out of the exact box";
-                return;
-            }
-
-    t = Clock::now();
-    std::array<HitImage, 2> hits;
-    renderPair(*scene, out.cameras[0], out.cameras[1], ro, out.pair, hits[0], hits[1]);
-    out.renderSeconds += secondsSince(t);
-
-    // Every ray that met the surface met it inside the exact box; those that met nothing pass
-    // no leaf of the level set that is not wholly inside it.
-    t = Clock::now();
-    bool anyMiss = false;
-    std::size_t outside = 0;
-    for (int v = 0; v < 2; ++v)
-        for (int y = 0; y < hits[v].height; ++y)
-            for (int x = 0; x < hits[v].width; ++x) {
-                if (!(hits[v].t[std::size_t(y) * std::size_t(hits[v].width) + std::size_t(x)] >= 0.0f)) {
-                    anyMiss = true;
-                    continue;
-                }
-                const Vec3d hit = hitPointMm(out.cameras[std::size_t(v)], hits[v], x, y);
-                if (!exact.contains(hit)) ++outside;
-            }
-    if (anyMiss) {
-        std::vector<BoxMm> boxes;
-        const std::unique_ptr<RayScene> leaves = leafBoxScene(sdf, exact, out.cameras, ro, boxes);
-        out.checkLeaves = boxes.size();
-        if (leaves) {
-            RenderOptions plain = ro;
-            plain.ost = false;
-            for (int v = 0; v < 2; ++v) {
-                HitImage boxHits;
-                traceHits(*leaves, out.cameras[std::size_t(v)], plain, boxHits);
-                for (std::size_t i = 0; i < boxHits.t.size(); ++i)
-                    if (!(hits[v].t[i] >= 0.0f) && boxHits.t[i] >= 0.0f) ++out.uncertainPixels;
-            }
-        }
-    }
-    out.checkSeconds += secondsSince(t);
-    if (outside > 0 || out.uncertainPixels > 0) {
-        out.reason = std::to_string(outside) + " rays meet the surface outside the exact box, " +
-                     std::to_string(out.uncertainPixels) + " that meet nothing here pass the level set outside it";
-        return;
-    }
-    out.certified = true;
-    out.reason.clear();
+    return std::make_unique<RayScene>(std::move(xyz), std::move(seen), fast);
 }
 
 } // namespace
@@ -230,25 +111,105 @@ LocalFirstPair localFirstPair(const openvdb::FloatGrid& sdf, const Centerline& c
     if (index >= centerline.points.size()) throw ParameterError("localFirstPair: centerline index past its end");
     const CenterlinePoint& p = centerline.points[index];
     const double cap = 2.0 * std::max(p.radiusMm, 0.0) + 5.0;
-    const BoxMm exact = boxAround(p.positionMm, std::max(EXACT_HALF_CAPS * cap, MIN_EXACT_HALF_MM));
+    const double exactHalf = std::max(EXACT_HALF_CAPS * cap, MIN_EXACT_HALF_MM);
+    const BoxMm exact = boxAround(p.positionMm, exactHalf);
     // Only where the clip box holds a small part of the surface: else the whole mesh is about
     // as near (a small lumen), and the try would only add its own work.
     const double margin = std::max(MARGIN_VOXELS * sdf.transform().voxelSize()[0], MIN_MARGIN_MM);
-    const BoxMm clip{exact.min - Vec3d{margin, margin, margin}, exact.max + Vec3d{margin, margin, margin}};
+    const BoxMm clip = boxAround(p.positionMm, exactHalf + margin);
     std::size_t leaves = 0, inClip = 0;
     for (auto leaf = sdf.tree().cbeginLeaf(); leaf; ++leaf) {
         ++leaves;
         const openvdb::Vec3d c = sdf.transform().indexToWorld(leaf->getNodeBoundingBox().getCenter());
         inClip += clip.contains(Vec3d{c[0], c[1], c[2]}) ? 1 : 0;
     }
+    out.exactBox = exact;
+    out.clipBox = clip;
     out.clipLeafFraction = leaves > 0 ? double(inClip) / double(leaves) : 1.0;
     if (out.clipLeafFraction > MAX_CLIP_LEAF_FRACTION) {
         out.reason = "the box round the first cameras holds most of the surface";
-        out.exactBox = exact;
-        out.clipBox = clip;
         return out;
     }
-    attempt(sdf, centerline, index, mesh, flyover, ro, exact, out);
+
+    // The surface in the clip box, made as the mesh stage makes the whole one.
+    auto t = Clock::now();
+    std::unique_ptr<RayScene> scene;
+    try {
+        const openvdb::BBoxd world(openvdb::Vec3d(clip.min.x, clip.min.y, clip.min.z),
+                                   openvdb::Vec3d(clip.max.x, clip.max.y, clip.max.z));
+        const openvdb::FloatGrid::Ptr clipped = openvdb::tools::clip(sdf, world);
+        LumenSurfaceReport report;
+        const TriMesh local = makeLumenSurface(*clipped, mesh, &report, nullptr, false, true);
+        std::vector<float> xyz;
+        std::vector<uint32_t> tris;
+        triMeshArrays(local, xyz, tris);
+        out.localTriangles = tris.size() / 3;
+        std::vector<float> normals = smoothVertexNormals(xyz, tris);
+        SceneOptions fast;
+        fast.fastBuild = true;
+        scene = std::make_unique<RayScene>(std::move(xyz), std::move(tris), normals, fast);
+    } catch (const InputError& e) {  // no surface in the box
+        out.reason = std::string("no surface round the first point: ") + e.what();
+        return out;
+    }
+    out.meshSeconds = secondsSince(t);
+
+    t = Clock::now();
+    bool fanWithin = false;
+    out.frameRadiusMm = flyoverFrameRadiusAt(*scene, centerline, flyover, index, {}, exact, fanWithin);
+    out.cameras = flyoverCameras(p, flyover, out.frameRadiusMm);
+    out.radiusSeconds = secondsSince(t);
+    if (!fanWithin) {
+        out.reason = "a fan ray of the frame radius leaves the exact box";
+        return out;
+    }
+    for (const Camera& cam : out.cameras)
+        for (const Vec3d& c : nearCorners(cam, ro.widthPx, ro.heightPx))
+            if (!exact.contains(c)) {
+                out.reason = "a near plane reaches out of the exact box";
+                return out;
+            }
+
+    t = Clock::now();
+    std::array<HitImage, 2> hits;
+    renderPair(*scene, out.cameras[0], out.cameras[1], ro, out.pair, hits[0], hits[1]);
+    out.renderSeconds = secondsSince(t);
+
+    // Every ray that met the surface met it inside the exact box; those that met nothing pass
+    // no leaf of the level set that is not wholly inside it.
+    t = Clock::now();
+    bool anyMiss = false;
+    std::size_t outside = 0;
+    for (int v = 0; v < 2; ++v)
+        for (int y = 0; y < hits[v].height; ++y)
+            for (int x = 0; x < hits[v].width; ++x) {
+                if (!(hits[v].t[std::size_t(y) * std::size_t(hits[v].width) + std::size_t(x)] >= 0.0f)) {
+                    anyMiss = true;
+                    continue;
+                }
+                const Vec3d hit = hitPointMm(out.cameras[std::size_t(v)], hits[v], x, y);
+                if (!exact.contains(hit)) ++outside;
+            }
+    if (anyMiss) {
+        const std::unique_ptr<RayScene> leafBoxes = leafBoxScene(sdf, exact, out.cameras, ro, out.checkLeaves);
+        if (leafBoxes) {
+            RenderOptions plain = ro;
+            plain.ost = false;
+            for (int v = 0; v < 2; ++v) {
+                HitImage boxHits;
+                traceHits(*leafBoxes, out.cameras[std::size_t(v)], plain, boxHits);
+                for (std::size_t i = 0; i < boxHits.t.size(); ++i)
+                    if (!(hits[v].t[i] >= 0.0f) && boxHits.t[i] >= 0.0f) ++out.uncertainPixels;
+            }
+        }
+    }
+    out.checkSeconds = secondsSince(t);
+    if (outside > 0 || out.uncertainPixels > 0) {
+        out.reason = std::to_string(outside) + " rays meet the surface outside the exact box, " +
+                     std::to_string(out.uncertainPixels) + " that meet nothing here pass the level set outside it";
+        return out;
+    }
+    out.certified = true;
     return out;
 }
 

@@ -684,14 +684,13 @@ json runFrames(StudyRun& run, Progress* progress)
             writePng(frames.path(pairName(0)), whole);
             if (run.opt.log) {
                 std::ostringstream msg;
+                msg << "frames: the first pair shown (from ";
                 if (local)
-                    msg << "frames: the first pair shown (from the local surface round its cameras, "
-                        << local->localTriangles << " triangles) differed from the whole scene's in " << differing;
+                    msg << "the local surface round its cameras, " << local->localTriangles;
                 else
-                    msg << "frames: the first pair shown (from its scene of " << first->pairTriangles << " of "
-                        << first->surfaceTriangles << " triangles) differed from the whole scene's in " << differing;
-                msg
-                    << " pixels" << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
+                    msg << "its scene of " << first->pairTriangles << " of " << first->surfaceTriangles;
+                msg << " triangles) differed from the whole scene's in " << differing << " pixels"
+                    << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
                     << " is now the whole scene's";
                 run.opt.log->message(msg.str());
             }

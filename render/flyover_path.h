@@ -47,7 +47,7 @@ std::vector<double> flyoverFrameRadii(const RayScene& scene, const Centerline& c
 double flyoverFrameRadiusAt(const RayScene& scene, const Centerline& centerline, const FlyoverParams& params,
                             std::size_t index, const FrameRadiusOptions& options = {});
 
-/// An axis-aligned box in world mm (for FanRayCheck).
+/// An axis-aligned box in world mm (for the fan rays' check below).
 struct BoxMm {
     Vec3d min, max;
     bool contains(const Vec3d& p) const
