@@ -13,8 +13,8 @@
 // reference arc, and the reference's own route between the two arcs with the lumen depth along
 // it. --dump writes the path (position, radius, nearest reference arc and error) and the depth
 // along the reference path as JSON for plotting.
-#include "volume/centerline.h"
-#include "volume/path_compare.h"
+#include "colon/centerline.h"
+#include "colon/path_compare.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>

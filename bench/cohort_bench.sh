@@ -5,13 +5,13 @@
 # under a temporary folder; quick renders (no video, coarse coverage) unless RENDER is set.
 #
 #   bench/cohort_bench.sh [N=8] [C=2]          (from the repository root, after a build)
-#   FLYOVER=build/pipeline/flyover RENDER="render.video=false" KEEP=1 bench/cohort_bench.sh
+#   FLYOVER=build/bin/flyover RENDER="render.video=false" KEEP=1 bench/cohort_bench.sh
 set -euo pipefail
 
 N=${1:-8}
 CORES=${2:-2}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-FLYOVER=$(realpath "${FLYOVER:-$ROOT/build/pipeline/flyover}")
+FLYOVER=$(realpath "${FLYOVER:-$ROOT/build/bin/flyover}")
 SNAKEFILE=$ROOT/workflows/cohort/Snakefile
 RENDER=${RENDER:-render.video=false render.width_px=128 render.height_px=128 render.overview_px=256 render.coverage_px=48 render.coverage_step_mm=10}
 command -v snakemake >/dev/null || { echo "cohort_bench: snakemake is not installed" >&2; exit 1; }

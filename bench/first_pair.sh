@@ -17,7 +17,7 @@ cd "$(dirname "$0")/.."
 SIZE=${1:-full}
 RUNS=${2:-5}
 shift $(( $# < 2 ? $# : 2 ))
-FLYOVER=${FLYOVER_BIN:-build/pipeline/flyover}
+FLYOVER=${FLYOVER_BIN:-build/bin/flyover}
 WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-first-pair}
 mkdir -p "$WORK"
 if [ "$SIZE" = gca ]; then

@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZE=${1:-full}
 RUNS=${2:-3}
-FLYOVER=${FLYOVER_BIN:-build/pipeline/flyover}
+FLYOVER=${FLYOVER_BIN:-build/bin/flyover}
 WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-first-view}
 command -v curl > /dev/null || { echo "first_view.sh: needs curl"; exit 1; }
 mkdir -p "$WORK"

@@ -14,7 +14,7 @@
 //   ingest_bench ingest FILE [OUT.vdb]     one ingest (child of compare); prints a JSON line
 //   ingest_bench baseline                  loads the libraries and exits (RSS floor)
 
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
 

@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 N=${1:-512}
 LIMIT=${2:-900}
 shift $(( $# < 2 ? $# : 2 ))
-FLYOVER=$(realpath "${FLYOVER_BIN:-build/pipeline/flyover}")
+FLYOVER=$(realpath "${FLYOVER_BIN:-build/bin/flyover}")
 WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-inspect}
 mkdir -p "$WORK"
 CT="$WORK/part-$N.nii"

@@ -1,4 +1,4 @@
-// local_mesh_probe: the measurement behind pipeline/local_first_pair.h (issue 15). Does a mesh
+// local_mesh_probe: the measurement behind colon/local_first_pair.h (issue 15). Does a mesh
 // extracted and smoothed (the mesh stage's extraction, Taubin and orientation guard) from a level
 // set clipped to a cube round the first centerline point equal the whole mesh away from the clip?
 //

@@ -6,11 +6,11 @@
 //   part_bench analyse CT [TRUTH.json]           read CT into a FloatGrid (every voxel active,
 //                                                as an ingest that keeps every voxel), analysePart
 #include "bench/process_memory.h"
-#include "data/part_phantom.h"
+#include "inspect/part_phantom.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/part_phantom_io.h"
+#include "inspect/part_phantom_io.h"
 #include "volume/image_io.h"
-#include "volume/voids.h"
+#include "inspect/voids.h"
 
 #include <openvdb/openvdb.h>
 #include <tbb/parallel_for.h>

@@ -8,7 +8,7 @@
 #   bench/real_colons.sh                      (from the repository root, after a build)
 #   SIZE=small SEEDS="1" VARIANTS="touching redundant" MODES=ct bench/real_colons.sh
 #   SIZE=small SEEDS="4 5" VARIANTS="touching4+redundant tube+touching2" bench/real_colons.sh
-#   FLYOVER=build/pipeline/flyover LIMIT=900 KEEP=1 GCA=0 bench/real_colons.sh
+#   FLYOVER=build/bin/flyover LIMIT=900 KEEP=1 GCA=0 bench/real_colons.sh
 #   UNTIL=centerline SIZE=small SEEDS="4 5 6 7 8" bench/real_colons.sh   (path and contacts only)
 #
 # Everything happens in a fresh folder under ${TMPDIR:-/tmp} (removed at the end unless KEEP
@@ -38,7 +38,7 @@
 set -uo pipefail
 
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-FLYOVER=$(realpath "${FLYOVER:-$ROOT/build/pipeline/flyover}")
+FLYOVER=$(realpath "${FLYOVER:-$ROOT/build/bin/flyover}")
 SIZE=${SIZE:-medium}
 SEEDS=${SEEDS:-1 2 3}
 VARIANTS=${VARIANTS:-touching redundant tube spacing all}

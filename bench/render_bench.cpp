@@ -37,10 +37,10 @@
 // third-party headers only.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/phantom_io.h"
-#include "pipeline/render_settings.h"
+#include "colon/phantom_io.h"
+#include "colon/render_settings.h"
 #include "pipeline/study.h"
 #include "render/camera.h"
 #include "render/coverage.h"
@@ -49,9 +49,9 @@
 #include "render/view_rays.h"
 #include "render/render_view.h"
 #include "surface/extract_surface.h"
-#include "volume/centerline.h"
+#include "colon/centerline.h"
 #include "volume/ingest.h"
-#include "volume/segment.h"
+#include "colon/segment.h"
 
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range2d.h>

@@ -6,7 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZE=${1:-full}
 RUNS=${2:-9}
-FLYOVER=${FLYOVER_BIN:-build/pipeline/flyover}
+FLYOVER=${FLYOVER_BIN:-build/bin/flyover}
 WORK=${FLYOVER_BENCH_DIR:-/tmp/flyover-bench-rerun}
 mkdir -p "$WORK"
 CT="$WORK/phantom-$SIZE.nii.gz"

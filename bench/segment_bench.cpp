@@ -1,6 +1,6 @@
-// segment_bench: lumen segmentation (volume/segment.h) on a phantom's HU grid, against a
+// segment_bench: lumen segmentation (colon/segment.h) on a phantom's HU grid, against a
 // plain pass over the same grid (air threshold + face-connected components), as a ratio.
-// With --mask: the mask-only path (volume/lumen_mask.h, segmentFromMask) on the phantom's true
+// With --mask: the mask-only path (colon/lumen_mask.h, segmentFromMask) on the phantom's true
 // lumen mask written as .nii.gz (read from the file, as `flyover run --mask` does), with the
 // time of each step.
 //
@@ -12,10 +12,10 @@
 // openImage() reads, e.g. one written by `flyover phantom`) instead of generating a phantom.
 //
 // --centerline: instead, segment + centerline as before contacts were cut ("centerline") against
-// segment + contact cutting + centerline ("contacts", volume/contacts.h), time and peak memory.
+// segment + contact cutting + centerline ("contacts", colon/contacts.h), time and peak memory.
 //
 // --mask-file FILE: the mask-only path on that mask file (e.g. a real segmentation) instead of a
-// phantom's; with --contacts, followed by cutContacts (volume/contacts.h), each step timed.
+// phantom's; with --contacts, followed by cutContacts (colon/contacts.h), each step timed.
 //
 // --lumen-file FILE: cutContacts alone, each step timed, on a copy of the `lumen_sdf` and
 // `lumen_mask` grids of FILE (a study's lumen.vdb written with
@@ -29,13 +29,13 @@
 // median CPU time (user + system: steadier than wall time on a shared machine), and each
 // child's resident memory after loading and at its peak.
 #include "bench/process_memory.h"
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "volume/image_io.h"
-#include "volume/centerline.h"
-#include "volume/contacts.h"
+#include "colon/centerline.h"
+#include "colon/contacts.h"
 #include "volume/ingest.h"
-#include "volume/lumen_mask.h"
-#include "volume/segment.h"
+#include "colon/lumen_mask.h"
+#include "colon/segment.h"
 #include "volume/segment_tools.h"
 
 #include <openvdb/openvdb.h>

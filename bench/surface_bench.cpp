@@ -4,7 +4,7 @@
 //
 //   surface_bench [--size full|medium|small] [--runs N] [--decimate-fraction F] [--stage mesh|centerline]
 //
-// --stage centerline times the centerline stage instead (volume/centerline.h: the distance
+// --stage centerline times the centerline stage instead (colon/centerline.h: the distance
 // field is the lumen level set itself; medial minimal path, centring on sections, smoothing,
 // bridging, resampling) on the same level set: issue 6's "under 3 s on 2 cores".
 //
@@ -14,11 +14,11 @@
 // the grid, not of the phantom generator. Prints the median and range of N runs: wall time
 // (and its parts), triangle count, resident memory after loading the grid and at its peak.
 #include "bench/process_memory.h"
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "surface/lumen_surface.h"
-#include "volume/centerline.h"
+#include "colon/centerline.h"
 #include "volume/ingest.h"
-#include "volume/segment.h"
+#include "colon/segment.h"
 
 #include <openvdb/openvdb.h>
 

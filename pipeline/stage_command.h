@@ -25,8 +25,8 @@
 /// leaves an "ok" receipt that a later rule trusts.
 #pragma once
 
-#include "pipeline/inspect_params.h"
-#include "pipeline/params.h"
+#include "inspect/inspect_params.h"
+#include "colon/params.h"
 #include "pipeline/run_log.h"
 #include "pipeline/study.h"
 

@@ -207,7 +207,7 @@ nlohmann::json runSegment(StudyRun& run, Progress* progress);
 nlohmann::json runSegmentFromMask(StudyRun& run, const std::string& maskPath, Progress* progress);
 nlohmann::json runCenterline(StudyRun& run, Progress* progress);
 struct LumenSegmentation;
-/// Finds and cuts the contacts between touching loops in seg's mask and sdf (volume/contacts.h),
+/// Finds and cuts the contacts between touching loops in seg's mask and sdf (colon/contacts.h),
 /// records them in the sdf's metadata (read by the centerline stage), logs them, returns the
 /// report.
 nlohmann::json cutLumenContacts(StudyRun& run, LumenSegmentation& seg);

@@ -4,8 +4,8 @@
 #include "pipeline/artifact_store.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/digest_stamps.h"
-#include "pipeline/local_first_pair.h"
-#include "pipeline/render_settings.h"
+#include "colon/local_first_pair.h"
+#include "colon/render_settings.h"
 #include "pipeline/stage_context.h"
 #include "volume/error.h"
 
@@ -106,7 +106,7 @@ const std::vector<StageSpec>& stageSpecs()
 #undef FLYOVER_CAMERA
 #undef FLYOVER_IMAGE
 
-/// The stage graph of a part study (`flyover inspect`, pipeline/stage_inspect.cpp).
+/// The stage graph of a part study (`flyover inspect`, inspect/stage_inspect.cpp).
 const std::vector<StageSpec>& partStageSpecs()
 {
     static const std::vector<StageSpec> specs{

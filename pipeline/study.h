@@ -19,8 +19,8 @@
 ///                    computed or reused, report
 #pragma once
 
-#include "pipeline/inspect_params.h"
-#include "pipeline/params.h"
+#include "inspect/inspect_params.h"
+#include "colon/params.h"
 #include "pipeline/run_log.h"
 
 #include <nlohmann/json.hpp>
@@ -39,7 +39,7 @@ struct StageError : std::runtime_error {
 
 /// Which stage graph a study runs: the colon's (`flyover run`) or a solid part's
 /// (`flyover inspect`: ingest -> voids -> surfaces -> {overviews, turntable}; see
-/// pipeline/stage_inspect.cpp). The manifest of a part study says "pipeline": "inspect".
+/// inspect/stage_inspect.cpp). The manifest of a part study says "pipeline": "inspect".
 enum class StudyKind { Colon, Part };
 
 struct RunOptions {

@@ -6,9 +6,9 @@ bash scripts/build.sh
 BUILD_DIR=${FLYOVER_BUILD_DIR:-build}
 OUT=${FLYOVER_DEMO_DIR:-demo}
 mkdir -p "$OUT"
-"$BUILD_DIR/pipeline/flyover" phantom "$OUT/phantom_ct.nii.gz" --truth "$OUT/phantom_truth.json" \
+"$BUILD_DIR/bin/flyover" phantom "$OUT/phantom_ct.nii.gz" --truth "$OUT/phantom_truth.json" \
     --truth-mask "$OUT/phantom_lumen.nii.gz" --size small --seed 1
-"$BUILD_DIR/pipeline/flyover" run "$OUT/phantom_ct.nii.gz" --study "$OUT/study"
+"$BUILD_DIR/bin/flyover" run "$OUT/phantom_ct.nii.gz" --study "$OUT/study"
 echo
 echo "Demo images:"
 echo "  overview (OST of the whole colon, anterior view): $(realpath "$OUT/study/overview.png")"
@@ -17,4 +17,4 @@ echo "  camera poses of every frame:                      $(realpath "$OUT/study
 echo "  all artifacts and manifest.json:                  $(realpath "$OUT/study")"
 echo
 echo "Fly over it interactively (a local web page; open the URL it prints, Ctrl-C stops it):"
-echo "  $BUILD_DIR/pipeline/flyover view --study $(realpath "$OUT/study")"
+echo "  $BUILD_DIR/bin/flyover view --study $(realpath "$OUT/study")"

@@ -1,7 +1,7 @@
 #include "view/view_study.h"
 
 #include "pipeline/artifact_io.h"
-#include "pipeline/render_settings.h"
+#include "colon/render_settings.h"
 #include "render/flyover_path.h"
 #include "render/overview.h"
 #include "volume/error.h"

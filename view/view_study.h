@@ -8,7 +8,7 @@
 ///        Thread-safe: every const method may be called from many threads at once.
 #pragma once
 
-#include "pipeline/params.h"
+#include "colon/params.h"
 #include "render/camera.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"

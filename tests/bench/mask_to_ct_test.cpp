@@ -1,7 +1,7 @@
 // bench/mask_to_ct: the CT it makes of a mask has the mask's geometry (or, padded, its lattice),
 // its air below the segment stage's -800 HU is the mask and the air outside the body, and the
 // tissues have the values it promises; bad input gets one line and no file.
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "volume/image.h"
 #include "volume/image_io.h"
 #include "tests/pipeline/cli_runner.h"

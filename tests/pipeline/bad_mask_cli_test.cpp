@@ -1,7 +1,7 @@
 // Masks that hold no plausible colon, through the command line: an empty file, a mask of
 // zeros, a label that is absent, small pieces only, a single ball. Each: exit 1, one line on
 // stderr naming the file and the problem, and nothing of the segment stage in the study.
-#include "cli_runner.h"
+#include "tests/pipeline/cli_runner.h"
 #include "volume/image_io.h"
 
 #include <gtest/gtest.h>

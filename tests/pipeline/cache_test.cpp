@@ -3,7 +3,7 @@
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"
-#include "study_fixture.h"
+#include "tests/pipeline/study_fixture.h"
 #include "volume/error.h"
 #include "volume/image_io.h"
 

@@ -1,11 +1,11 @@
 // Centerline on the synthetic phantoms, measured against their ground truth (the issue's
 // accuracy targets), and on the real TotalSegmentator colon label (mask-only input).
-#include "data/phantom.h"
-#include "volume/centerline.h"
+#include "colon/phantom.h"
+#include "colon/centerline.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
-#include "volume/lumen_mask.h"
-#include "volume/segment.h"
+#include "colon/lumen_mask.h"
+#include "colon/segment.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/tools/Interpolation.h>

@@ -1,7 +1,7 @@
 // The command line as a user meets it: help texts, and one clear line plus a non-zero exit for
 // every bad command line or missing input.
 
-#include "cli_runner.h"
+#include "tests/pipeline/cli_runner.h"
 
 #include <gtest/gtest.h>
 

@@ -1,9 +1,9 @@
 // The foundation's end-to-end check: the small phantom through every stage, measured against
 // its ground truth (lumen Dice, centerline distance, inward faces) and the OST property.
 
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/phantom_io.h"
+#include "colon/phantom_io.h"
 #include "pipeline/run_log.h"
 #include "pipeline/study.h"
 #include "render/ray_scene.h"

@@ -2,7 +2,7 @@
 // problem, exit code 1, and no grid in the study; the ingest options (--series, --voxel-mm,
 // --allow-gaps) reach the stage; the manifest records frame, memory and file size.
 
-#include "cli_runner.h"
+#include "tests/pipeline/cli_runner.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
-// The first fly-over pair from a local surface (issue 15, pipeline/local_first_pair.h): shown
+// The first fly-over pair from a local surface (issue 15, colon/local_first_pair.h): shown
 // only when certified, and then the very pixels of the whole surface's scene.
 
-#include "pipeline/local_first_pair.h"
+#include "colon/local_first_pair.h"
 #include "pipeline/run_log.h"
 #include "pipeline/study.h"
 #include "render/ray_scene.h"

@@ -3,10 +3,10 @@
 // phantom's true lumen mask, matched to the CT's grid). The mask's content is part of the
 // segment stage's key. Also: the centerline exports (.mrk.json, .vtk) and the --rectum-mm and
 // --step-mm shortcuts.
-#include "cli_runner.h"
+#include "tests/pipeline/cli_runner.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/export.h"
-#include "study_fixture.h"
+#include "colon/export.h"
+#include "tests/pipeline/study_fixture.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>

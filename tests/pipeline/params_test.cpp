@@ -1,4 +1,4 @@
-#include "pipeline/params.h"
+#include "colon/params.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>

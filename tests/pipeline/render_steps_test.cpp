@@ -6,7 +6,7 @@
 #include "pipeline/artifact_store.h"
 #include "pipeline/render_output.h"
 #include "pipeline/run_log.h"
-#include "study_fixture.h"
+#include "tests/pipeline/study_fixture.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>

@@ -2,7 +2,7 @@
 // with review in coverage/coverage.json, on the small phantom study of the pipeline tests.
 #include "pipeline/artifact_io.h"
 #include "pipeline/study.h"
-#include "study_fixture.h"
+#include "tests/pipeline/study_fixture.h"
 
 #include <gtest/gtest.h>
 

@@ -1,13 +1,13 @@
 // The mesh and the centerline made beside the segment stage's contact cut
-// (pipeline/speculative_mesh.h) are those of the lumen the segment stage hands on: kept when
+// (colon/speculative_mesh.h) are those of the lumen the segment stage hands on: kept when
 // the cut removes nothing, dropped when it cuts (issue 15); CancellableWork, which runs them.
 
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/phantom_io.h"
-#include "pipeline/speculative_mesh.h"
+#include "colon/phantom_io.h"
+#include "colon/speculative_mesh.h"
 #include "surface/lumen_surface.h"
-#include "study_fixture.h"
+#include "tests/pipeline/study_fixture.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/tools/LevelSetSphere.h>

@@ -1,11 +1,11 @@
 // `flyover stage NAME --study DIR` (one stage for workflow engines), its receipts and exit codes,
 // the classification of failures as retryable or not, and a study that moves keeping its cache.
 
-#include "cli_runner.h"
+#include "tests/pipeline/cli_runner.h"
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"
 #include "pipeline/stage_command.h"
-#include "study_fixture.h"
+#include "tests/pipeline/study_fixture.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>

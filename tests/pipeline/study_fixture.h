@@ -2,8 +2,8 @@
 // process into a temporary folder, and each test gets its own study folder.
 #pragma once
 
-#include "data/phantom.h"
-#include "pipeline/phantom_io.h"
+#include "colon/phantom.h"
+#include "colon/phantom_io.h"
 #include "pipeline/study.h"
 
 #include <gtest/gtest.h>

@@ -4,15 +4,15 @@
 // pixels as the scene of the whole surface), on phantoms where other loops show behind.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#include "data/phantom.h"
-#include "pipeline/render_settings.h"
+#include "colon/phantom.h"
+#include "colon/render_settings.h"
 #include "render/flyover_path.h"
 #include "render/render_view.h"
 #include "surface/extract_surface.h"
-#include "volume/centerline.h"
+#include "colon/centerline.h"
 #include "volume/error.h"
 #include "volume/ingest.h"
-#include "volume/segment.h"
+#include "colon/segment.h"
 
 #include <gtest/gtest.h>
 

@@ -3,18 +3,18 @@
 // polyp where the two views meet.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#include "data/phantom.h"
-#include "pipeline/params.h"
-#include "pipeline/render_settings.h"
+#include "colon/phantom.h"
+#include "colon/params.h"
+#include "colon/render_settings.h"
 #include "render/coverage.h"
 #include "render/flyover_path.h"
 #include "render/render_view.h"
 #include "render/review.h"
 #include "reference_marker.h"
 #include "surface/extract_surface.h"
-#include "volume/centerline.h"
+#include "colon/centerline.h"
 #include "volume/ingest.h"
-#include "volume/segment.h"
+#include "colon/segment.h"
 
 #include <gtest/gtest.h>
 

@@ -5,12 +5,12 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "surface/mesh_checks.h"
 #include "surface_test_shapes.h"
 #include "volume/error.h"
 #include "volume/ingest.h"
-#include "volume/segment.h"
+#include "colon/segment.h"
 
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetSphere.h>

@@ -6,10 +6,10 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/lumen_surface.h"
 
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "surface_test_shapes.h"
 #include "volume/ingest.h"
-#include "volume/segment.h"
+#include "colon/segment.h"
 
 #include <gtest/gtest.h>
 

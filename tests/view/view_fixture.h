@@ -3,9 +3,9 @@
 // write (bookmarks, screenshots) copy it first. A server is started in-process on port 0.
 #pragma once
 
-#include "data/phantom.h"
+#include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/phantom_io.h"
+#include "colon/phantom_io.h"
 #include "pipeline/study.h"
 #include "view/view_server.h"
 

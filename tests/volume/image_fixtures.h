@@ -2,7 +2,7 @@
 // model behind them, shared by image_io_test.cpp and ingest_test.cpp.
 #pragma once
 
-#include "shared_data.h"
+#include "tests/volume/shared_data.h"
 #include "volume/image.h"
 
 #include <cmath>

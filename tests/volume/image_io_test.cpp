@@ -2,7 +2,7 @@
 // compressed transfer syntaxes, the real CT's geometry against its headers, and one clear
 // InputError naming the file for every kind of bad input.
 
-#include "image_fixtures.h"
+#include "tests/volume/image_fixtures.h"
 
 #include "volume/error.h"
 #include "volume/image_io.h"

@@ -1,7 +1,7 @@
 // Ingest: identical grids from every format, world positions that land on the scan
 // (oblique, anisotropic, gantry-tilted, with gaps), sparse outside air, slab-by-slab reads.
 
-#include "image_fixtures.h"
+#include "tests/volume/image_fixtures.h"
 
 #include "volume/error.h"
 #include "volume/image_io.h"

@@ -5,7 +5,7 @@
 // both paths: ITK scales metre/micron spacing to mm but not the offsets; flyover scales both.) Also big-endian, gzip, scl_slope and
 // the voxel values.
 
-#include "image_fixtures.h"
+#include "tests/volume/image_fixtures.h"
 
 #include "volume/error.h"
 #include "volume/image_io.h"

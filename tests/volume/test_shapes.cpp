@@ -1,4 +1,4 @@
-#include "test_shapes.h"
+#include "tests/volume/test_shapes.h"
 
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>

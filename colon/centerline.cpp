@@ -1,0 +1,1305 @@
+// Centerline on the sparse lumen grid (see centerline.h for the method in brief):
+//  1. flat leaf-blocked index of the lumen voxels (sdf < 0), D = -sdf;
+//  2. 26-connected pieces by breadth-first search; the last voxel a search reaches is
+//     farthest from its seed in steps, so the labelling pass also yields one geodesic
+//     farthest end per piece, and a second search from it yields the other end;
+//  3. per piece, a minimal path under the cost D^-p per unit length (route_search.h: bucket
+//     queues; the core's and the whole piece's searched from both ends at once)
+//     through the piece's core (voxels at least half as deep as the deepest nearby), which
+//     is all a path through the middle needs and a quarter of the voxels;
+//  4. per piece: end trimming, ridge of D, cross-section centroids, twiced Gaussian
+//     smoothing, straight extension into the blind ends;
+//  5. pieces ordered and bridged (centerline_bridge.h), uniform resampling, radii, frames.
+// Searches are deterministic (the two ends of a route search run side by side, each serial);
+// per-point geometry runs in parallel over points.
+#include "colon/centerline.h"
+
+#include "colon/centerline_bridge.h"
+#include "colon/centerline_far_end.h"
+#include "volume/error.h"
+#include "colon/lumen_index.h"
+#include "colon/route_search.h"
+
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <sstream>
+#include <utility>
+#include <vector>
+#include <cstdio>
+#include <chrono>
+#include <ctime>
+#include <cstdlib>
+
+namespace flyover {
+
+namespace {
+
+using namespace lumen_index;
+using route_search::RouteWorkspace;
+using route_search::shortestRoute;
+
+/// 26-connected lumen pieces: a label per slot, and per piece its voxel count and the voxel
+/// its breadth-first labelling search reached last (farthest in steps from the seed: for a
+/// tube, one of its two ends).
+struct Pieces {
+    std::vector<std::int32_t> label;  ///< per slot, -1 for non-lumen
+    std::vector<std::size_t> size;    ///< per label
+    std::vector<Slot> lastReached;    ///< per label
+};
+
+Pieces labelPieces(const LumenIndex& index, const SlotBits& holes, Progress* progress)
+{
+    Pieces c;
+    c.label.assign(index.slotCount(), -1);
+    SlotBits labelled = holes;  // and the lumen voxels labelled
+    std::vector<Slot> queue;
+    for (Slot s = 0; s < index.slotCount(); ++s) {
+        if (labelled.test(s)) continue;
+        const std::int32_t id = static_cast<std::int32_t>(c.size.size());
+        queue.clear();
+        queue.push_back(s);
+        labelled.set(s);
+        c.label[s] = id;
+        for (std::size_t head = 0; head < queue.size(); ++head) {
+            if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
+            forEachClearNeighbour(index, labelled, queue[head], [&](Slot t) {
+                labelled.set(t);
+                c.label[t] = id;
+                queue.push_back(t);
+            });
+        }
+        c.size.push_back(queue.size());
+        c.lastReached.push_back(queue.back());
+    }
+    return c;
+}
+
+/// Breadth-first search from the distinct `seeds` (the queue's start) over their pieces, at most
+/// `maxSteps` 26-neighbour steps deep: calls reach(slot, steps) for each slot reached, seeds
+/// with 0, and leaves the slots in the order reached in `queue`. `holes`: holeBits(index).
+template<typename Reach>
+void breadthFirst(const LumenIndex& index, const SlotBits& holes, std::vector<Slot>& queue, std::int32_t maxSteps,
+                  Reach&& reach, Progress* progress)
+{
+    SlotBits reached = holes;  // a bit per slot: a copy is a few MB at most
+    std::size_t kept = 0;
+    for (Slot s : queue)
+        if (!reached.testAndSet(s)) queue[kept++] = s;
+    queue.resize(kept);
+    for (Slot s : queue) reach(s, 0);
+    std::size_t layerEnd = queue.size();
+    std::int32_t layer = 0;
+    for (std::size_t head = 0; head < queue.size(); ++head) {
+        if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
+        if (head == layerEnd) {
+            if (++layer == maxSteps) break;
+            layerEnd = queue.size();
+        }
+        const std::int32_t next = layer + 1;
+        forEachClearNeighbour(index, reached, queue[head], [&](Slot t) {
+            reached.set(t);
+            reach(t, next);
+            queue.push_back(t);
+        });
+    }
+}
+
+/// Breadth-first search from `source` over its piece: steps[s] = number of 26-neighbour steps
+/// from the source (slots of this piece only; others untouched). `holes`: holeBits(index).
+/// Returns the slot reached last, the farthest in steps (ties: the first found).
+Slot stepsFrom(const LumenIndex& index, const SlotBits& holes, Slot source, std::vector<std::int32_t>& steps,
+               Progress* progress)
+{
+    std::vector<Slot> queue{source};
+    breadthFirst(index, holes, queue, std::numeric_limits<std::int32_t>::max(),
+                 [&](Slot s, std::int32_t n) { steps[s] = n; }, progress);
+    return queue.back();
+}
+
+Vec3d toVec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
+
+/// Arc length at each vertex of a polyline.
+std::vector<double> arcLengths(const std::vector<Vec3d>& pts)
+{
+    std::vector<double> s(pts.size(), 0.0);
+    for (std::size_t i = 1; i < pts.size(); ++i) s[i] = s[i - 1] + distance(pts[i], pts[i - 1]);
+    return s;
+}
+
+/// Position at arc length `t` along the polyline (linear interpolation); `hint` is a vertex
+/// index at or before `t` that the caller advances monotonically.
+Vec3d pointAt(const std::vector<Vec3d>& pts, const std::vector<double>& s, double t,
+              std::size_t& hint)
+{
+    while (hint + 2 < pts.size() && s[hint + 1] < t) ++hint;
+    const double seg = s[hint + 1] - s[hint];
+    const double a = seg > 0 ? std::clamp((t - s[hint]) / seg, 0.0, 1.0) : 0.0;
+    return pts[hint] * (1.0 - a) + pts[hint + 1] * a;
+}
+
+/// Resamples a polyline at n+1 points evenly spaced in arc length (both ends included).
+std::vector<Vec3d> resampleEven(const std::vector<Vec3d>& pts, double spacing)
+{
+    const std::vector<double> s = arcLengths(pts);
+    const double total = s.back();
+    const std::size_t n = std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(total / spacing)));
+    std::vector<Vec3d> out(n + 1);
+    std::size_t hint = 0;
+    for (std::size_t i = 0; i <= n; ++i) out[i] = pointAt(pts, s, total * double(i) / double(n), hint);
+    out.back() = pts.back();
+    return out;
+}
+
+/// D = -sdf at a world position by triquadratic interpolation (27 voxels). Trilinear
+/// interpolation of a distance field takes its extrema at voxel centres, which would snap a
+/// ridge search back onto the voxel grid and bias D low on the axis; the quadratic stencil
+/// follows the ridge between voxels. One probe per thread (it owns a tree accessor).
+class DepthProbe {
+public:
+    explicit DepthProbe(const openvdb::FloatGrid& grid) : mAcc(grid.tree()), mXf(grid.transform()) {}
+    double operator()(const Vec3d& worldMm)
+    {
+        float v = 0.0f;
+        openvdb::tools::QuadraticSampler::sample(
+            mAcc, mXf.worldToIndex(openvdb::Vec3d(worldMm.x, worldMm.y, worldMm.z)), v);
+        return -static_cast<double>(v);
+    }
+
+private:
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> mAcc;
+    const openvdb::math::Transform& mXf;
+};
+
+/// Moves each point of an evenly sampled path onto the ridge of D (the medial axis) within the
+/// plane through it perpendicular to the local path direction, by parabolic line searches of
+/// D with a one-voxel stencil along two in-plane directions, alternated until neither improves
+/// D. The voxel path is quantised to voxel centres and joins the axis at an angle near its ends;
+/// centering removes both before smoothing. The total move is limited to half the local depth
+/// so that a point never jumps across a fold to another part of the lumen.
+std::vector<Vec3d> centerOnRidge(const std::vector<Vec3d>& pts, const openvdb::FloatGrid& grid,
+                                 double voxelMm, double spacingMm)
+{
+    const long n = static_cast<long>(pts.size());
+    std::vector<Vec3d> out(pts);
+    if (n < 3) return out;
+    const long half = std::max(1L, static_cast<long>(std::lround(2.0 * voxelMm / spacingMm)));
+    tbb::parallel_for(tbb::blocked_range<long>(0, n, 64), [&](const tbb::blocked_range<long>& r) {
+        DepthProbe depthAt(grid);
+        for (long i = r.begin(); i != r.end(); ++i) {
+            const Vec3d t = normalize(pts[std::min(n - 1, i + half)] - pts[std::max(0L, i - half)]);
+            if (length(t) == 0) continue;
+            const Vec3d helper = std::abs(t.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+            const Vec3d u1 = normalize(cross(t, helper)), u2 = cross(t, u1);
+            const Vec3d p0 = pts[i];
+            Vec3d p = p0;
+            double dp = depthAt(p);
+            const double maxShift = 0.5 * std::max(0.0, dp);
+            // One parabolic step along u; returns whether it moved to a deeper point.
+            auto search = [&](const Vec3d& u) {
+                const double dm = depthAt(p - u * voxelMm), dq = depthAt(p + u * voxelMm);
+                const double curvature = dm - 2.0 * dp + dq;
+                double step;
+                if (curvature < 0) step = std::clamp(0.5 * voxelMm * (dm - dq) / curvature, -voxelMm, voxelMm);
+                else if (std::max(dm, dq) > dp) step = dq > dm ? voxelMm : -voxelMm;
+                else return false;
+                const Vec3d q = p + u * step;
+                if (distance(q, p0) > maxShift) return false;
+                const double dq2 = depthAt(q);
+                if (!(dq2 > dp)) return false;
+                p = q;
+                dp = dq2;
+                return true;
+            };
+            for (int k = 0; k < 16; ++k) {  // at most 16 voxels of travel
+                const bool moved1 = search(u1);
+                const bool moved2 = search(u2);
+                if (!moved1 && !moved2) break;
+            }
+            out[i] = p;
+        }
+    });
+    return out;
+}
+
+/// Least-squares line p(i) = a + b i through the samples first..last of `pts`.
+void fitLine(const std::vector<Vec3d>& pts, long first, long last, Vec3d& a, Vec3d& b)
+{
+    const double n = double(last - first + 1);
+    double si = 0, sii = 0;
+    Vec3d sp, sip;
+    for (long i = first; i <= last; ++i) {
+        si += double(i);
+        sii += double(i) * double(i);
+        sp += pts[i];
+        sip += pts[i] * double(i);
+    }
+    const double den = n * sii - si * si;
+    b = den > 0 ? (sip * n - sp * si) / den : Vec3d{};
+    a = (sp - b * si) / n;
+}
+
+/// Gaussian smoothing of an evenly spaced polyline (sigma in samples). Beyond each end the
+/// polyline is continued by the least-squares line through its last 1.5 sigma of samples (a
+/// variant of reflection): a straight end is reproduced exactly, so the ends neither shrink
+/// towards the middle nor bend, while the end points themselves are smoothed like the rest
+/// (the first voxel of a path is as noisy as any other). A quadratic continuation would follow
+/// curved ends too, but it amplifies the staircase noise of the voxel path at the very end.
+std::vector<Vec3d> gaussianSmooth(const std::vector<Vec3d>& pts, double sigmaSamples)
+{
+    const long n = static_cast<long>(pts.size());
+    if (!(sigmaSamples > 0.0) || n < 3) return pts;
+    const long radius = static_cast<long>(std::ceil(3.0 * sigmaSamples));
+    std::vector<double> w(radius + 1);
+    double wsum = 0;
+    for (long k = 0; k <= radius; ++k) {
+        w[k] = std::exp(-0.5 * double(k * k) / (sigmaSamples * sigmaSamples));
+        wsum += k == 0 ? w[k] : 2 * w[k];
+    }
+    const long fitCount = std::clamp(static_cast<long>(std::ceil(1.5 * sigmaSamples)), 2L, n);
+    Vec3d headA, headB, tailA, tailB;
+    fitLine(pts, 0, fitCount - 1, headA, headB);
+    fitLine(pts, n - fitCount, n - 1, tailA, tailB);
+    auto at = [&](long i) -> Vec3d {
+        if (i < 0) return headA + headB * double(i);
+        if (i >= n) return tailA + tailB * double(i);
+        return pts[i];
+    };
+    std::vector<Vec3d> out(pts.size());
+    tbb::parallel_for(tbb::blocked_range<long>(0, n, 256), [&](const tbb::blocked_range<long>& r) {
+        for (long i = r.begin(); i != r.end(); ++i) {
+            Vec3d acc = pts[i] * w[0];
+            for (long k = 1; k <= radius; ++k) acc += (at(i - k) + at(i + k)) * w[k];
+            out[i] = acc / wsum;
+        }
+    });
+    return out;
+}
+void validate(const openvdb::FloatGrid& sdf, const CenterlineParams& p)
+{
+    auto bad = [](const std::string& what) { throw ParameterError("CenterlineParams." + what); };
+    if (!(p.stepMm > 0) || !std::isfinite(p.stepMm)) bad("stepMm must be finite and > 0");
+    if (!(p.wallPenalty >= 0) || !std::isfinite(p.wallPenalty))
+        bad("wallPenalty must be finite and >= 0");
+    if (!(p.smoothingMm >= 0) || !std::isfinite(p.smoothingMm))
+        bad("smoothingMm must be finite and >= 0");
+    if (p.rectumMm && !(std::isfinite(p.rectumMm->x) && std::isfinite(p.rectumMm->y) &&
+                        std::isfinite(p.rectumMm->z)))
+        bad("rectumMm must be a finite point");
+    if (!(p.minPieceMl >= 0) || !std::isfinite(p.minPieceMl)) bad("minPieceMl must be finite and >= 0");
+    if (!(p.minPieceFraction >= 0 && p.minPieceFraction <= 1)) bad("minPieceFraction must be in [0, 1]");
+    if (!(p.bridgeTurnMmPerRad >= 0) || !std::isfinite(p.bridgeTurnMmPerRad))
+        bad("bridgeTurnMmPerRad must be finite and >= 0");
+    if (!(p.nearWallMm >= 0) || !std::isfinite(p.nearWallMm)) bad("nearWallMm must be finite and >= 0");
+    if (!(p.corridorMm >= 0) || !std::isfinite(p.corridorMm)) bad("corridorMm must be finite and >= 0");
+    const auto& xf = sdf.transform();
+    if (!xf.isLinear()) throw InputError("extractCenterline: the sdf grid's transform is not linear");
+    const openvdb::Vec3d vs = xf.voxelSize();
+    if (!(vs[0] > 0) || std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] ||
+        std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
+        throw InputError("extractCenterline: the sdf grid's voxels are not cubic");
+}
+
+/// The sdf at a world position by trilinear interpolation (mm). One probe per thread.
+class SdfProbe {
+public:
+    explicit SdfProbe(const openvdb::FloatGrid& grid) : mAcc(grid.tree()), mXf(grid.transform()) {}
+    double operator()(const Vec3d& worldMm)
+    {
+        float v = 0.0f;
+        openvdb::tools::BoxSampler::sample(
+            mAcc, mXf.worldToIndex(openvdb::Vec3d(worldMm.x, worldMm.y, worldMm.z)), v);
+        return static_cast<double>(v);
+    }
+
+private:
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> mAcc;
+    const openvdb::math::Transform& mXf;
+};
+
+/// Distance from `origin` (inside the lumen) along the unit vector `dir` to the first zero
+/// crossing of the sdf; -1 when there is none within maxMm. Sphere tracing: a step of 90% of
+/// |sdf| never reaches the wall, however thin (a fold), because |sdf| is at most the distance
+/// to the nearest wall; a floor of a quarter voxel bounds the step count near the wall. The
+/// crossing is then located by four regula falsi steps in the bracketing interval.
+double rayToWall(SdfProbe& sdf, const Vec3d& origin, const Vec3d& dir, double maxMm, double voxelMm)
+{
+    double tIn = 0.0, sIn = sdf(origin);
+    if (!(sIn < 0.0)) return 0.0;
+    const double minStep = 0.25 * voxelMm;
+    while (tIn < maxMm) {
+        const double t = tIn + std::max(-0.9 * sIn, minStep);
+        const double s = sdf(origin + dir * t);
+        if (s >= 0.0) {
+            double a = tIn, fa = sIn, b = t, fb = s;
+            for (int k = 0; k < 4; ++k) {
+                const double m = a + (b - a) * fa / (fa - fb);
+                const double fm = sdf(origin + dir * m);
+                if (fm < 0.0) {
+                    a = m;
+                    fa = fm;
+                } else {
+                    b = m;
+                    fb = fm;
+                }
+            }
+            return a + (b - a) * fa / (fa - fb);
+        }
+        tIn = t;
+        sIn = s;
+    }
+    return -1.0;
+}
+
+/// The lumen's cross-section in the plane through p perpendicular to the unit vector t, as
+/// the star-shaped polygon of the wall hits of RAYS rays from p.
+struct Section {
+    Vec3d centroidMm;
+    double areaMm2 = 0;
+    bool ok = false;   ///< every ray hit the wall within reach and the centroid is in the lumen
+};
+
+constexpr int SECTION_RAYS = 32;
+
+Section crossSection(SdfProbe& sdf, const Vec3d& p, const Vec3d& t, double maxRayMm, double voxelMm)
+{
+    const Vec3d helper = std::abs(t.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+    const Vec3d u1 = normalize(cross(t, helper)), u2 = cross(t, u1);
+    std::array<Vec3d, SECTION_RAYS> hit;
+    constexpr double TWO_PI = 6.283185307179586476925;
+    for (int k = 0; k < SECTION_RAYS; ++k) {
+        const double a = TWO_PI * k / SECTION_RAYS;
+        const Vec3d dir = u1 * std::cos(a) + u2 * std::sin(a);
+        const double r = rayToWall(sdf, p, dir, maxRayMm, voxelMm);
+        if (!(r > 0.0)) return {};
+        hit[k] = dir * r;  // relative to p
+    }
+    // Fan of triangles (p, hit k, hit k+1): area-weighted centroids.
+    Section sec;
+    Vec3d moment;
+    for (int k = 0; k < SECTION_RAYS; ++k) {
+        const Vec3d& a = hit[k];
+        const Vec3d& b = hit[(k + 1) % SECTION_RAYS];
+        const double area = 0.5 * length(cross(a, b));
+        sec.areaMm2 += area;
+        moment += (a + b) * (area / 3.0);
+    }
+    if (!(sec.areaMm2 > 0.0)) return {};
+    sec.centroidMm = p + moment / sec.areaMm2;
+    sec.ok = sdf(sec.centroidMm) < 0.0;
+    return sec;
+}
+
+/// Moves an evenly sampled path (spacing spacingMm) to the centroids of the lumen's cross-
+/// sections perpendicular to it, taken every sectionStride samples. A haustral fold or a large
+/// polyp cuts into the sections within its thickness and pulls their centroids (and the ridge
+/// of D, over a whole lumen radius either side) off the axis of the lumen; such sections are
+/// recognised by an area below 85% of the median over the neighbouring SECTION_WINDOW_MM
+/// either side (a fold takes a quarter to a third of the section, taper and bends change the
+/// area by a few per cent over that window) and skipped: their displacement, like that of
+/// sections whose rays do not all reach the wall (the end caps, an oblique cut at a tight
+/// bend), is interpolated linearly from the nearest kept sections.
+std::vector<Vec3d> centerOnSections(const std::vector<Vec3d>& pts, const openvdb::FloatGrid& grid,
+                                    double voxelMm, double spacingMm, long* firstKept = nullptr,
+                                    long* lastKept = nullptr)
+{
+    const long n = static_cast<long>(pts.size());
+    if (n < 3) return pts;
+    constexpr double SECTION_WINDOW_MM = 20.0;
+    const double MIN_AREA_FRACTION = 0.9;
+    const double GROW_MM = 3.0;
+    const double SHIFT_FRACTION = 1.0;
+    const double TANGENT_SIGMA_MM = 8.0;
+    const long stride = std::max(1L, static_cast<long>(std::lround(std::min(voxelMm, 1.0) / spacingMm)));
+    std::vector<long> at;
+    for (long i = 0; i < n; i += stride) at.push_back(i);
+    if (at.back() != n - 1) at.push_back(n - 1);
+    const long m = static_cast<long>(at.size());
+
+    // Section normals from the path smoothed over two voxels (the sampled path has
+    // voxel-scale wiggles that would tilt single sections).
+    const std::vector<Vec3d> smooth = gaussianSmooth(pts, std::max(2.0 * voxelMm, TANGENT_SIGMA_MM) / spacingMm);
+    const long half = std::max(1L, static_cast<long>(std::lround(voxelMm / spacingMm)));
+
+    std::vector<Section> sections(static_cast<std::size_t>(m));
+    tbb::parallel_for(tbb::blocked_range<long>(0, m, 16), [&](const tbb::blocked_range<long>& r) {
+        SdfProbe sdf(grid);
+        for (long j = r.begin(); j != r.end(); ++j) {
+            const long i = at[j];
+            const Vec3d t = normalize(smooth[std::min(n - 1, i + half)] - smooth[std::max(0L, i - half)]);
+            if (length(t) == 0) continue;
+            const double depth = std::max(-sdf(pts[i]), voxelMm);
+            Section s = crossSection(sdf, pts[i], t, 3.0 * depth, voxelMm);
+            // A centroid farther than the local depth from the point is not the same stretch of
+            // lumen (the section reaches round a tight bend or into a pocket).
+            if (s.ok && distance(s.centroidMm, pts[i]) > SHIFT_FRACTION * depth) s.ok = false;
+            sections[j] = s;
+        }
+    });
+
+    const long window = std::max(2L, static_cast<long>(std::lround(SECTION_WINDOW_MM / (stride * spacingMm))));
+    std::vector<char> keep(static_cast<std::size_t>(m), 0);
+    std::vector<double> areas;
+    for (long j = 0; j < m; ++j) {
+        if (!sections[j].ok) continue;
+        areas.clear();
+        for (long k = std::max(0L, j - window); k <= std::min(m - 1, j + window); ++k)
+            if (sections[k].ok) areas.push_back(sections[k].areaMm2);
+        auto mid = areas.begin() + static_cast<long>(areas.size() / 2);
+        std::nth_element(areas.begin(), mid, areas.end());
+        keep[j] = sections[j].areaMm2 >= MIN_AREA_FRACTION * *mid;
+    }
+    {
+        // Sections next to a skipped one are tilted through the same fold or polyp by the
+        // path's own deviation there: skip them too.
+        const long grow = std::max(1L, static_cast<long>(std::lround(GROW_MM / (stride * spacingMm))));
+        std::vector<char> grown(keep);
+        for (long j = 0; j < m; ++j)
+            if (!keep[j] && sections[j].ok)
+                for (long k = std::max(0L, j - grow); k <= std::min(m - 1, j + grow); ++k) grown[k] = 0;
+        keep.swap(grown);
+    }
+
+    {
+        // The centroids of a tube's sections lie on a smooth curve. Where the lumen is no tube
+        // (a pouch, two limbs merged in a coarse mask) neighbouring sections cut different
+        // parts of it and their centroids jump: skip a section whose centroid lies more than
+        // half a voxel off the line through the kept centroids within two voxels either side.
+        const long reach = std::max(2L, static_cast<long>(std::lround(2.0 * voxelMm / (stride * spacingMm))));
+        const double tolerance = 0.5 * voxelMm;
+        std::vector<char> smoothOk(keep);
+        for (long j = 0; j < m; ++j) {
+            if (!keep[j]) continue;
+            double n = 0, st = 0, stt = 0;
+            Vec3d sc, stc;
+            for (long k = std::max(0L, j - reach); k <= std::min(m - 1, j + reach); ++k) {
+                if (k == j || !keep[k]) continue;
+                const double t = double(k - j);
+                n += 1;
+                st += t;
+                stt += t * t;
+                sc += sections[k].centroidMm;
+                stc += sections[k].centroidMm * t;
+            }
+            const double den = n * stt - st * st;
+            if (n < 2 || !(den > 0)) continue;
+            const Vec3d slope = (stc * n - sc * st) / den;
+            const Vec3d at0 = (sc - slope * st) / n;  // the fitted line at t = 0
+            if (distance(at0, sections[j].centroidMm) > tolerance) smoothOk[j] = 0;
+        }
+        keep.swap(smoothOk);
+    }
+
+    // Skipped sections get positions from the kept centroids around them: a cubic Hermite
+    // curve through the two kept neighbours, with tangents from kept centroids a few mm
+    // further on (Catmull-Rom), so a skipped fold neither keeps the path's own deviation there
+    // nor cuts a bend. Gaps longer than SPLINE_GAP_MM (the end caps, long oblique stretches)
+    // instead get the displacement interpolated linearly; before the first and after the last
+    // kept section the displacement is held.
+    constexpr double SPLINE_GAP_MM = 25.0;
+    constexpr double TANGENT_BASE_MM = 5.0;
+    std::vector<long> kept;
+    for (long j = 0; j < m; ++j)
+        if (keep[j]) kept.push_back(j);
+    if (kept.empty()) return pts;
+    if (firstKept) *firstKept = at[kept.front()];
+    if (lastKept) *lastKept = at[kept.back()];
+    std::vector<Vec3d> shift(static_cast<std::size_t>(m));
+    for (long j : kept) shift[j] = sections[j].centroidMm - pts[at[j]];
+    for (long k = 0; k < kept.front(); ++k) shift[k] = shift[kept.front()];
+    for (long k = kept.back() + 1; k < m; ++k) shift[k] = shift[kept.back()];
+    const long baseSamples = std::max(1L, static_cast<long>(std::lround(TANGENT_BASE_MM / spacingMm)));
+    auto centroidTangent = [&](std::size_t q) {  // d centroid / d sample index at kept[q]
+        std::size_t lo = q, hi = q;
+        while (lo > 0 && at[kept[q]] - at[kept[lo]] < baseSamples) --lo;
+        while (hi + 1 < kept.size() && at[kept[hi]] - at[kept[q]] < baseSamples) ++hi;
+        if (hi == lo) return Vec3d{};
+        return (sections[kept[hi]].centroidMm - sections[kept[lo]].centroidMm) /
+               double(at[kept[hi]] - at[kept[lo]]);
+    };
+    for (std::size_t q = 0; q + 1 < kept.size(); ++q) {
+        const long j0 = kept[q], j1 = kept[q + 1];
+        if (j1 - j0 < 2) continue;
+        const double h = double(at[j1] - at[j0]);
+        if (h * spacingMm > SPLINE_GAP_MM) {
+            for (long k = j0 + 1; k < j1; ++k) {
+                const double a = double(at[k] - at[j0]) / h;
+                shift[k] = shift[j0] * (1.0 - a) + shift[j1] * a;
+            }
+            continue;
+        }
+        const Vec3d c0 = sections[j0].centroidMm, c1 = sections[j1].centroidMm;
+        const Vec3d m0 = centroidTangent(q) * h, m1 = centroidTangent(q + 1) * h;
+        for (long k = j0 + 1; k < j1; ++k) {
+            const double t = double(at[k] - at[j0]) / h, t2 = t * t, t3 = t2 * t;
+            const Vec3d pos = c0 * (2 * t3 - 3 * t2 + 1) + m0 * (t3 - 2 * t2 + t) +
+                              c1 * (-2 * t3 + 3 * t2) + m1 * (t3 - t2);
+            shift[k] = pos - pts[at[k]];
+        }
+    }
+
+    std::vector<Vec3d> out(pts.size());
+    for (long j = 0; j + 1 < m; ++j)
+        for (long i = at[j]; i <= at[j + 1]; ++i) {
+            const double a = double(i - at[j]) / double(at[j + 1] - at[j]);
+            out[i] = pts[i] + shift[j] * (1.0 - a) + shift[j + 1] * a;
+        }
+    return out;
+}
+
+/// Ends, part 1. The geodesic farthest voxels lie on the wall of the blind ends, generally not
+/// at the pole of the end cap (the voxel metric is anisotropic), and within a cap D has no
+/// ridge: the cheapest path runs straight from that wall voxel to where the medial axis
+/// begins, at an angle to the lumen's axis. Along that approach D grows as fast as the path
+/// advances (dD/ds ~ 1), while along the medial axis it changes slowly (taper and folds:
+/// |dD/ds| well below 1). So each end loses its leading run on which D rises by more than
+/// half the distance travelled over the next 1.5 voxels.
+std::vector<Vec3d> trimEnds(const std::vector<Vec3d>& fine, DepthProbe& depthAt, double voxelMm)
+{
+    std::vector<double> depth(fine.size());
+    for (std::size_t i = 0; i < fine.size(); ++i) depth[i] = depthAt(fine[i]);
+    const std::vector<double> s = arcLengths(fine);
+    const double windowMm = 1.5 * voxelMm;
+    const double slope = 0.5;
+    std::size_t first = 0, last = fine.size() - 1;
+    for (std::size_t j = 0; first < last; ++first) {
+        while (j < last && s[j] - s[first] < windowMm) ++j;
+        if (depth[j] - depth[first] < slope * (s[j] - s[first])) break;
+    }
+    for (std::size_t j = last; last > first; --last) {
+        while (j > first && s[last] - s[j] < windowMm) --j;
+        if (depth[j] - depth[last] < slope * (s[last] - s[j])) break;
+    }
+    // Never trim a path away completely: keep its middle if nothing qualifies.
+    if (last <= first) first = last = fine.size() / 2;
+    return std::vector<Vec3d>(fine.begin() + first, fine.begin() + last + 1);
+}
+
+/// Smoothing along arc length of an evenly sampled path. A Gaussian alone pulls a bend of
+/// radius R inwards by about sigma^2 / (2 R) (0.8 mm for sigma 4 mm on a 10 mm flexure), so the
+/// residual is smoothed once more and added back ("twicing", the filter 2G - G^2): the bias
+/// drops to fourth order in sigma while voxel-scale staircase noise is still removed.
+std::vector<Vec3d> smoothTwiced(const std::vector<Vec3d>& fine, double sigmaMm)
+{
+    if (fine.size() < 3 || !(sigmaMm > 0)) return fine;
+    const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
+    if (!(spacing > 0)) return fine;
+    const double sigma = sigmaMm / spacing;
+    const std::vector<Vec3d> once = gaussianSmooth(fine, sigma);
+    std::vector<Vec3d> residual(fine.size());
+    for (std::size_t i = 0; i < fine.size(); ++i) residual[i] = fine[i] - once[i];
+    const std::vector<Vec3d> back = gaussianSmooth(residual, sigma);
+    std::vector<Vec3d> out(fine.size());
+    for (std::size_t i = 0; i < fine.size(); ++i) out[i] = once[i] + back[i];
+    return out;
+}
+
+/// Ends, part 2: continues the path straight along its end tangent into the blind end until
+/// D falls to 60% of its value at the end. The path stops about one radius short of the cap
+/// wall (where sections stop being whole); the extension lets the end cameras look into the
+/// cap while keeping a reasonable radius there. Within the cap the direction is extrapolated,
+/// so its error grows with the extension's length: 60% rather than half keeps the end within
+/// a voxel of the axis' straight continuation on the test shapes. Extends path.back().
+void extendEnd(std::vector<Vec3d>& path, DepthProbe& depthAt, double fineMm)
+{
+    const Vec3d end = path.back();
+    const double endDepth = depthAt(end);
+    if (!(endDepth > 0) || path.size() < 2) return;
+    // End tangent: least-squares line through the last radius of path.
+    const std::vector<double> s = arcLengths(path);
+    const double tangentMm = std::min(endDepth, 0.5 * s.back());
+    const long lastIndex = static_cast<long>(path.size()) - 1;
+    long k = lastIndex;
+    while (k > 0 && s.back() - s[k] < tangentMm) --k;
+    Vec3d a, b;
+    fitLine(path, std::min(k, lastIndex - 1), lastIndex, a, b);
+    const Vec3d dir = normalize(b);
+    if (length(dir) == 0) return;
+    for (double x = fineMm; x <= 2.0 * endDepth; x += fineMm) {
+        const Vec3d q = end + dir * x;
+        if (depthAt(q) < 0.6 * endDepth) break;
+        path.push_back(q);
+    }
+}
+
+/// Where the section-centred path left the deep lumen, the ridge is kept. The centroids of a
+/// tube's sections lie on its axis, where D is about the lumen radius (a fold or a polyp moves
+/// them by a fraction of it). Where the sections overlap, as in a bend tighter than the lumen
+/// radius (a flexure folded back on itself: the sections of its inner side cross each other
+/// and reach into the other limb), or cut lengthwise through a pouch, their centroids fall
+/// towards the inner wall, and each round of centring, taking its section planes from the path
+/// the round before moved, moves the path further, until it hugs the inner wall or the tip of
+/// the fold between the limbs (gca-colon-00020: 16 mm off the reference path at D 1.6 mm, where
+/// the ridge kept 17 mm of lumen round the bend). So a point of the centred path less than
+/// SHALLOW_FRACTION as deep as the ridge point nearest to it, and moved off it by more than
+/// OFFSET_FRACTION of that depth (a fold moves the centroid less), marks a stretch that is no
+/// tube's section centre; where the ridge itself has no lumen to speak of (under
+/// MIN_RIDGE_VOXELS deep: a neck or a thread of lumen, where it is no better a guide) nothing is
+/// replaced. The stretch, widened on either hand until the centred path is back within
+/// SEAM_FRACTION of the ridge's depth of it, is replaced by the ridge between the matching
+/// points (the smoothing that follows removes the small steps at the seams). Returns `centred`
+/// itself where no point is that shallow.
+std::vector<Vec3d> keepRidgeWhereShallow(const std::vector<Vec3d>& centred, const std::vector<Vec3d>& ridge,
+                                         const openvdb::FloatGrid& grid, double voxelMm, double fineMm)
+{
+    constexpr double SHALLOW_FRACTION = 0.5;
+    constexpr double OFFSET_FRACTION = 0.5;
+    constexpr double MIN_RIDGE_VOXELS = 2.0;
+    constexpr double SEAM_FRACTION = 0.15;
+    constexpr double MATCH_WINDOW_MM = 150.0;  // how far apart matching points may lie along the paths
+    const long n = static_cast<long>(centred.size()), nr = static_cast<long>(ridge.size());
+    if (n < 3 || nr < 3) return centred;
+    std::vector<double> dc(centred.size()), dr(ridge.size());
+    tbb::parallel_for(tbb::blocked_range<long>(0, std::max(n, nr), 256), [&](const tbb::blocked_range<long>& r) {
+        DepthProbe depthAt(grid);
+        for (long i = r.begin(); i != r.end(); ++i) {
+            if (i < n) dc[i] = depthAt(centred[i]);
+            if (i < nr) dr[i] = depthAt(ridge[i]);
+        }
+    });
+    // Nearest ridge point of each centred point, within a window around the arc-proportional
+    // position (both paths run between the same ends).
+    const long window = static_cast<long>(MATCH_WINDOW_MM / fineMm);
+    std::vector<long> match(centred.size());
+    tbb::parallel_for(tbb::blocked_range<long>(0, n, 256), [&](const tbb::blocked_range<long>& r) {
+        for (long i = r.begin(); i != r.end(); ++i) {
+            const long centre = static_cast<long>(double(i) * double(nr - 1) / double(n - 1));
+            long best = centre;
+            double bestD = std::numeric_limits<double>::infinity();
+            for (long j = std::max(0L, centre - window); j <= std::min(nr - 1, centre + window); ++j) {
+                const double d = distance(centred[i], ridge[j]);
+                if (d < bestD) {
+                    bestD = d;
+                    best = j;
+                }
+            }
+            match[i] = best;
+        }
+    });
+    auto shallow = [&](long i) {
+        const double ridgeDepth = dr[match[i]];
+        return ridgeDepth >= MIN_RIDGE_VOXELS * voxelMm && dc[i] < SHALLOW_FRACTION * ridgeDepth &&
+               distance(centred[i], ridge[match[i]]) > OFFSET_FRACTION * ridgeDepth;
+    };
+    auto onRidge = [&](long i) { return distance(centred[i], ridge[match[i]]) <= SEAM_FRACTION * dr[match[i]]; };
+    std::vector<Vec3d> out;
+    long copied = 0;  // centred[copied..] not yet handled
+    int count = 0;
+    for (long i = 0; i < n; ++i) {
+        if (!shallow(i)) continue;
+        long a = i, b = i;
+        while (a > copied && !onRidge(a)) --a;
+        while (b + 1 < n && (shallow(b + 1) || !onRidge(b))) ++b;
+        out.insert(out.end(), centred.begin() + copied, centred.begin() + a);
+        if (match[a] <= match[b]) out.insert(out.end(), ridge.begin() + match[a], ridge.begin() + match[b] + 1);
+        copied = b + 1;
+        i = b;
+        ++count;
+    }
+    if (count == 0) return centred;
+    out.insert(out.end(), centred.begin() + copied, centred.end());
+    return resampleEven(out, fineMm);
+}
+
+/// Rounds of centring on sections: each starts from the previous one's path and section
+/// planes; the third changes the path by well under a tenth of a voxel on the phantoms.
+constexpr int SECTION_ITERATIONS = 3;
+
+/// From the voxel path of one piece to its smooth centerline, sampled every fineMm.
+std::vector<Vec3d> refinePath(const std::vector<Vec3d>& raw, const openvdb::FloatGrid& grid,
+                              double voxelMm, double fineMm, const CenterlineParams& params)
+{
+    if (raw.size() < 2) return raw;
+    DepthProbe depthAt(grid);  // serial uses below
+    std::vector<Vec3d> fine = trimEnds(resampleEven(raw, fineMm), depthAt, voxelMm);
+    if (fine.size() >= 3) {
+        const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
+        if (spacing > 0) fine = resampleEven(centerOnRidge(fine, grid, voxelMm, spacing), fineMm);
+    }
+    const std::vector<Vec3d> ridge = fine;
+    if (params.centerSections)
+        for (int iteration = 0; iteration < SECTION_ITERATIONS && fine.size() >= 3; ++iteration) {
+            const double spacing = arcLengths(fine).back() / double(fine.size() - 1);
+            if (!(spacing > 0)) break;
+            long first = 0, last = -1;
+            std::vector<Vec3d> moved = centerOnSections(fine, grid, voxelMm, spacing, &first, &last);
+            // Beyond the outermost whole sections (the end caps, the approach of the voxel path
+            // from the cap wall) the path is not centred: cut it there; the ends are continued
+            // straight along the centred path below.
+            if (iteration + 1 == SECTION_ITERATIONS && last > first) {
+                // At most two lumen radii: a longer stretch of broken sections at an end is a
+                // lumen that is no tube there, not an end cap, and it is kept.
+                const long n = static_cast<long>(moved.size());
+                first = std::min(first, static_cast<long>(2.0 * depthAt(moved[first]) / spacing));
+                last = std::max(last, n - 1 - static_cast<long>(2.0 * depthAt(moved[last]) / spacing));
+                if (last > first) moved = std::vector<Vec3d>(moved.begin() + first, moved.begin() + last + 1);
+            }
+            fine = resampleEven(moved, fineMm);
+        }
+    if (params.centerSections) fine = keepRidgeWhereShallow(fine, ridge, grid, voxelMm, fineMm);
+    fine = smoothTwiced(fine, params.smoothingMm);
+    extendEnd(fine, depthAt, fineMm);
+    std::reverse(fine.begin(), fine.end());
+    extendEnd(fine, depthAt, fineMm);
+    std::reverse(fine.begin(), fine.end());
+    return fine;
+}
+
+/// Outward unit tangent at the back end of a path: the chord over its last few millimetres.
+Vec3d backOutward(const std::vector<Vec3d>& path, double voxelMm)
+{
+    if (path.size() < 2) return {0, 0, 1};
+    const std::vector<double> s = arcLengths(path);
+    const double reach = std::min(std::max(3.0 * voxelMm, 5.0), 0.5 * s.back());
+    std::size_t k = path.size() - 1;
+    while (k > 0 && s.back() - s[k] < reach) --k;
+    const Vec3d d = normalize(path.back() - path[k]);
+    return length(d) > 0 ? d : Vec3d{0, 0, 1};
+}
+
+Vec3d frontOutward(const std::vector<Vec3d>& path, double voxelMm)
+{
+    std::vector<Vec3d> r(path.rbegin(), path.rend());
+    return backOutward(r, voxelMm);
+}
+
+/// Without rectumMm, the rectum is the lowest piece end; when that lies more than this above
+/// the lowest lumen voxel (mm), the farthest pair missed the rectum (the path end stops about a
+/// lumen radius short of the cap wall; a distended rectum is up to ~25 mm in radius).
+constexpr double LOWEST_END_SLACK_MM = 40.0;
+
+/// One piece's centerline and where it came from.
+struct PiecePath {
+    std::int32_t label = -1;
+    std::vector<Vec3d> pointsMm;
+    const char* searchedOn = "";  ///< CenterlinePieceInfo::routeSearchedOn
+};
+
+} // namespace
+
+Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const CenterlineParams& params,
+                             Progress* progress, CenterlineReport* report)
+{
+    validate(sdfGrid, params);
+    const openvdb::math::Transform& xf = sdfGrid.transform();
+    const double voxelMm = xf.voxelSize()[0];
+    const double voxelMl = voxelMm * voxelMm * voxelMm / 1000.0;
+    reportProgress(progress, 0.0, "index lumen voxels");
+
+    // A level set has no active tiles; voxelise a copy if a caller hands one in anyway.
+    openvdb::FloatGrid::ConstPtr grid = sdfGrid.copy();
+    if (sdfGrid.tree().hasActiveTiles()) {
+        openvdb::FloatGrid::Ptr dense = sdfGrid.deepCopy();
+        dense->tree().voxelizeActiveTiles();
+        grid = dense;
+    }
+
+    // 1. Lumen voxels (sdf < 0) and their depth D = -sdf (mm).
+    const LumenIndex index = buildIndex(grid->tree());
+    if (index.slotCount() == 0)
+        throw InputError("extractCenterline: the lumen is empty (no active sdf voxel below 0)");
+    reportProgress(progress, 0.1, "lumen pieces");
+
+    // 2. Pieces, largest first (ties: lower label, i.e. first in slot order).
+    const SlotBits holes = holeBits(index);
+    const Pieces pieces = labelPieces(index, holes, progress);
+    std::vector<std::int32_t> bySize(pieces.size.size());
+    for (std::size_t i = 0; i < bySize.size(); ++i) bySize[i] = static_cast<std::int32_t>(i);
+    std::stable_sort(bySize.begin(), bySize.end(),
+                     [&](std::int32_t a, std::int32_t b) { return pieces.size[a] > pieces.size[b]; });
+    std::vector<std::int32_t> used;
+    for (std::size_t r = 0; r < bySize.size(); ++r)
+        if (r == 0 || pieceLargeEnough(double(pieces.size[bySize[r]]), double(pieces.size[bySize[0]]), voxelMl, params))
+            used.push_back(bySize[r]);
+
+    // With rectumMm: the lumen voxel nearest to it over the pieces used (the seed); its piece's
+    // path runs from the end of the tube nearest to the seed (the voxel farthest from the
+    // seed's farthest voxel) to the voxel farthest from that end along the lumen (the cecum).
+    // Without: each piece's farthest pair, and the lowest end in world z is the rectum (step 4).
+    // The lowest lumen voxel is reported either way.
+    Slot rectumSeed = NO_SLOT, lowestSlot = NO_SLOT;
+    {
+        std::vector<std::uint8_t> isUsed(pieces.size.size(), 0);
+        for (std::int32_t l : used) isUsed[l] = 1;
+        double best = std::numeric_limits<double>::infinity(), lowest = best;
+        for (Slot s = 0; s < index.slotCount(); ++s) {
+            if (!index.isLumen(s) || !isUsed[pieces.label[s]]) continue;
+            const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
+            if (w.z < lowest) {
+                lowest = w.z;
+                lowestSlot = s;
+            }
+            if (params.rectumMm && distance(w, *params.rectumMm) < best) {
+                best = distance(w, *params.rectumMm);
+                rectumSeed = s;
+            }
+        }
+    }
+
+    // 3. Per piece: ends, minimal path through the core, refinement. A step of length l
+    // between voxels u and v costs l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid
+    // rule for the integral of D^-p along the step, symmetric in u and v (the same path either
+    // way). Near the wall D is small and the cost explodes, so the path keeps to the ridge of
+    // D, the medial axis; on a bend the ridge stays optimal because any sideways shift lowers
+    // D linearly while it shortens the path only at second order. eps = half a voxel: the
+    // distance is not resolved below that, and it bounds the cost of voxels at the wall.
+    const double eps = 0.5 * voxelMm;
+    std::vector<float> weight(index.slotCount(), 0.0f);
+    std::vector<std::uint8_t> core(index.slotCount(), 0);
+    {
+        // The core: voxels at least half as deep as the deepest voxel nearby (within one to
+        // two leaves). The minimal path runs along the ridge of D, deep inside the core, so
+        // leaving out the outer shell does not change it, while it quarters the search.
+        const std::vector<float> nearby = nearbyMaxDepth(index);
+        const float coreMarginMm = static_cast<float>(3.0 * voxelMm);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t s = r.begin(); s != r.end(); ++s) {
+                const float d = index.depthMm[s];
+                if (d < 0.0f) continue;
+                weight[s] = static_cast<float>(std::pow(std::max<double>(d, eps), -params.wallPenalty));
+                const float m = nearby[s / LEAF_VOXELS];
+                core[s] = d >= std::min(0.5f * m, m - coreMarginMm);
+            }
+        });
+    }
+    float minWeight = std::numeric_limits<float>::max(), maxWeight = 0.0f;
+    for (std::size_t s = 0; s < index.slotCount(); ++s)
+        if (index.depthMm[s] >= 0.0f) {
+            minWeight = std::min(minWeight, weight[s]);
+            maxWeight = std::max(maxWeight, weight[s]);
+        }
+    const std::array<double, 26> stepMm = [&] {
+        std::array<double, 26> a{};
+        for (int k = 0; k < 26; ++k) a[k] = STEPS[k].lengthVoxels * voxelMm;
+        return a;
+    }();
+    auto medial = [&](Slot u, Slot v, int k) {
+        return stepMm[k] * 0.5 * (double(weight[u]) + double(weight[v]));
+    };
+    auto medialCoarse = [&](Slot u, Slot v, int k) {
+        const double len = 2.0 * stepMm[k];
+        if (!(double(index.depthMm[u]) + double(index.depthMm[v]) > len))
+            return std::numeric_limits<double>::infinity();
+        return len * 0.5 * (double(weight[u]) + double(weight[v]));
+    };
+    auto isEven = [](Slot s) {
+        const int off = static_cast<int>(s % LEAF_VOXELS);
+        return (off & ((1 << (2 * LEAF_LOG2)) | (1 << LEAF_LOG2) | 1)) == 0;
+    };
+    std::vector<std::uint8_t> coarse(index.slotCount(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s)
+            coarse[s] = core[s] && isEven(static_cast<Slot>(s));
+    });
+    const double minEdge = voxelMm * double(minWeight), maxEdge = std::sqrt(3.0) * voxelMm * double(maxWeight);
+
+    // Sampling of the paths before the final resampling: a quarter voxel, at most 0.5 mm, and
+    // independent of stepMm: the refinement (trimming, sections, smoothing) works on these
+    // samples, and on a coarse grid (3 mm voxels) a spacing that followed the output step moved
+    // the path by up to 15 mm between --step-mm 1 and 2 (issue 14: the path from the other
+    // end, asked with another step, was another curve). Linear interpolation between samples
+    // this close is exact to well under a micrometre on colon bends.
+    const double fineMm = std::min(0.25 * voxelMm, 0.5);
+    std::vector<std::int32_t> steps(index.slotCount(), -1);
+    std::vector<Slot> pieceSlots;
+    RouteWorkspace routeWork;
+    // The coarse lattice holds an eighth of the core: its search is short, from one end.
+    const route_search::RouteOptions coarseSearch{false};
+    std::vector<PiecePath> paths;
+    // Where a narrowing splits a piece's core, the minimal route leaves the core only in the
+    // narrowing and at the piece's ends (the cap walls it starts and ends on). So the route is
+    // searched on the core plus corridors through those places: the piece's voxels within
+    // corridorMm (in steps, at least three) of where a route over the piece's voxels of even coordinates (an
+    // eighth of them; each two-voxel step through the voxel between, at the two steps' cost)
+    // runs outside the core, and of the two ends (the route over the core's voxels alone was
+    // found not to exist). False when that lattice's route does not exist either (a passage the
+    // lattice misses): the whole piece is then searched. On gca-colon-00020 (10.5 M
+    // voxels, the core split near the far end) the lattice's route adds 13.7 k voxels to the
+    // core, and the route found is the whole piece's, voxel for voxel. `core` and `coarse` are
+    // left as they were (a piece traced again from a seed searches its corridors again).
+    auto medialThrough = [&](Slot u, Slot v, int k) {
+        const Slot m = index.stepSlot(u, k);
+        if (m == NO_SLOT || !index.isLumen(m)) return std::numeric_limits<double>::infinity();
+        return medial(u, m, k) + medial(m, v, k);
+    };
+    auto searchCorridors = [&](Slot a, Slot b, std::vector<Slot>& route) {
+        Slot ends[2] = {NO_SLOT, NO_SLOT};
+        std::vector<std::uint8_t>& even = coarse;  // the core's even voxels, restored below
+        for (Slot s : pieceSlots) {
+            even[s] = isEven(s);
+            if (!even[s] || steps[s] < 0) continue;
+            if (ends[0] == NO_SLOT || steps[s] < steps[ends[0]]) ends[0] = s;
+            if (ends[1] == NO_SLOT || steps[s] > steps[ends[1]]) ends[1] = s;
+        }
+        std::vector<Slot> lattice;
+        const bool found = ends[0] != NO_SLOT && ends[0] != ends[1] &&
+                           shortestRoute<2>(index, even, ends[0], ends[1], medialThrough, 2.0 * minEdge,
+                                            2.0 * maxEdge, routeWork, lattice, progress);
+        for (Slot s : pieceSlots) even[s] = core[s] && isEven(s);
+        if (!found) return false;
+        std::vector<Slot> queue{a, b};
+        for (std::size_t i = 0; i < lattice.size(); ++i) {
+            const Slot r = lattice[i];
+            if (!core[r]) queue.push_back(r);
+            if (i + 1 == lattice.size()) break;
+            const Coord d = index.coord(lattice[i + 1]) - index.coord(r);
+            const Slot m = index.stepSlot(r, lumen_index::stepIndex(d[0] / 2, d[1] / 2, d[2] / 2));
+            if (m != NO_SLOT && !core[m]) queue.push_back(m);
+        }
+        // Breadth-first from those voxels, corridorMm / voxelMm steps deep and at least three (on
+        // the small phantom's 2.5 mm voxels, two steps round a stricture gave another route than
+        // the whole piece's near the cecum's cap).
+        const int depthSteps = std::max(3, static_cast<int>(std::ceil(params.corridorMm / voxelMm)));
+        breadthFirst(index, holes, queue, depthSteps, [](Slot, std::int32_t) {}, progress);
+        std::vector<Slot> added;
+        for (Slot s : queue)
+            if (!core[s]) {
+                core[s] = 1;
+                added.push_back(s);
+            }
+        const bool routed = shortestRoute<1>(index, core, a, b, medial, minEdge, maxEdge, routeWork, route, progress);
+        for (Slot s : added) core[s] = 0;
+        return routed;
+    };
+    // No voxel of the piece reached yet (before a search that must not find ends left over from
+    // an earlier one: one that stops at a plug).
+    auto unreached = [&](std::int32_t label) {
+        for (Slot s = 0; s < index.slotCount(); ++s)
+            if (pieces.label[s] == label) steps[s] = -1;
+    };
+    // One piece's path; from the end of the tube nearest to `seed` when one is given.
+    // `from`: start there instead (with `plugged`, the piece's holes plus voxels that end
+    // the search there: the far end is then the farthest voxel reached without crossing them).
+    auto tracePiece = [&](std::int32_t label, Slot seed, Slot from = NO_SLOT, const SlotBits* plugged = nullptr) {
+        // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches
+        // the other end last. Both lie on the wall of the blind ends; the path runs between
+        // the core voxels nearest to them in steps.
+        Slot a = pieces.lastReached[label];
+        if (from != NO_SLOT) {
+            a = from;
+        } else if (seed != NO_SLOT) {
+            // The end of the tube nearest to the seed: the voxel farthest from the seed's
+            // farthest voxel (the seed itself when it lies at an end).
+            const Slot far = stepsFrom(index, holes, seed, steps, progress);
+            a = stepsFrom(index, holes, far, steps, progress);
+        }
+        if (plugged) unreached(label);  // voxels past the plug are not reached: no end may lie there
+        const Slot b = stepsFrom(index, plugged ? *plugged : holes, a, steps, progress);
+        // The search runs on the coarsest set that connects the ends: the core's voxels of even
+        // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
+        // whole piece (a stricture, or a piece next to a much deeper one, can break the core:
+        // on a 2.4 m real colon, a narrowing 1.6 mm deep between stretches 10 mm deep; a
+        // cheaper set for that case was tried and lost accuracy, see the README). A two-voxel
+        // step is taken only where the inscribed balls of its ends overlap, so it never crosses
+        // a wall; the path's precision does not matter, the refinement below moves it to the
+        // sections' centroids.
+        Slot ends[2][2] = {{NO_SLOT, NO_SLOT}, {NO_SLOT, NO_SLOT}};  // [coarse, core][near, far]
+        pieceSlots.clear();
+        for (Slot s = 0; s < index.slotCount(); ++s) {
+            if (pieces.label[s] != label) continue;
+            pieceSlots.push_back(s);
+            if (!core[s] || steps[s] < 0) continue;
+            for (int level = 0; level < 2; ++level) {
+                if (level == 0 && !isEven(s)) continue;
+                Slot* e = ends[level];
+                if (e[0] == NO_SLOT || steps[s] < steps[e[0]]) e[0] = s;
+                if (e[1] == NO_SLOT || steps[s] > steps[e[1]]) e[1] = s;
+            }
+        }
+        std::vector<Slot> route;
+        const bool coarseRoute =
+            ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
+            shortestRoute<2>(index, coarse, ends[0][0], ends[0][1], medialCoarse, 2.0 * minEdge, 2.0 * maxEdge,
+                             routeWork, route, progress, coarseSearch);
+        const bool coreRoute = coarseRoute || (ends[1][0] != NO_SLOT &&
+                                               shortestRoute<1>(index, core, ends[1][0], ends[1][1], medial,
+                                                                minEdge, maxEdge, routeWork, route, progress));
+        const char* searchedOn = coarseRoute ? "coarse core" : "core";
+        if (!coreRoute && params.corridorMm > 0 && searchCorridors(a, b, route)) {
+            searchedOn = "core and corridors";
+        } else if (!coreRoute) {
+            for (Slot s : pieceSlots) core[s] = 1;
+            if (!shortestRoute<1>(index, core, a, b, medial, minEdge, maxEdge, routeWork, route, progress))
+                route.assign(1, a);  // cannot happen: a and b lie in one piece
+            searchedOn = "whole piece";
+        }
+        std::vector<Vec3d> raw;
+        for (Slot s : route) raw.push_back(toVec(xf.indexToWorld(index.coord(s))));
+        PiecePath path;
+        path.label = label;
+        path.pointsMm = refinePath(raw, *grid, voxelMm, fineMm, params);
+        path.searchedOn = searchedOn;
+        return path;
+    };
+    for (std::size_t u = 0; u < used.size(); ++u) {
+        reportProgress(progress, 0.2 + 0.6 * double(u) / double(used.size()), "minimal path");
+        paths.push_back(tracePiece(used[u], NO_SLOT));
+    }
+    reportProgress(progress, 0.8, "order and bridge pieces");
+
+    // 4. The rectum end: the lowest piece end in world z (LPS: +z is superior), or the end
+    // nearest to rectumMm; its piece comes first, entered there. Every piece is first traced
+    // between its own farthest pair, whatever the hint, so that the path from one end and the
+    // path from the other are the same curve (a piece with cycles or branches has several
+    // tips, and the tip farthest from the hint's end need not be the one the other direction
+    // starts from). Only a hint that lies at none of these ends re-traces its piece from there.
+    DepthProbe depthAt(*grid);
+    std::vector<PieceEnds> ends(paths.size());
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+        const auto& p = paths[i].pointsMm;
+        ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+    }
+    int first = 0;
+    bool firstReversed = false;
+    {
+        double best = std::numeric_limits<double>::infinity();
+        auto score = [&](const Vec3d& e) {
+            return params.rectumMm ? distance(e, *params.rectumMm) : e.z;
+        };
+        for (std::size_t i = 0; i < ends.size(); ++i)
+            for (bool back : {false, true}) {
+                const double sc = score(back ? ends[i].backMm : ends[i].frontMm);
+                if (sc < best) {
+                    best = sc;
+                    first = static_cast<int>(i);
+                    firstReversed = back;
+                }
+            }
+    }
+    // Re-trace the piece of `seed` from the end of the tube nearest to it, and start there.
+    auto retraceFrom = [&](Slot seed) {
+        const std::int32_t label = pieces.label[seed];
+        for (std::size_t i = 0; i < paths.size(); ++i)
+            if (paths[i].label == label) {
+                paths[i] = tracePiece(label, seed);
+                const auto& p = paths[i].pointsMm;
+                ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+                first = static_cast<int>(i);
+                firstReversed = false;
+            }
+    };
+    const Vec3d lowestMm = toVec(xf.indexToWorld(index.coord(lowestSlot)));
+    bool reseeded = false;
+    const Vec3d start = firstReversed ? ends[first].backMm : ends[first].frontMm;
+    if (params.rectumMm) {
+        // The hint at an end: the lumen voxel nearest to it (on the cap wall for a hint outside
+        // the lumen, such as the anus) within two depths of the end (the path stops where the
+        // depth in the cap falls to 60% of the lumen radius, that far from the cap wall).
+        const Vec3d seedMm = toVec(xf.indexToWorld(index.coord(rectumSeed)));
+        const double reach = std::max(2.0 * std::max(0.0, depthAt(start)), 3.0 * voxelMm);
+        if (distance(start, seedMm) > reach) {
+            retraceFrom(rectumSeed);
+            reseeded = true;
+        }
+    } else if (start.z - lowestMm.z > LOWEST_END_SLACK_MM) {
+        // The lowest end far above the lowest lumen voxel: the farthest pair of its piece
+        // missed the rectum (a shortcut left through an uncut contact, a branch).
+        retraceFrom(lowestSlot);
+        reseeded = true;
+    }
+    const PieceChain chain = orderPieces(ends, first, firstReversed, params.bridgeTurnMmPerRad);
+
+    // 4b. The far end (centerline_far_end.h): when the last piece's path ends in a narrow tube
+    // off a wide lumen (the terminal ileum off the cecum), the tube is plugged past its mouth
+    // and the farthest voxel from the piece's near end is searched again. When that lies well
+    // beyond the mouth (FAR_SAC_DEPTHS wide depths, in steps), the wide lumen has an end of its
+    // own that the path skipped (the cecum below the valve): the piece is traced to it. Else
+    // (a narrow cecum, no wide end beyond its mouth) the path stays.
+    std::optional<CenterlineFarBranch> farBranch;
+    std::vector<Vec3d> leftOutBranch;
+    {
+        const std::size_t lastPos = chain.order.size() - 1;
+        const int last = chain.order[lastPos];
+        const bool reversed = chain.reversed[lastPos];
+        std::vector<Vec3d> pts = paths[std::size_t(last)].pointsMm;
+        if (reversed) std::reverse(pts.begin(), pts.end());
+        if (const auto narrow = narrowFarEnd(pts, [&](const Vec3d& p) { return depthAt(p); })) {
+            const std::int32_t label = paths[std::size_t(last)].label;
+            const Vec3d mouth = pts[narrow->mouthIndex];
+            Slot nearSlot = NO_SLOT, mouthSlot = NO_SLOT, farSlot = NO_SLOT;
+            double nearMm = std::numeric_limits<double>::infinity(), mouthMm = nearMm, farMm = nearMm;
+            SlotBits plugged = holes;
+            for (Slot s = 0; s < index.slotCount(); ++s) {
+                if (pieces.label[s] != label) continue;
+                const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
+                const auto nearest = [&](const Vec3d& p, Slot& slot, double& best) {
+                    const double d = distance(w, p);
+                    if (d < best) {
+                        best = d;
+                        slot = s;
+                    }
+                };
+                nearest(pts.front(), nearSlot, nearMm);
+                nearest(mouth, mouthSlot, mouthMm);
+                nearest(pts.back(), farSlot, farMm);
+                if (distance(w, narrow->plugMm) <= narrow->plugRadiusMm) plugged.set(s);
+            }
+            if (!plugged.test(nearSlot) && !plugged.test(mouthSlot)) {
+                unreached(label);
+                const Slot end = stepsFrom(index, plugged, nearSlot, steps, progress);
+                const double beyondMm = double(steps[end] - steps[mouthSlot]) * voxelMm;
+                if (steps[farSlot] < 0 && beyondMm >= FAR_SAC_DEPTHS * narrow->wideDepthMm) {
+                    PiecePath traced = tracePiece(label, NO_SLOT, nearSlot, &plugged);
+                    // The tube's axis past the plug's centre, kept for coverage.
+                    leftOutBranch.clear();
+                    bool inTube = false;
+                    for (const Vec3d& q : pts) {
+                        inTube = inTube || distance(q, narrow->plugMm) < 0.5 * fineMm;
+                        if (inTube && (leftOutBranch.empty() || distance(leftOutBranch.back(), q) >= 2.0))
+                            leftOutBranch.push_back(q);
+                    }
+                    if (!leftOutBranch.empty() && leftOutBranch.back() != pts.back()) leftOutBranch.push_back(pts.back());
+                    CenterlineFarBranch info;
+                    info.mouthMm = mouth;
+                    info.endMm = pts.back();
+                    info.lengthMm = narrow->lengthMm;
+                    info.depthMm = narrow->narrowDepthMm;
+                    info.wideDepthMm = narrow->wideDepthMm;
+                    info.wideEndBeyondMouthMm = beyondMm;
+                    farBranch = info;
+                    if (reversed) std::reverse(traced.pointsMm.begin(), traced.pointsMm.end());
+                    const auto& p = traced.pointsMm;
+                    ends[std::size_t(last)] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+                    paths[std::size_t(last)] = std::move(traced);
+                }
+            }
+        }
+    }
+
+    // 5. One polyline: pieces in chain order, bridges between them.
+    struct Bridge {
+        double startArc, endArc, startDepth, endDepth;
+    };
+    std::vector<Vec3d> chainPts;
+    std::vector<Bridge> bridges;
+    std::vector<CenterlineBridgeInfo> bridgeInfo;
+    for (std::size_t k = 0; k < chain.order.size(); ++k) {
+        std::vector<Vec3d> pts = paths[chain.order[k]].pointsMm;
+        if (chain.reversed[k]) std::reverse(pts.begin(), pts.end());
+        if (k > 0) {
+            const Vec3d exit = chainPts.back();
+            const Vec3d exitOut = chain.reversed[k - 1] ? ends[chain.order[k - 1]].frontOut
+                                                        : ends[chain.order[k - 1]].backOut;
+            const Vec3d entryOut = chain.reversed[k] ? ends[chain.order[k]].backOut
+                                                     : ends[chain.order[k]].frontOut;
+            const std::vector<Vec3d> curve = bridgeCurve(exit, exitOut, pts.front(), entryOut, fineMm);
+            Bridge b;
+            b.startArc = arcLengths(chainPts).back();
+            b.startDepth = std::max(0.0, depthAt(exit));
+            b.endDepth = std::max(0.0, depthAt(pts.front()));
+            chainPts.insert(chainPts.end(), curve.begin() + 1, curve.end() - 1);
+            const double bridgeLength = arcLengths(curve).back();
+            b.endArc = b.startArc + bridgeLength;
+            bridges.push_back(b);
+            CenterlineBridgeInfo info;
+            info.fromPiece = chain.order[k - 1];
+            info.toPiece = chain.order[k];
+            info.gapMm = distance(exit, pts.front());
+            info.lengthMm = bridgeLength;
+            bridgeInfo.push_back(info);
+        }
+        chainPts.insert(chainPts.end(), pts.begin(), pts.end());
+    }
+
+    // Uniform arc-length resampling at stepMm from the rectum end; the remainder (< stepMm) at
+    // the cecum end is dropped so that every step is exactly stepMm. Radii: D at the point; on
+    // a bridge (no lumen to measure) linear in arc length between D at its two ends.
+    Centerline cl;
+    cl.stepMm = params.stepMm;
+    const std::vector<double> s = arcLengths(chainPts);
+    if (chainPts.size() < 2 || !(s.back() > 0)) {
+        CenterlinePoint p;
+        p.positionMm = chainPts.front();
+        p.radiusMm = std::max(0.0, depthAt(p.positionMm));
+        cl.points.push_back(p);
+    } else {
+        const std::size_t count = static_cast<std::size_t>(std::floor(s.back() / params.stepMm + 1e-9)) + 1;
+        cl.points.resize(count);
+        std::size_t hint = 0, bridge = 0;
+        for (std::size_t i = 0; i < count; ++i) {
+            const double arc = double(i) * params.stepMm;
+            CenterlinePoint& p = cl.points[i];
+            p.positionMm = pointAt(chainPts, s, arc, hint);
+            while (bridge < bridges.size() && bridges[bridge].endArc <= arc) ++bridge;
+            if (bridge < bridges.size() && bridges[bridge].startArc < arc) {
+                const Bridge& b = bridges[bridge];
+                const double t = (arc - b.startArc) / std::max(b.endArc - b.startArc, 1e-9);
+                p.bridged = true;
+                p.radiusMm = b.startDepth + (b.endDepth - b.startDepth) * t;
+            } else {
+                p.radiusMm = std::max(0.0, depthAt(p.positionMm));
+            }
+        }
+    }
+    computeTangentsAndNormals(cl);
+    if (farBranch) {
+        cl.leftOutBranchMm = leftOutBranch;
+        cl.leftOutBranchRadiusMm = farBranch->depthMm;
+    }
+
+    // Stretches of the path closer to the wall than nearWallMm outside bridges.
+    std::vector<CenterlineNearWall> nearWall;
+    for (std::size_t i = 0; i < cl.points.size(); ++i) {
+        const CenterlinePoint& p = cl.points[i];
+        if (p.bridged || !(p.radiusMm < params.nearWallMm)) continue;
+        const double arc = double(i) * params.stepMm;
+        if (!nearWall.empty() && nearWall.back().toArcMm + 1.5 * params.stepMm >= arc) {
+            CenterlineNearWall& w = nearWall.back();
+            w.toArcMm = arc;
+            if (p.radiusMm < w.minRadiusMm) {
+                w.minRadiusMm = p.radiusMm;
+                w.positionMm = p.positionMm;
+            }
+        } else {
+            nearWall.push_back({arc, arc, p.radiusMm, p.positionMm});
+        }
+    }
+
+    if (report) {
+        report->pieces.clear();
+        report->bridges = bridgeInfo;
+        report->rectumRule = params.rectumMm ? (reseeded ? "end of the tube nearest to rectum_mm"
+                                                         : "piece end nearest to rectum_mm")
+                             : reseeded      ? "end nearest to the lowest lumen voxel"
+                                             : "lowest end";
+        report->lowestLumenMm = lowestMm;
+        report->nearWall = nearWall;
+        report->farBranchLeftOut = farBranch;
+        std::vector<int> infoOf(pieces.size.size(), -1);
+        for (std::size_t r = 0; r < bySize.size(); ++r) {
+            CenterlinePieceInfo info;
+            info.volumeMl = double(pieces.size[bySize[r]]) * voxelMl;
+            infoOf[bySize[r]] = static_cast<int>(r);
+            report->pieces.push_back(info);
+        }
+        for (std::size_t k = 0; k < chain.order.size(); ++k) {
+            const PiecePath& path = paths[chain.order[k]];
+            CenterlinePieceInfo& info = report->pieces[infoOf[path.label]];
+            info.used = true;
+            info.chainIndex = static_cast<int>(k);
+            info.pathLengthMm = arcLengths(path.pointsMm).back();
+            info.routeSearchedOn = path.searchedOn;
+            info.entryMm = chain.reversed[k] ? path.pointsMm.back() : path.pointsMm.front();
+            info.exitMm = chain.reversed[k] ? path.pointsMm.front() : path.pointsMm.back();
+        }
+        for (CenterlineBridgeInfo& b : report->bridges) {
+            b.fromPiece = infoOf[paths[b.fromPiece].label];
+            b.toPiece = infoOf[paths[b.toPiece].label];
+        }
+    }
+    reportProgress(progress, 1.0, "centerline done");
+    return cl;
+}
+
+} // namespace flyover

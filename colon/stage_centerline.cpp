@@ -1,0 +1,105 @@
+#include "pipeline/stage_context.h"
+
+#include "pipeline/artifact_io.h"
+#include "colon/speculative_mesh.h"
+#include "colon/centerline.h"
+#include "colon/segment.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <iomanip>
+#include <sstream>
+#include <vector>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace flyover {
+
+json runCenterline(StudyRun& run, Progress* progress)
+{
+    auto sdf = run.sdf();
+    // The segment stage's centerline of this very lumen, traced beside its contact cut, when it
+    // traced one; else traced here. The rectal tube's tip (found by segment) is the rectum hint
+    // unless --rectum-mm gave one.
+    std::shared_ptr<SpeculativeCenterline> speculative = std::move(run.state.speculativeCenterline);
+    bool fromTube = false;
+    const CenterlineParams params = centerlineParamsFor(*sdf, run.opt.params.centerline, fromTube);
+    CenterlineReport cr;
+    if (speculative) reportProgress(progress, 0.0, "waiting for the centerline traced beside the contact cut");
+    Centerline c = speculative ? speculative->take(cr, fromTube) : extractCenterline(*sdf, params, progress, &cr);
+    writeJson(run.path("centerline.json"), centerlineToJson(c));
+    run.state.centerline = std::move(c);
+    const Centerline& cl = *run.state.centerline;
+    const auto& pts = cl.points;
+
+    // What the path squeezes through, and what was cut on its way (segment stage).
+    json nearWall = json::array();
+    for (const CenterlineNearWall& w : cr.nearWall) {
+        nearWall.push_back(json{{"from_arc_mm", w.fromArcMm},
+                                {"to_arc_mm", w.toArcMm},
+                                {"min_radius_mm", w.minRadiusMm},
+                                {"position_mm", vec3Json(w.positionMm)}});
+        if (run.opt.log) {
+            std::ostringstream msg;
+            msg << std::fixed << std::setprecision(1) << "centerline: warning: the path passes "
+                << w.minRadiusMm << " mm from the wall (under " << run.opt.params.centerline.nearWallMm
+                << " mm, not a bridged gap) at arc " << w.fromArcMm << "-" << w.toArcMm << " mm, ("
+                << w.positionMm.x << ", " << w.positionMm.y << ", " << w.positionMm.z << ") mm";
+            run.opt.log->message(msg.str());
+        }
+    }
+    json bridges = json::array();
+    for (const CenterlineBridgeInfo& b : cr.bridges)
+        bridges.push_back(json{{"gap_mm", b.gapMm}, {"length_mm", b.lengthMm}});
+    // The pieces the path runs through, in travel order, and where each one's route was found.
+    std::vector<const CenterlinePieceInfo*> travelled;
+    for (const CenterlinePieceInfo& p : cr.pieces)
+        if (p.used) travelled.push_back(&p);
+    std::sort(travelled.begin(), travelled.end(),
+              [](const CenterlinePieceInfo* a, const CenterlinePieceInfo* b) { return a->chainIndex < b->chainIndex; });
+    json pieces = json::array();
+    for (const CenterlinePieceInfo* p : travelled)
+        pieces.push_back(json{{"volume_ml", p->volumeMl},
+                              {"path_length_mm", p->pathLengthMm},
+                              {"route_searched_on", p->routeSearchedOn}});
+    const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
+    json farBranch;  // null: none left out
+    if (const auto& f = cr.farBranchLeftOut) {
+        farBranch = json{{"handling", "a narrow tube off the wide lumen at the far end (the terminal ileum, gas-filled "
+                                      "through an open ileocecal valve, off the cecum) is left out: the path ends at "
+                                      "the wide lumen's own end"},
+                         {"mouth_mm", vec3Json(f->mouthMm)},
+                         {"tube_end_mm", vec3Json(f->endMm)},
+                         {"tube_length_mm", f->lengthMm},
+                         {"tube_radius_mm", f->depthMm},
+                         {"wide_radius_mm", f->wideDepthMm},
+                         {"wide_end_beyond_mouth_mm", f->wideEndBeyondMouthMm}};
+        if (run.opt.log) {
+            std::ostringstream line;
+            line << std::fixed << std::setprecision(0) << "centerline: a narrow tube (radius " << f->depthMm
+                 << " mm, " << f->lengthMm << " mm followed) leaves the wide lumen (radius " << f->wideDepthMm
+                 << " mm) near its far end at (" << f->mouthMm.x << ", " << f->mouthMm.y << ", " << f->mouthMm.z
+                 << ") LPS mm, as the terminal ileum leaves the cecum; left out: the path ends at the wide lumen's "
+                    "own end, "
+                 << f->wideEndBeyondMouthMm << " mm beyond it";
+            run.opt.log->message(line.str());
+        }
+    }
+    return json{{"traced_beside_contact_cut", bool(speculative)},
+                {"points", pts.size()},
+                {"length_mm", cl.lengthMm()},
+                {"world_frame", "LPS"},
+                {"rectum_mm", pts.empty() ? json() : vec3Json(pts.front().positionMm)},
+                {"cecum_mm", pts.empty() ? json() : vec3Json(pts.back().positionMm)},
+                {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")},
+                {"rectum_rule", cr.rectumRule},
+                {"rectum_above_lowest_lumen_mm", aboveLowest},
+                {"pieces", pieces},
+                {"bridges", bridges},
+                {"near_wall", nearWall},
+                {"far_branch_left_out", farBranch},
+                {"contacts", contactsAlongPath(*sdf, cl)}};
+}
+
+} // namespace flyover

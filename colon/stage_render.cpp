@@ -1,0 +1,1017 @@
+// The render steps, each a cached step of the stage graph with its own key (study.cpp lists
+// the parameters each one depends on): fly-over frame pairs first, then fly-through pairs, the
+// six OST overviews, the video (MP4 through the ffmpeg program) and coverage side by side.
+//
+// Artifacts (all folders are flat):
+//   frames/                   pair_NNNN.png (camera 0 | camera 1), poses.json
+//   flythrough/               pair_NNNN.png (forward | backward) at the same positions, poses.json
+//   overview.png              the anterior overview (with the marker when one is asked for)
+//   overviews/                <view>.png for the six canonical views, cameras.json
+//   video/                    flyover.mp4, poses.json (schema flyover.video/1: every video frame's cameras)
+//   coverage/                 coverage.json, surface_seen.ply
+//   review/                   review_NNNN.png (review views for what the fly-over missed), poses.json
+// The first fly-over pair is rendered and written before anything else, published in the
+// study's frames/ at once and announced (report: first_pair_seconds).
+#include "pipeline/stage_context.h"
+
+#include "colon/local_first_pair.h"
+
+#include "pipeline/artifact_io.h"
+#include "pipeline/deferred_writes.h"
+#include "pipeline/render_output.h"
+#include "colon/render_settings.h"
+#include "render/camera.h"
+#include "render/coverage.h"
+#include "render/flyover_path.h"
+#include "render/overview.h"
+#include "render/ray_scene.h"
+#include "render/render_view.h"
+#include "render/review.h"
+#include "volume/error.h"
+#include "volume/object_pool.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstdlib>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <future>
+#include <mutex>
+#include <optional>
+#include <sstream>
+#include <condition_variable>
+#include <thread>
+#include <memory>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+extern char** environ;
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace flyover {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// How a frame was rendered, so that any frame can be reproduced from the JSON alone.
+json renderOptionsJson(const RenderOptions& ro)
+{
+    return json{{"width_px", ro.widthPx},       {"height_px", ro.heightPx},
+                {"ost", ro.ost},                {"supersample", ro.supersample},
+                {"smooth_shading", ro.smoothShading}, {"depth_cue", ro.depthCue},
+                {"depth_cue_mm", ro.depthCueRangeMm}};
+}
+
+/// Centerline indices every `stepMm` of arc length from the first point.
+std::vector<std::size_t> pathIndices(const Centerline& cl, double stepMm)
+{
+    const double step = cl.stepMm > 0 ? cl.stepMm : 1.0;
+    std::vector<std::size_t> indices;
+    for (std::size_t k = 0;; ++k) {
+        const auto i = static_cast<std::size_t>(std::llround(double(k) * stepMm / step));
+        if (i >= cl.points.size()) break;
+        if (indices.empty() || indices.back() != i) indices.push_back(i);
+    }
+    return indices;
+}
+
+std::string pairName(std::size_t frame)
+{
+    char name[32];
+    std::snprintf(name, sizeof name, "pair_%04zu.png", frame);
+    return name;
+}
+
+json missedRegionsJson(const std::vector<MissedRegion>& regions)
+{
+    json out = json::array();
+    for (const MissedRegion& r : regions)
+        out.push_back(json{{"area_mm2", r.areaMm2},
+                           {"centroid_mm", vec3Json(r.centroidMm)},
+                           {"triangles", r.triangles},
+                           {"nearest_centerline_index", r.nearestCenterlineIndex},
+                           {"arc_mm", r.arcMm},
+                           {"distance_to_centerline_mm", r.distanceToCenterlineMm}});
+    return out;
+}
+
+json methodJson(const MethodCoverage& m, double minRegionMm2)
+{
+    return json{{"fraction", m.fraction},
+                {"seen_area_mm2", m.seenAreaMm2},
+                {"missed_regions_min_area_mm2", minRegionMm2},
+                {"missed_regions_count", m.missed.size()},
+                {"missed_area_in_listed_regions_mm2", m.missedInListedRegionsMm2},
+                {"missed_regions", missedRegionsJson(m.missed)}};
+}
+
+/// Per vertex: 1 when every triangle around it was seen, so a missed region shows in full
+/// (its border vertices are 0) and a miss is never hidden by interpolation in a viewer.
+std::vector<uint8_t> vertexSeen(const RayScene& scene, const std::vector<uint8_t>& triangleSeen)
+{
+    std::vector<uint8_t> v(scene.vertexCount(), 1);
+    for (uint32_t f = 0; f < scene.triangleCount(); ++f) {
+        if (triangleSeen[f]) continue;
+        for (const uint32_t i : scene.triangle(f)) v[i] = 0;
+    }
+    return v;
+}
+
+bool isLittleEndian()
+{
+    const uint16_t probe = 1;
+    uint8_t first = 0;
+    std::memcpy(&first, &probe, 1);
+    return first == 1;
+}
+
+/// surface_seen.ply: binary PLY with per-vertex seen_flyover, seen_flythrough (two-way),
+/// seen_flythrough_forward (0/1) and a colour: blue where the fly-over missed, orange where
+/// only the fly-through missed, tissue elsewhere.
+void writeSurfaceSeen(const std::string& path, const RayScene& scene, const CoverageResult& cov)
+{
+    static_assert(sizeof(float) == 4 && sizeof(int32_t) == 4, "PLY needs 32-bit float and int");
+    if (!isLittleEndian()) throw std::runtime_error(path + ": the PLY writer assumes a little-endian machine");
+    const auto flyover = vertexSeen(scene, cov.flyover.seen);
+    const auto twoWay = vertexSeen(scene, cov.flythroughTwoWay.seen);
+    const auto forward = vertexSeen(scene, cov.flythroughForward.seen);
+    writeAtomically(path, [&](const std::string& tmp) {
+        std::ofstream out(tmp, std::ios::binary);
+        out << "ply\nformat binary_little_endian 1.0\n"
+            << "comment flyover surface_seen: 1 = every triangle around the vertex was hit by a primary ray\n"
+            << "comment colour: blue = missed by the fly-over, orange = missed by the two-way fly-through only\n"
+            << "element vertex " << scene.vertexCount() << "\n"
+            << "property float x\nproperty float y\nproperty float z\n"
+            << "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+            << "property uchar seen_flyover\nproperty uchar seen_flythrough\nproperty uchar seen_flythrough_forward\n"
+            << "element face " << scene.triangleCount() << "\n"
+            << "property list uchar int vertex_indices\nend_header\n";
+        std::vector<char> buf;
+        buf.reserve(std::size_t(scene.vertexCount()) * 18 + std::size_t(scene.triangleCount()) * 13);
+        auto put = [&](const void* p, std::size_t n) {
+            const char* c = static_cast<const char*>(p);
+            buf.insert(buf.end(), c, c + n);
+        };
+        for (uint32_t i = 0; i < scene.vertexCount(); ++i) {
+            const Vec3d p = scene.vertex(i);
+            const float xyz[3] = {float(p.x), float(p.y), float(p.z)};
+            put(xyz, sizeof xyz);
+            uint8_t rgb[3] = {225, 170, 160};
+            if (!flyover[i]) rgb[0] = 30, rgb[1] = 80, rgb[2] = 230;
+            else if (!twoWay[i]) rgb[0] = 245, rgb[1] = 170, rgb[2] = 30;
+            const uint8_t props[6] = {rgb[0], rgb[1], rgb[2], flyover[i], twoWay[i], forward[i]};
+            put(props, sizeof props);
+        }
+        for (uint32_t f = 0; f < scene.triangleCount(); ++f) {
+            const uint8_t n = 3;
+            put(&n, 1);
+            for (const uint32_t v : scene.triangle(f)) {
+                const int32_t idx = int32_t(v);
+                put(&idx, 4);
+            }
+        }
+        out.write(buf.data(), std::streamsize(buf.size()));
+        if (!out) throw InputError(path + ": write failed");
+    });
+}
+
+/// Review views after the fly-over's coverage (render.review): plans them (render/review.h),
+/// renders each into `folder` as review_NNNN.png (a pair like frames/, or one targeted view)
+/// with poses.json, and returns what coverage.json says about them: "flyover_with_review",
+/// "review_views" and "review". With render.review off the folder holds an empty poses.json.
+json renderReview(const RayScene& scene, const Centerline& cl, const CoverageParams& cp,
+                  const std::vector<double>& frameRadii, const CoverageResult& cov, const RenderParams& rp,
+                  const RenderOptions& ro, StagedFolder& folder, Progress* progress)
+{
+    const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
+    json poses = json::array();
+    json out{{"flyover_with_review", nullptr}, {"review_views", 0}};
+    if (!rp.review) {
+        writeJson(folder.path("poses.json"), json{{"schema", "flyover.review_poses/1"},
+                                                  {"world_frame", WORLD_FRAME},
+                                                  {"enabled", false},
+                                                  {"views", poses}});
+        out["review"] = json{{"enabled", false}};
+        return out;
+    }
+    ReviewParams params;
+    params.targetFraction = rp.reviewTarget;
+    params.minRegionMm2 = cp.minRegionMm2;
+    const ReviewResult review = planReview(scene, cl, cp, frameRadii, cov, params, progress);
+
+    std::vector<json> views(review.views.size());
+    tbb::parallel_for(std::size_t(0), review.views.size(), [&](std::size_t k) {
+        const ReviewView& v = review.views[k];
+        char name[32];
+        std::snprintf(name, sizeof name, "review_%04zu.png", k);
+        RgbImage image;
+        if (v.cameras.size() == 2)
+            renderPair(scene, v.cameras[0], v.cameras[1], ro, image);
+        else
+            renderView(scene, v.cameras[0], ro, image);
+        writePng(folder.path(name), image);
+        json cams = json::array();
+        for (const Camera& c : v.cameras) cams.push_back(cameraJson(c));
+        views[k] = json{{"view", k},
+                        {"file", name},
+                        {"kind", v.kind},
+                        {"round", v.round},
+                        {"centerline_index", v.centerlineIndex},
+                        {"arc_mm", double(v.centerlineIndex) * clStep},
+                        {"centerline_point_mm", vec3Json(cl.points[v.centerlineIndex].positionMm)},
+                        {"roll_deg", v.rollDeg},
+                        {"frame_radius_mm", v.frameRadiusMm},
+                        {"added_area_mm2", v.addedAreaMm2},
+                        {"flyover_region", v.flyoverRegion >= 0 ? json(v.flyoverRegion) : json(nullptr)},
+                        {"region_centroid_mm", vec3Json(v.regionCentroidMm)},
+                        {"region_area_mm2", v.regionAreaMm2},
+                        {"cameras", cams}};
+    });
+    writeJson(folder.path("poses.json"),
+              json{{"schema", "flyover.review_poses/1"},
+                   {"world_frame", WORLD_FRAME},
+                   {"enabled", true},
+                   {"layout", "pair views (kind *_pair): camera 0 left, camera 1 right; targeted views: one image"},
+                   {"flyover_region_rule", "index into coverage.json flyover.both_cameras.missed_regions of the "
+                                           "region the view adds the most area to (null: only smaller ones)"},
+                   {"render", renderOptionsJson(ro)},
+                   {"views", views}});
+
+    json missed = missedRegionsJson(review.withReview.missed);
+    for (std::size_t r = 0; r < review.unreached.size(); ++r) {
+        missed[r]["reason"] = review.unreached[r].reason;
+        missed[r]["best_candidate_area_mm2"] = review.unreached[r].bestCandidateAreaMm2;
+    }
+    json withReview = methodJson(review.withReview, cp.minRegionMm2);
+    withReview["missed_regions"] = missed;
+    withReview["target"] = params.targetFraction;
+    withReview["target_reached"] = review.targetReached;
+    out["flyover_with_review"] = withReview;
+    out["review_views"] = review.views.size();
+    out["review"] = json{{"enabled", true},
+                         {"target", params.targetFraction},
+                         {"min_region_mm2", params.minRegionMm2},
+                         {"views", review.views.size()},
+                         {"candidates_evaluated", review.candidatesEvaluated},
+                         {"rounds", review.rounds},
+                         {"rays", review.rays},
+                         {"poses", "review/poses.json"}};
+    return out;
+}
+
+/// The fly-over cameras' settings and the frame images' options, as every step derives them.
+struct FlyoverSetup {
+    FlyoverParams fp;
+    RenderOptions ro;
+    double clStep;
+};
+
+FlyoverSetup flyoverSetup(const RenderParams& rp, const Centerline& cl)
+{
+    return FlyoverSetup{flyoverParamsOf(rp), frameOptionsOf(rp), cl.stepMm > 0 ? cl.stepMm : 1.0};
+}
+
+/// Makes DIR/frames a folder holding only the first pair (a hard link to the staged file), so
+/// that a viewer finds it before the step ends; the commit then replaces the folder by the
+/// complete one. Nothing records this folder: a run killed before the commit leaves a frames/
+/// whose digest matches no record, which status reports and the next run replaces.
+void publishFirstPair(const fs::path& dir, const std::string& stagedPair, const std::string& name)
+{
+    const std::string pid = std::to_string(::getpid());
+    const fs::path tmp = dir / (".tmp-" + pid + "-first-frames"), old = dir / (".tmp-" + pid + "-old-first-frames");
+    fs::remove_all(tmp);
+    fs::remove_all(old);
+    fs::create_directories(tmp);
+    fs::create_hard_link(stagedPair, tmp / name);
+    if (fs::exists(dir / "frames")) fs::rename(dir / "frames", old);
+    fs::rename(tmp, dir / "frames");
+    fs::remove_all(old);
+}
+
+/// Writes frames one at a time, in the order given, on a thread of its own (started by the
+/// constructor, so it inherits the constructing thread's signal mask): write() waits for the
+/// previous frame's write, hands the frame on and returns, so the caller must keep the frame
+/// until its next write() or finish(). A failed write is rethrown by the next write() or finish().
+class FrameWriter {
+public:
+    explicit FrameWriter(std::function<void(const RgbImage&)> sink)
+        : mSink(std::move(sink)), mThread([this] { loop(); })
+    {
+    }
+    ~FrameWriter() { stop(); }
+    FrameWriter(const FrameWriter&) = delete;
+    FrameWriter& operator=(const FrameWriter&) = delete;
+
+    void write(const RgbImage& frame)
+    {
+        std::unique_lock<std::mutex> lock(mMutex);
+        mIdle.wait(lock, [this] { return mPending == nullptr; });
+        if (mError) std::rethrow_exception(mError);
+        mPending = &frame;
+        mWork.notify_one();
+    }
+
+    void finish()
+    {
+        stop();
+        if (mError) std::rethrow_exception(mError);
+    }
+
+private:
+    void loop()
+    {
+        std::unique_lock<std::mutex> lock(mMutex);
+        for (;;) {
+            mWork.wait(lock, [this] { return mPending != nullptr || mStop; });
+            if (mPending == nullptr) return;  // stopped, nothing left
+            const RgbImage* frame = mPending;
+            lock.unlock();
+            std::exception_ptr error;
+            if (!mError) {
+                try {
+                    mSink(*frame);
+                } catch (...) {
+                    error = std::current_exception();
+                }
+            }
+            lock.lock();
+            if (error) mError = error;
+            mPending = nullptr;
+            mIdle.notify_all();
+        }
+    }
+
+    void stop()
+    {
+        {
+            std::lock_guard<std::mutex> lock(mMutex);
+            mStop = true;
+            mWork.notify_one();
+        }
+        if (mThread.joinable()) mThread.join();
+    }
+
+    std::function<void(const RgbImage&)> mSink;
+    std::mutex mMutex;
+    std::condition_variable mWork, mIdle;
+    const RgbImage* mPending = nullptr;
+    bool mStop = false;
+    std::exception_ptr mError;
+    std::thread mThread;  // last: starts once the members above exist
+};
+
+} // namespace
+
+RenderInputs::~RenderInputs() = default;
+
+StudyRun::~StudyRun() = default;
+
+namespace {
+
+std::unique_ptr<SurfaceArrays> arraysOfMesh(const TriMesh& mesh)
+{
+    const auto t0 = Clock::now();
+    auto arrays = std::make_unique<SurfaceArrays>();
+    triMeshArrays(mesh, arrays->xyz, arrays->triangles);
+    arrays->normals = smoothVertexNormals(arrays->xyz, arrays->triangles);
+    arrays->prepareSeconds = secondsSince(t0);
+    return arrays;
+}
+
+} // namespace
+
+void StudyRun::beginSurfaceArrays()
+{
+    if (mSurfaceBegun.valid() || !state.mesh) return;
+    const TriMesh* mesh = &*state.mesh;
+    mSurfaceBegun = std::async(std::launch::async, [mesh] {
+        auto arrays = arraysOfMesh(*mesh);
+        arrays->begunByMeshStage = true;
+        return arrays;
+    });
+}
+
+SurfaceArrays& StudyRun::surfaceArrays()
+{
+    const std::lock_guard<std::mutex> lock(mSurfaceMutex);
+    if (mSurface) return *mSurface;
+    // The arrays begun by the mesh stage, or straight from the mesh in memory, or from
+    // surface.ply's arrays (no topology).
+    if (mSurfaceBegun.valid()) {
+        mSurface = mSurfaceBegun.get();  // rethrows what preparing them threw
+    } else if (state.mesh) {
+        mSurface = arraysOfMesh(*state.mesh);
+    } else {
+        const auto t0 = Clock::now();
+        auto arrays = std::make_unique<SurfaceArrays>();
+        if (!readPlainPly(path("surface.ply"), arrays->xyz, arrays->triangles)) {
+            state.mesh = readMesh(path("surface.ply"));
+            triMeshArrays(*state.mesh, arrays->xyz, arrays->triangles);
+        }
+        arrays->readSurfaceSeconds = secondsSince(t0);
+        const auto t1 = Clock::now();
+        arrays->normals = smoothVertexNormals(arrays->xyz, arrays->triangles);
+        arrays->prepareSeconds = secondsSince(t1);
+        mSurface = std::move(arrays);
+    }
+    return *mSurface;
+}
+
+const Centerline& StudyRun::renderCenterline()
+{
+    const std::lock_guard<std::mutex> lock(mSurfaceMutex);
+    if (!state.centerline) {
+        const auto t0 = Clock::now();
+        state.centerline = centerlineFromJson(readJson(path("centerline.json")), path("centerline.json"));
+        mReadCenterlineSeconds = secondsSince(t0);
+    }
+    if (state.centerline->points.empty()) throw InputError(path("centerline.json") + ": the centerline is empty");
+    return *state.centerline;
+}
+
+const RenderInputs& StudyRun::renderInputs()
+{
+    tbb::collaborative_call_once(mRenderOnce, [this] {
+        auto in = std::make_unique<RenderInputs>();
+        SurfaceArrays& arrays = surfaceArrays();
+        in->readSurfaceSeconds = arrays.readSurfaceSeconds;
+        in->prepareSurfaceSeconds = arrays.prepareSeconds;
+        in->surfaceBegunByMeshStage = arrays.begunByMeshStage;
+        const auto tScene = Clock::now();
+        // The normals given are those the scene would compute (the same function): the same bits.
+        in->scene = std::make_unique<RayScene>(std::move(arrays.xyz), std::move(arrays.triangles), arrays.normals);
+        arrays = SurfaceArrays{};
+        in->buildSceneSeconds = secondsSince(tScene);
+        in->centerline = &renderCenterline();
+        in->readCenterlineSeconds = mReadCenterlineSeconds;
+        const auto tRadii = Clock::now();
+        in->frameRadii = flyoverFrameRadii(*in->scene, *in->centerline, flyoverParamsOf(opt.params.render));
+        in->frameRadiiSeconds = secondsSince(tRadii);
+        mRender = std::move(in);
+    });
+    return *mRender;
+}
+
+namespace {
+
+/// The first fly-over pair rendered from scenes of only the triangles it can meet (the full
+/// scene of the other pairs is built after it): R(p) of its centerline point from a scene of
+/// the triangles its fan rays (and those of its neighbours within reach) can hit, the same
+/// double as flyoverFrameRadii gives; then its two cameras' frustum cull.
+struct FirstPairFromSubset {
+    std::array<Camera, 2> cameras;
+    double frameRadiusMm = 0;
+    std::size_t radiusTriangles = 0, pairTriangles = 0, surfaceTriangles = 0;
+    double surfaceSeconds = 0, radiusSceneSeconds = 0, radiusSeconds = 0, pairSceneSeconds = 0;
+};
+
+FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const RenderOptions& ro, std::size_t index,
+                                   std::unique_ptr<RayScene>& pairScene)
+{
+    FirstPairFromSubset out;
+    auto t = Clock::now();
+    const SurfaceArrays& arrays = run.surfaceArrays();
+    out.surfaceTriangles = arrays.triangles.size() / 3;
+    out.surfaceSeconds = secondsSince(t);
+    const Centerline& cl = run.renderCenterline();
+    t = Clock::now();
+    std::vector<uint32_t> radiusTris = frameRadiusTriangles(arrays.xyz, arrays.triangles, cl, fp, index);
+    out.radiusTriangles = radiusTris.size() / 3;
+    // Scenes for a few thousand rays: a fast (Morton) BVH build, the same hits (tested).
+    SceneOptions fast;
+    fast.fastBuild = true;
+    const auto radiusScene = sceneOfTriangles(arrays.xyz, arrays.normals, radiusTris, fast);
+    out.radiusSceneSeconds = secondsSince(t);
+    t = Clock::now();
+    out.frameRadiusMm = flyoverFrameRadiusAt(*radiusScene, cl, fp, index);
+    out.radiusSeconds = secondsSince(t);
+    t = Clock::now();
+    out.cameras = flyoverCameras(cl.points[index], fp, out.frameRadiusMm);
+    // Test hook (tests/pipeline): FLYOVER_TEST_FIRST_PAIR_CULL_MM moves the frustum's planes
+    // (negative: inwards, dropping what the cameras see) to exercise the confirmation below.
+    const char* testMargin = std::getenv("FLYOVER_TEST_FIRST_PAIR_CULL_MM");
+    const std::vector<Camera> cameras{out.cameras[0], out.cameras[1]};
+    std::vector<uint32_t> pairTris =
+        testMargin ? frustumTriangles(arrays.xyz, arrays.triangles, cameras, ro.widthPx, ro.heightPx, std::atof(testMargin))
+                   : frustumTriangles(arrays.xyz, arrays.triangles, cameras, ro.widthPx, ro.heightPx);
+    out.pairTriangles = pairTris.size() / 3;
+    pairScene = sceneOfTriangles(arrays.xyz, arrays.normals, pairTris, fast);
+    out.pairSceneSeconds = secondsSince(t);
+    return out;
+}
+
+/// Where the first pair's seconds went: with `first`, the wait for the surface's arrays (begun
+/// by the mesh stage), the frame radius's scene and the pair's cull and scene; else the whole
+/// scene and every frame radius (the frames step found them built).
+json firstPairBreakdown(const std::optional<FirstPairFromSubset>& first, const RenderInputs& in,
+                        double renderSeconds, double pngSeconds)
+{
+    if (first)
+        return json{{"wait_for_surface", first->surfaceSeconds},
+                    {"read_surface", in.readSurfaceSeconds},
+                    {"prepare_surface", in.prepareSurfaceSeconds},
+                    {"read_centerline", in.readCenterlineSeconds},
+                    {"frame_radius_scene", first->radiusSceneSeconds},
+                    {"frame_radius", first->radiusSeconds},
+                    {"pair_scene", first->pairSceneSeconds},
+                    {"render_pair", renderSeconds},
+                    {"write_png", pngSeconds}};
+    return json{{"read_surface", in.readSurfaceSeconds},
+                {"prepare_surface", in.prepareSurfaceSeconds},
+                {"build_scene", in.buildSceneSeconds},
+                {"read_centerline", in.readCenterlineSeconds},
+                {"frame_radii", in.frameRadiiSeconds},
+                {"render_pair", renderSeconds},
+                {"write_png", pngSeconds}};
+}
+
+/// Which scene the first pair was rendered from, and how many triangles each kept.
+json firstPairSceneJson(const std::optional<FirstPairFromSubset>& first)
+{
+    if (!first) return json{{"scene", "whole surface"}};
+    return json{{"scene", "frustum cull of the whole surface"},
+                {"surface_triangles", first->surfaceTriangles},
+                {"pair_triangles", first->pairTriangles},
+                {"frame_radius_triangles", first->radiusTriangles},
+                {"frame_radius_mm", first->frameRadiusMm}};
+}
+
+} // namespace
+
+json makeLocalFirstPair(StudyRun& run, const openvdb::FloatGrid& sdf, const Centerline& centerline)
+{
+    const auto t0 = Clock::now();
+    const RenderParams& rp = run.opt.params.render;
+    const std::size_t index0 = pathIndices(centerline, rp.frameStepMm).front();
+    auto made = std::make_shared<LocalFirstPair>(
+        localFirstPair(sdf, centerline, index0, run.opt.params.mesh, flyoverParamsOf(rp), frameOptionsOf(rp)));
+    json report{{"certified", made->certified},
+                {"clip_leaf_fraction", made->clipLeafFraction},
+                {"exact_box_mm", {vec3Json(made->exactBox.min), vec3Json(made->exactBox.max)}},
+                {"local_triangles", made->localTriangles},
+                {"checked_leaves", made->checkLeaves},
+                {"seconds",
+                 {{"mesh", made->meshSeconds},
+                  {"frame_radius", made->radiusSeconds},
+                  {"render", made->renderSeconds},
+                  {"check", made->checkSeconds}}}};
+    if (!made->certified) {
+        report["reason"] = made->reason;
+        run.state.localFirstPairReport = report;
+        return report;
+    }
+    // In the study's frames/ at once, alone (publishFirstPair), and announced.
+    const std::string staged = run.path(".tmp-" + std::to_string(::getpid()) + "-local-first-pair.png");
+    {
+        const DeferredWrites::Scope now(nullptr);  // written at once, not behind (the segment stage's are)
+        writePng(staged, made->pair);
+    }
+    publishFirstPair(run.dir, staged, pairName(0));
+    std::error_code ec;
+    fs::remove(staged, ec);
+    report["seconds_since_run_start"] = secondsSince(run.start);
+    report["seconds"]["total"] = secondsSince(t0);
+    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+    crashPoint("frames:first-pair");
+    run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
+    run.state.localFirstPair = std::move(made);
+    run.state.localFirstPairReport = report;
+    return report;
+}
+
+json runFrames(StudyRun& run, Progress* progress)
+{
+    const auto tStart = Clock::now();
+    const RenderParams& rp = run.opt.params.render;
+    StagedFolder frames(run.dir, "frames");
+    double firstRenderSeconds = 0, firstPngSeconds = 0;
+    // Pair images reused from pair to pair (no allocation per pair), each lent to one pair at a
+    // time: a thread waiting for a pair's tiles may take up another pair meanwhile (ObjectPool).
+    ObjectPool<RgbImage> buffers([] { return RgbImage{}; });
+    RgbImage firstShown;  // pair 0 as rendered from its own scenes, for the confirmation below
+    auto renderFramePair = [&](const RayScene& scene, std::size_t f, const std::array<Camera, 2>& cams) {
+        const auto t0 = Clock::now();
+        const auto lease = buffers.take();
+        RgbImage& pair = *lease;
+        renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), pair);
+        const auto t1 = Clock::now();
+        writePng(frames.path(pairName(f)), pair);
+        if (f == 0) {
+            firstRenderSeconds = std::chrono::duration<double>(t1 - t0).count();
+            firstPngSeconds = secondsSince(t1);
+            firstShown = pair;
+        }
+    };
+
+    // The first pair before anything else, in the study's frames/ at once, announced: when the
+    // scene of the whole surface is not built yet, from scenes of only the triangles its rays
+    // can meet (the same pixels: tested), the whole scene after it.
+    std::optional<FirstPairFromSubset> first;
+    const std::shared_ptr<const LocalFirstPair> local = run.state.localFirstPair;
+    if (local) {
+        // Made, written and announced by the segment stage from a local surface
+        // (local_first_pair.h): into this step's folder, confirmed on the whole scene below.
+        writePng(frames.path(pairName(0)), local->pair);
+        firstShown = local->pair;
+    } else if (!run.renderInputsBuilt()) {
+        const Centerline& cl = run.renderCenterline();
+        const std::size_t index0 = pathIndices(cl, rp.frameStepMm).front();
+        std::unique_ptr<RayScene> pairScene;
+        first = firstPairScene(run, flyoverParamsOf(rp), frameOptionsOf(rp), index0, pairScene);
+        renderFramePair(*pairScene, 0, first->cameras);
+    } else {
+        const RenderInputs& in = run.renderInputs();
+        const std::size_t index0 = pathIndices(*in.centerline, rp.frameStepMm).front();
+        renderFramePair(*in.scene, 0,
+                        flyoverCameras(in.centerline->points[index0], flyoverParamsOf(rp), in.frameRadii[index0]));
+    }
+    const double firstPairSeconds = local ? 0.0 : secondsSince(tStart);
+    const double firstPairSinceRunStart =
+        local ? run.state.localFirstPairReport.value("seconds_since_run_start", 0.0) : secondsSince(run.start);
+    if (!local) {
+        publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
+        if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+        crashPoint("frames:first-pair");
+        run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
+    }
+
+    // The whole scene, before the work that waited for the first pair (the mesh checks, the
+    // write-behind's fsyncs) starts: the BVH build's temporaries and theirs would add up.
+    const auto tInputs = Clock::now();
+    const RenderInputs& in = run.renderInputs();
+    const double inputsSeconds = secondsSince(tInputs);
+    run.openFirstPairGate();
+    const RayScene& scene = *in.scene;
+    const Centerline& cl = *in.centerline;
+    const FlyoverSetup s = flyoverSetup(rp, cl);
+    const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
+    // The first pair shown came from scenes of a cull (the same pixels in every test): it is
+    // confirmed on the whole scene (one pair, ~0.01 s) and, should it differ, replaced, so that
+    // frames/ is always the whole scene's rendering; the log and the report say so.
+    json firstConfirmed = json{{"confirmed_on_whole_scene", false}};
+    if (first || local) {
+        const auto cams = flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]);
+        const auto lease = buffers.take();
+        RgbImage& whole = *lease;
+        renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), whole);
+        const std::size_t differing = differingPixels(firstShown, whole);
+        const double shownRadius = local ? local->frameRadiusMm : first->frameRadiusMm;
+        const bool sameRadius = shownRadius == in.frameRadii[indices[0]];
+        firstConfirmed = json{{"confirmed_on_whole_scene", true},
+                              {"same_frame_radius", sameRadius},
+                              {"differing_pixels", differing},
+                              {"replaced", differing > 0}};
+        if (differing > 0) {
+            writePng(frames.path(pairName(0)), whole);
+            if (run.opt.log) {
+                std::ostringstream msg;
+                msg << "frames: the first pair shown (from ";
+                if (local)
+                    msg << "the local surface round its cameras, " << local->localTriangles;
+                else
+                    msg << "its scene of " << first->pairTriangles << " of " << first->surfaceTriangles;
+                msg << " triangles) differed from the whole scene's in " << differing << " pixels"
+                    << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
+                    << " is now the whole scene's";
+                run.opt.log->message(msg.str());
+            }
+        }
+    }
+    std::vector<json> poses(indices.size());
+    auto poseOf = [&](std::size_t f, const std::array<Camera, 2>& cams) {
+        const CenterlinePoint& p = cl.points[indices[f]];
+        poses[f] = json{{"frame", f},
+                        {"file", pairName(f)},
+                        {"centerline_index", indices[f]},
+                        {"arc_mm", double(indices[f]) * s.clStep},
+                        {"centerline_point_mm", vec3Json(p.positionMm)},
+                        {"radius_mm", p.radiusMm},
+                        {"frame_radius_mm", in.frameRadii[indices[f]]},
+                        {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
+    };
+    poseOf(0, flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]));
+
+    const auto tRest = Clock::now();
+    std::atomic<std::size_t> done{1};
+    tbb::parallel_for(std::size_t(1), indices.size(), [&](std::size_t f) {
+        const auto cams = flyoverCameras(cl.points[indices[f]], s.fp, in.frameRadii[indices[f]]);
+        renderFramePair(scene, f, cams);
+        poseOf(f, cams);
+        reportProgress(progress, double(++done) / double(indices.size()), "fly-over frame pairs");
+    });
+    writeJson(frames.path("poses.json"),
+              json{{"schema", "flyover.poses/1"},
+                   {"world_frame", WORLD_FRAME},
+                   {"image_size_px", {rp.widthPx, rp.heightPx}},
+                   {"layout", "pair images: camera 0 left, camera 1 right"},
+                   {"ost", rp.ost},
+                   {"render", renderOptionsJson(s.ro)},
+                   {"frames", poses}});
+    frames.commit();
+    RenderedPairs shared;
+    for (std::size_t f = 0; f < indices.size(); ++f) {
+        shared.centerlineIndices.push_back(indices[f]);
+        shared.files.push_back(run.path("frames/" + pairName(f)));
+    }
+    run.state.framePairs = std::move(shared);
+    return json{{"frame_pairs", indices.size()},
+                {"triangles", scene.triangleCount()},
+                {"first_pair_seconds", firstPairSeconds},
+                {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
+                {"first_pair_breakdown_seconds",
+                 local ? run.state.localFirstPairReport["seconds"]
+                       : firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
+                {"first_pair_scene", local ? json{{"scene", "local surface round the first cameras (segment stage)"},
+                                                  {"local_triangles", local->localTriangles},
+                                                  {"frame_radius_mm", local->frameRadiusMm}}
+                                           : firstPairSceneJson(first)},
+                {"local_first_pair", run.state.localFirstPairReport},
+                {"first_pair_check", firstConfirmed},
+                {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
+                {"whole_scene_seconds",
+                 {{"wait_for_inputs", inputsSeconds},
+                  {"build_scene", first ? in.buildSceneSeconds : 0.0},
+                  {"frame_radii", first ? in.frameRadiiSeconds : 0.0}}},
+                {"other_pairs_seconds", secondsSince(tRest)}};
+}
+
+json runFlythrough(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
+    StagedFolder flythrough(run.dir, "flythrough");
+    std::size_t pairs = 0;
+    if (rp.flythroughFrames) {
+        const RenderInputs& in = run.renderInputs();
+        const Centerline& cl = *in.centerline;
+        const FlyoverSetup s = flyoverSetup(rp, cl);
+        const std::vector<std::size_t> indices = pathIndices(cl, rp.frameStepMm);
+        std::vector<json> ftPoses(indices.size());
+        std::atomic<std::size_t> done{0};
+        ObjectPool<RgbImage> buffers([] { return RgbImage{}; });  // as in runFrames
+        tbb::parallel_for(std::size_t(0), indices.size(), [&](std::size_t f) {
+            const CenterlinePoint& p = cl.points[indices[f]];
+            const Camera fwd = flythroughCamera(p, true, rp.flythroughFovDeg);
+            const Camera back = flythroughCamera(p, false, rp.flythroughFovDeg);
+            const auto lease = buffers.take();
+            renderPair(*in.scene, fwd, back, s.ro, *lease);
+            writePng(flythrough.path(pairName(f)), *lease);
+            ftPoses[f] = json{{"frame", f},
+                              {"file", pairName(f)},
+                              {"centerline_index", indices[f]},
+                              {"arc_mm", double(indices[f]) * s.clStep},
+                              {"cameras", json::array({cameraJson(fwd), cameraJson(back)})}};
+            reportProgress(progress, double(++done) / double(indices.size()), "fly-through frame pairs");
+        });
+        writeJson(flythrough.path("poses.json"),
+                  json{{"schema", "flyover.poses/1"},
+                       {"world_frame", WORLD_FRAME},
+                       {"layout", "pair images: forward (rectum -> cecum) left, backward right"},
+                       {"render", renderOptionsJson(s.ro)},
+                       {"frames", ftPoses}});
+        pairs = indices.size();
+    }
+    flythrough.commit();
+    return json{{"frame_pairs", pairs}};
+}
+
+json runOverviews(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
+    const RenderInputs& in = run.renderInputs();
+    const RayScene& scene = *in.scene;
+    const Centerline& cl = *in.centerline;
+    const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
+    StagedFolder overviews(run.dir, "overviews");
+    RenderOptions ov;
+    ov.widthPx = ov.heightPx = rp.overviewPx;
+    ov.ost = rp.ost;
+    ov.supersample = std::max(rp.supersample, 2);
+    ov.smoothShading = rp.smoothShading;
+    ov.depthCue = rp.depthCue;  // range 0: half the scene's diagonal
+    std::optional<OverviewMarker> marker;
+    if (rp.overviewMarkerMm >= 0) {
+        const auto i = std::min(cl.points.size() - 1, std::size_t(std::llround(rp.overviewMarkerMm / clStep)));
+        marker = OverviewMarker{cl.points[i].positionMm, std::max(cl.points[i].radiusMm, 1.0)};
+    }
+    json overviewCameras = json::object();
+    RgbImage anterior;
+    std::size_t done = 0;
+    for (const CanonicalView& view : canonicalViews()) {
+        const Camera cam = overviewCamera(scene.boundsMin(), scene.boundsMax(), view.viewDir, view.up, 30.0);
+        RgbImage image = renderView(scene, cam, ov);
+        if (marker) drawMarker(image, cam, *marker);
+        writePng(overviews.path(std::string(view.name) + ".png"), image);
+        overviewCameras[view.name] = cameraJson(cam);
+        if (std::string(view.name) == "anterior") anterior = std::move(image);
+        reportProgress(progress, double(++done) / double(canonicalViews().size()), "overviews");
+    }
+    json overviewInfo{{"schema", "flyover.overviews/1"},
+                      {"world_frame", WORLD_FRAME},
+                      {"render", renderOptionsJson(ov)},
+                      {"cameras", overviewCameras}};
+    if (marker)
+        overviewInfo["marker"] = json{{"arc_mm", rp.overviewMarkerMm},
+                                      {"position_mm", vec3Json(marker->positionMm)},
+                                      {"radius_mm", marker->radiusMm}};
+    writeJson(overviews.path("cameras.json"), overviewInfo);
+    writePng(run.path("overview.png"), anterior);
+    overviews.commit();
+    return json{{"overview_camera", overviewCameras["anterior"]}};
+}
+
+json runVideo(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
+    StagedFolder videoDir(run.dir, "video");
+    std::size_t frameCount = 0, reusedPairs = 0;
+    if (rp.video) {
+        const std::string ffmpeg = findOnPath("ffmpeg");
+        if (ffmpeg.empty())
+            throw std::runtime_error("render.video: the 'ffmpeg' program is not on PATH; install it "
+                                     "(Debian: apt-get install ffmpeg) or set render.video=false");
+        const RenderInputs& in = run.renderInputs();
+        const Centerline& cl = *in.centerline;
+        const FlyoverSetup s = flyoverSetup(rp, cl);
+        const std::vector<std::size_t> vIdx = pathIndices(cl, rp.videoStepMm);
+        const int pairWidth = 2 * rp.widthPx + PAIR_GAP_PX;
+        std::vector<json> vPoses;
+        // The frames step of this run rendered the pairs at its centerline indices with the
+        // same cameras and options (both from this run's parameters): those frames are read
+        // back (PNG is lossless) instead of rendered again.
+        const RenderedPairs* framePairs = run.state.framePairs ? &*run.state.framePairs : nullptr;
+        auto framePairFile = [&](std::size_t centerlineIndex) -> const std::string* {
+            if (!framePairs) return nullptr;
+            const auto& ids = framePairs->centerlineIndices;
+            const auto it = std::lower_bound(ids.begin(), ids.end(), centerlineIndex);
+            if (it == ids.end() || *it != centerlineIndex) return nullptr;
+            return &framePairs->files[std::size_t(it - ids.begin())];
+        };
+        // The frames are rendered (or read back) several at a time by whichever threads are
+        // free, so that the video, the longest render step, keeps both cores busy once the
+        // other steps have ended; they reach ffmpeg in order (the MP4 is the same, byte for
+        // byte). The writer is a thread of this step's own: FfmpegVideo blocks SIGPIPE on the
+        // thread that made it, and a thread it starts inherits that.
+        constexpr std::size_t IN_FLIGHT = 4;  // frames rendered at once, at most
+        const std::size_t n = vIdx.size();
+        std::vector<json> cameraPoses(n);
+        std::atomic<std::size_t> reused{0};
+        writeAtomically(videoDir.path("flyover.mp4"), [&](const std::string& tmp) {
+            FfmpegVideo video(ffmpeg, tmp, videoDir.path(".ffmpeg.log"), pairWidth, rp.heightPx, rp.videoFps);
+            // Frames in flight are consecutive (the last filter takes them in order), plus the
+            // one being written: slot k % (IN_FLIGHT + 1) is free when frame k enters.
+            std::vector<RgbImage> slots(IN_FLIGHT + 1);
+            FrameWriter writer([&video](const RgbImage& frame) { video.write(frame); });
+            std::size_t next = 0;
+            tbb::parallel_pipeline(
+                IN_FLIGHT,
+                tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
+                                                    [&](tbb::flow_control& fc) -> std::size_t {
+                                                        if (next == n) fc.stop();
+                                                        return next < n ? next++ : 0;
+                                                    }) &
+                    tbb::make_filter<std::size_t, std::size_t>(
+                        tbb::filter_mode::parallel,
+                        [&](std::size_t k) {
+                            const auto cams = flyoverCameras(cl.points[vIdx[k]], s.fp, in.frameRadii[vIdx[k]]);
+                            RgbImage& pair = slots[k % slots.size()];
+                            if (const std::string* file = framePairFile(vIdx[k])) {
+                                pair = readPng(*file);
+                                if (pair.width != pairWidth || pair.height != rp.heightPx)
+                                    throw std::runtime_error(
+                                        *file + ": a fly-over pair of " + std::to_string(pair.width) + " x " +
+                                        std::to_string(pair.height) + " px where the video needs " +
+                                        std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
+                                ++reused;
+                            } else {
+                                renderPair(*in.scene, cams[0], cams[1], s.ro, pair);
+                            }
+                            cameraPoses[k] = json{{"frame", k},
+                                                  {"centerline_index", vIdx[k]},
+                                                  {"arc_mm", double(vIdx[k]) * s.clStep},
+                                                  {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
+                            return k;
+                        }) &
+                    tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t k) {
+                        writer.write(slots[k % slots.size()]);  // waits for frame k - 1's write
+                        if (k % 32 == 0) reportProgress(progress, double(k + 1) / double(n), "video frames");
+                    }));
+            writer.finish();  // rethrows a failed write
+            video.finish();
+        });
+        vPoses = std::move(cameraPoses);
+        fs::remove(videoDir.path(".ffmpeg.log"));
+        writeJson(videoDir.path("poses.json"),
+                  json{{"schema", "flyover.video/1"},
+                       {"world_frame", WORLD_FRAME},
+                       {"file", "flyover.mp4"},
+                       {"codec", "H.264 (libx264 ultrafast, yuv420p, crf 20)"},
+                       {"fps", rp.videoFps},
+                       {"step_mm", rp.videoStepMm},
+                       {"image_size_px", {pairWidth, rp.heightPx}},
+                       {"layout", "pair images: camera 0 left, camera 1 right"},
+                       {"render", renderOptionsJson(s.ro)},
+                       {"frames", vPoses}});
+        frameCount = vIdx.size();
+        reusedPairs = reused.load();
+    }
+    videoDir.commit();
+    return json{{"video_frames", frameCount}, {"frames_from_frame_pairs", reusedPairs}};
+}
+
+json runCoverage(StudyRun& run, Progress* progress)
+{
+    const RenderParams& rp = run.opt.params.render;
+    StagedFolder coverage(run.dir, "coverage");
+    StagedFolder review(run.dir, "review");
+    json summary = nullptr, reviewInfo = nullptr;
+    double reviewSeconds = 0;
+    if (rp.coverage) {
+        const RenderInputs& in = run.renderInputs();
+        const RayScene& scene = *in.scene;
+        reportProgress(progress, 0.05, "coverage rays");
+        CoverageParams cp;
+        cp.viewPx = rp.coveragePx;
+        cp.stepMm = rp.coverageStepMm;
+        cp.flyover = flyoverParamsOf(rp);
+        cp.ost = rp.ost;
+        cp.flythroughFovDeg = rp.flythroughFovDeg;
+        cp.frameRadiiMm = in.frameRadii;  // the cameras of the frames and the video
+        const CoverageResult cov = computeCoverage(scene, *in.centerline, cp);
+        const FlyoverParams& fp = cp.flyover;
+        const auto tReview = Clock::now();
+        reviewInfo = renderReview(scene, *in.centerline, cp, in.frameRadii, cov, rp, frameOptionsOf(rp), review, progress);
+        reviewSeconds = secondsSince(tReview);
+        json coverageJson{{"schema", "flyover.coverage/1"},
+                       {"world_frame", WORLD_FRAME},
+                       {"total_area_mm2", cov.totalAreaMm2},
+                       {"triangles", scene.triangleCount()},
+                       {"sampling",
+                        {{"rule", "a triangle is seen when at least one primary ray of the method hits it; "
+                                  "fraction = area of seen triangles / total area"},
+                         {"view_px", cp.viewPx},
+                         {"step_mm", cp.stepMm},
+                         {"positions", cov.positions},
+                         {"rays", cov.rays}}},
+                       {"flyover",
+                        {{"fov_deg", fp.fovDeg},
+                         {"roll_deg", fp.rollDeg},
+                         {"clip_offset_fraction", fp.clipOffsetFraction},
+                         {"clip_offset_mm", fp.clipOffsetMm},
+                         {"ost", cp.ost},
+                         {"both_cameras", methodJson(cov.flyover, cp.minRegionMm2)}}},
+                       {"flythrough",
+                        {{"fov_deg", cp.flythroughFovDeg},
+                         {"one_way_forward", methodJson(cov.flythroughForward, cp.minRegionMm2)},
+                         {"one_way_backward", methodJson(cov.flythroughBackward, cp.minRegionMm2)},
+                         {"two_way", methodJson(cov.flythroughTwoWay, cp.minRegionMm2)}}},
+                       {"vertex_rule", "surface_seen.ply: a vertex is 1 when every triangle around it was seen"}};
+        if (cov.leftOutAreaMm2 > 0)  // only then: other studies' coverage.json stay byte for byte
+            coverageJson["left_out"] = json{{"area_mm2", cov.leftOutAreaMm2},
+                                            {"reason", "the wall round the narrow tube at the lumen's far end that "
+                                                       "the path leaves out (centerline.json left_out_branch: the "
+                                                       "terminal ileum off the cecum); not in total_area_mm2 nor in "
+                                                       "any fraction"}};
+        for (auto it = reviewInfo.begin(); it != reviewInfo.end(); ++it) coverageJson[it.key()] = it.value();
+        writeJson(coverage.path("coverage.json"), coverageJson);
+        writeSurfaceSeen(coverage.path("surface_seen.ply"), scene, cov);
+        summary = json{{"flyover", cov.flyover.fraction},
+                       {"flythrough_one_way_forward", cov.flythroughForward.fraction},
+                       {"flythrough_one_way_backward", cov.flythroughBackward.fraction},
+                       {"flythrough_two_way", cov.flythroughTwoWay.fraction},
+                       {"flyover_missed_regions", cov.flyover.missed.size()}};
+        if (rp.review) {
+            summary["flyover_with_review"] = reviewInfo["flyover_with_review"]["fraction"];
+            summary["review_views"] = reviewInfo["review_views"];
+        }
+    } else {
+        writeJson(review.path("poses.json"), json{{"schema", "flyover.review_poses/1"},
+                                                  {"world_frame", WORLD_FRAME},
+                                                  {"enabled", false},
+                                                  {"views", json::array()}});
+    }
+    reportProgress(progress, 1.0, "coverage done");
+    coverage.commit();
+    review.commit();
+    return json{{"coverage", summary}, {"review_seconds", reviewSeconds}};
+}
+
+} // namespace flyover
