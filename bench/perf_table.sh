@@ -67,7 +67,17 @@ row() {
   local line
   line=$(grep -m1 -F -- "$2" "$1" || true)
   [ -n "$line" ] || { echo "| $3 | (not measured) | | | |"; return; }
-  sed -E 's/.*median +([0-9.]+) +([A-Za-z]+) +min +([0-9.]+) +max +([0-9.]+) +\(([0-9]+) runs\).*/| '"$3"' | \1 \2 | \3 | \4 | \5 |/' <<< "$line"
+  # MB as whole numbers, seconds with three decimals (as measured).
+  awk -v text="$3" '{
+    for (i = 1; i < NF; i++) {
+      if ($i == "median") { med = $(i + 1); unit = $(i + 2) }
+      if ($i == "min") min = $(i + 1)
+      if ($i == "max") max = $(i + 1)
+      if ($i ~ /^\(/) runs = substr($i, 2)
+    }
+    f = unit == "MB" ? "%.0f" : "%.3f"
+    printf "| %s | " f " %s | " f " | " f " | %s |\n", text, med, unit, min, max, runs
+  }' <<< "$line"
 }
 # ratio FILE PREFIX TEXT: the row of first_pair.sh's "PREFIX: a / b = r" line.
 ratio() {
