@@ -1,5 +1,5 @@
 // centerline_real: the centerline of a real colon against its published reference path
-// (issue 14: shortcuts between loops), with the figures the test and the bench table use and
+// (to catch shortcuts between loops), with the figures the test and the bench table use and
 // where the worst jump along the reference lies.
 //
 //   centerline_real --sdf LUMEN.vdb --ref reference_path.json [--wall-penalty P] [--no-sections]

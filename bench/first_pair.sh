@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Time to viewing (issue 15): cold runs of `flyover run` on a phantom, each in a fresh study.
+# Time to viewing: cold runs of `flyover run` on a phantom, each in a fresh study.
 # Usage: bench/first_pair.sh [small|medium|full|gca] [runs] [extra flyover run arguments...]
 # gca: the real colon mask of the shared data (gca-colon-00020, 3.6 L, 2.4 m of colon; no CT,
 # so no ingest and no ITK reference), run with --mask: how a real colon's length and shape
@@ -9,7 +9,7 @@
 # the median of unchanged re-runs; the process CPU seconds (user + system) at the first pair and
 # at the end (steadier than wall times on a shared machine); then the plain ITK reference
 # (bench/itk_reference: ITK read + threshold + marching cubes of the same file) and the ratio
-# first pair / reference (issue 15 asks <= 0.75), and the same against ITK's own mesher
+# first pair / reference (the target is <= 0.75), and the same against ITK's own mesher
 # (itk_reference --mesher itk: ITK alone, one thread for the mesh). Works only in its own folder (FLYOVER_BENCH_DIR, default
 # /tmp/flyover-bench-first-pair): never in a user's study. Build first: scripts/build.sh.
 set -euo pipefail

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Time to the first view in the viewer (issue 15): a cold `flyover run` of a phantom with
+# Time to the first view in the viewer: a cold `flyover run` of a phantom with
 # `flyover view` opened on the same study right after it starts, as a reader would. Measures,
 # from the run's start: its first_pair event, the moment /api/status first says ready (the
 # study served), the first /api/pair image answered, and the whole run; then the revisions the

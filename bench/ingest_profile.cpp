@@ -1,4 +1,4 @@
-// Where ingest's time goes (issue 15): the steps of `flyover run`'s ingest stage on one scan,
+// Where ingest's time goes: the steps of `flyover run`'s ingest stage on one scan,
 // one after the other in this process, each with its wall seconds and the process's CPU
 // seconds (user + system, all threads: what a busy machine does not inflate).
 //

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# flyover inspect at scale (issue 16): per stage, wall time, CPU time (user + sys) and peak RSS,
+# flyover inspect at scale: per stage, wall time, CPU time (user + sys) and peak RSS,
 # on the part phantom of N^3 voxels (uint16, written streaming).
 # Usage: bench/inspect_stages.sh [N=512] [time limit per stage, s=900] [extra inspect arguments...]
 # Each stage runs as its own process (`flyover inspect --until STAGE`, the stages before it

@@ -1,4 +1,4 @@
-// itk_reference: the plain reference of issue 15's first-pair target — read a CT with ITK,
+// itk_reference: the plain reference for the first-pair time target — read a CT with ITK,
 // threshold it, mesh the threshold — timed on the same file as `flyover run`, so that
 // bench/first_pair.sh can print the ratio CT -> first pair / reference.
 //

@@ -1,7 +1,7 @@
 // mask_to_ct: a plausible CT (int16 HU) of a colon label mask, on the mask's own voxel lattice,
 // so that the CT path (`flyover run CT`) can be timed on the same colon as the mask path
-// (`flyover run --mask MASK`): issue 14 asks the mask-only segment stage to come near the CT
-// path's time, which was only known on the phantoms' smaller colons (bench/mask_vs_ct.sh).
+// (`flyover run --mask MASK`): the mask-only segment stage should come near the CT path's
+// time, which was only known on the phantoms' smaller colons (bench/mask_vs_ct.sh).
 //
 //   mask_to_ct MASK OUT.nii.gz [--label N] [--pad-mm P] [--seed S] [--noise-hu H]
 //              [--wall-mm W] [--fat-mm F] [--margin-mm M] [--no-spine] [--mask-out PADDED.nii.gz]

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The CT path and the mask path on the same colon (issue 14: "bring the mask-only segment stage near
-# the CT path's 3 s", a figure taken on the phantom's ~1 L colon). Makes a CT of the mask with
+# The CT path and the mask path on the same colon (the mask-only segment stage should come near
+# the CT path's 3 s, a figure taken on the phantom's ~1 L colon). Makes a CT of the mask with
 # build/bench/mask_to_ct, then times cold runs (fresh study each) of
 #   ct      flyover run CT --study S --until segment            (ingest + segment)
 #   mask    flyover run --mask MASK --study S --until segment   (the mask path on the mask as given)

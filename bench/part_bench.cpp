@@ -1,4 +1,4 @@
-// Industrial part at scale (issue 16): the part phantom written slab by slab, and the void
+// Industrial part at scale: the part phantom written slab by slab, and the void
 // analysis of a scan read slab by slab into a sparse grid. Prints wall and CPU time, peak RSS
 // and the grids' own memory. Not a CTest test.
 //

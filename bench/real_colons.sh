@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 14 ("Real colons") figures for the closing note: per phantom variant (each difficulty
+# Figures for real colons: per phantom variant (each difficulty
 # alone, all together; CT and --truth-mask; several seeds) and on the real segmentation
 # gca-colon-00020 (mask only): path mean / p95 error against the truth (mm), length ratio,
 # contacts found vs truth, fly-over coverage alone and with review, review views added, and

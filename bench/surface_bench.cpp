@@ -6,7 +6,7 @@
 //
 // --stage centerline times the centerline stage instead (colon/centerline.h: the distance
 // field is the lumen level set itself; medial minimal path, centring on sections, smoothing,
-// bridging, resampling) on the same level set: issue 6's "under 3 s on 2 cores".
+// bridging, resampling) on the same level set, against its target of under 3 s on 2 cores.
 //
 // The phantom is generated, ingested and segmented once; the lumen level set is saved as a
 // temporary .vdb. Each measured run is a fresh child process (this program with --grid FILE)

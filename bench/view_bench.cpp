@@ -10,7 +10,7 @@
 //     request in flight (as the page does): median, p95, and pairs/s sustained;
 //   * the server's resident memory (VmRSS, VmHWM) against the scene's size (scene_bytes of
 //     /api/study: vertices, normals, triangles, CT grid).
-// Targets (issue 18): median <= 25 ms, p95 <= 60 ms, >= 30 pairs/s, RSS <= scene + 300 MB,
+// Targets: median <= 25 ms, p95 <= 60 ms, >= 30 pairs/s, RSS <= scene + 300 MB,
 // URL line <= 1 s.
 
 #include <httplib.h>

@@ -46,7 +46,7 @@ struct RenderParams {
     int videoFps = 25;               ///< video frame rate
     bool coverage = true;            ///< coverage of fly-over and fly-through, missed regions
     /// Coverage rays per view: coverage_px^2. 96 px every 3 mm gives the fractions of 192 px
-    /// every 1 mm to within 0.1% on the phantoms, at a sixth of the time (issue 8 note).
+    /// every 1 mm to within 0.1% on the phantoms, at a sixth of the time.
     int coveragePx = 96;
     double coverageStepMm = 3.0;     ///< distance between coverage views along the centerline (mm)
     bool review = true;              ///< review views for the fly-over's missed regions (review/)

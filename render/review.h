@@ -1,5 +1,5 @@
 /// @file review.h
-/// @brief Review views for what the fly-over missed (issue 14, part 4). After the fly-over,
+/// @brief Review views for what the fly-over missed. After the fly-over,
 ///        each missed region of at least minRegionMm2 gets candidate views: the fly-over pair at
 ///        the region's nearest centerline point rolled so that the region lies in the middle of
 ///        one view, the pair turned about the centerline in steps from there, the centred pair

@@ -103,7 +103,7 @@ struct LumenSurfaceReport {
 /// @param deferFinalChecks  leave the checks of the final mesh (report->check, orientation,
 ///        smoothedVolumeMm3, smoothedRoughnessDeg, smoothingVolumeChange) to a later call of
 ///        checkLumenSurface(), so that the mesh can be used first (the pipeline renders the
-///        first pair meanwhile, issue 15); report->finalChecksPending says whether they were
+///        first pair meanwhile); report->finalChecksPending says whether they were
 ///        left. The raw mesh's measures (rawAreaMm2, rawVolumeMm3, rawRoughnessDeg) are left
 ///        too (the extracted positions are kept in report->extractedPoints meanwhile), and so
 ///        are the extraction's soup edge checks (its triangles kept in

@@ -1,6 +1,6 @@
 /// @file live_study.h
-/// @brief The study `flyover view` serves, kept in step with its folder (issue 15: the viewer
-///        on a study that is still being computed). A watcher polls the files the viewer reads
+/// @brief The study `flyover view` serves, kept in step with its folder, so that the viewer
+///        can show a study that is still being computed. A watcher polls the files the viewer reads
 ///        (centerline.json, surface.ply, ct.vdb, coverage/coverage.json, manifest.json); when
 ///        they have changed and then held still for one more poll, it loads a new ViewStudy in
 ///        the background (taking the surface's scene and the CT grid over from the study served

@@ -1,4 +1,4 @@
-// The rectal tube and all the difficulties of issue 14 together, from the CT of the phantoms
+// The rectal tube and all the real-colon difficulties together, from the CT of the phantoms
 // with truth (colon/phantom.h): the tube found whatever the voxel size (its air may not touch
 // the outside air: a closed outer end, or a wall that partial volume closes at coarse voxels),
 // the path from the rectum (the tube's tip as the rectum hint, as the centerline stage does)
@@ -26,7 +26,7 @@ namespace {
 
 using namespace flyover;
 
-/// The issue's standard for a path against the truth.
+/// The standard for a path against the truth.
 constexpr double MAX_MEAN_ERROR_MM = 1.0;
 constexpr double MAX_LENGTH_RATIO_OFF = 0.03;
 /// The path's first point lies within this of the truth's rectum end (the anal verge): in
@@ -138,7 +138,7 @@ void expectTubeCase(const PhantomParams& pp, const std::string& label, bool from
     EXPECT_LE(f.p95Mm, 3.0) << "p95 distance to the truth (mm): " << p95Why;
 }
 
-// Defect of issue 14: at 2.5 mm voxels the tube's lumen is 1-3 voxels across and its wall
+// Former defect: at 2.5 mm voxels the tube's lumen is 1-3 voxels across and its wall
 // closes it in the CT (partial volume, and the phantom's outer end is capped), so the colon's
 // air never touches the outside and the tube was not looked for: the path started at the
 // tube's outer end, 159 mm from the rectum.
@@ -235,7 +235,7 @@ TEST(IlealRefluxPhantom, PathEndsInTheCecumNotInTheIleum)
     }
 }
 
-// Defect of issue 14: with two touching loops too (seeds 4-8), at 2.5 mm voxels, the tube was
+// Former defect: with two touching loops too (seeds 4-8), at 2.5 mm voxels, the tube was
 // followed only part of the way into the rectum. From the CT a straight run from the anal
 // canal started off the tube's axis (the thin piece's bin centroids stray by up to a voxel)
 // and left the 2-voxel air core early: the tip was found 13-41 mm short (at the anal verge on

@@ -84,11 +84,11 @@ TEST(RealColonContacts, GcaPathRunsAnusToCecumWithoutShortcut)
     EXPECT_LT(arc.front(), 30.0) << "the path starts at the anus end of the reference";
     EXPECT_GT(arc.back(), valveArc - 100.0) << "the path ends in the cecum";
     EXPECT_NEAR(cl.lengthMm() / refLength, 1.0, 0.05) << "path length vs the reference over the same stretch";
-    // The target is 20 mm. The jumps of 38.4 and 22.7 mm that the path had (centerline
+    // The target is 20 mm. The jumps of 38.4 and 22.7 mm that the path had (centerline
     // version 4) were no contact: the section centring pulled the path onto the tip of the fold
     // inside two flexures folded back on themselves (below the hepatic flexure, and near the
     // cecum) while the ridge of D went round it 17 mm away (colon/centerline.cpp,
-    // keepRidgeWhereShallow). Measured 2026-11-24 after the fix: largest jump 10.9 mm (in
+    // keepRidgeWhereShallow). Since the fix the largest jump is 10.9 mm (in
     // the transverse colon, reference arc 1747 -> 1758 mm); bound 16 mm.
     EXPECT_LE(worstJump, 16.0) << "consecutive path points jump along the reference: a shortcut";
     EXPECT_LE(mean, 5.0) << "mean distance to the reference path (mm)";

@@ -588,7 +588,7 @@ TEST(SegmentFromMask, ThinObliqueTubeKeepsItsVolumeAndStaysWhole)
     EXPECT_EQ(seg.mask->activeVoxelCount(), countLabel(mask, 1.0f));
 }
 
-// Defect of issue 14: a resampled mask (0.8 x 0.8 x 1.25 mm slices onto 0.8 mm voxels) lost a
+// Former defect: a resampled mask (0.8 x 0.8 x 1.25 mm slices onto 0.8 mm voxels) lost a
 // part one slice thick whose slice lies between two output samples: both samples were free
 // (trilinear indicator 0.64 and 0.72, constrained only from 0.75) and the smoothing closed
 // it. The all-difficulties phantom's second contact (a channel one slice thick between two

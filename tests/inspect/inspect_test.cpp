@@ -80,7 +80,7 @@ TEST_F(InspectTest, VoidsCsvJsonCacheAndVisibility)
                                     " --quiet");
     ASSERT_EQ(r.exitCode, 0) << r.err;
 
-    // voids.csv: the header, one row per listed void.
+    // voids.csv: the fixed header, one row per listed void.
     std::string header;
     const auto rows = readCsv(study + "/voids.csv", header);
     EXPECT_EQ(header, HEADER);

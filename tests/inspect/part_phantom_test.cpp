@@ -1,5 +1,5 @@
 // The industrial part phantom (inspect/part_phantom.h) and the void analysis (inspect/voids.h)
-// against its truth: every void found, volumes, kinds, porosity (issue 16).
+// against its truth: every void found, volumes, kinds, porosity.
 #include "inspect/part_phantom.h"
 #include "pipeline/artifact_io.h"
 #include "inspect/part_phantom_io.h"
@@ -76,7 +76,7 @@ std::string describe(const PartVoidTruth& t)
     return o.str();
 }
 
-/// Every truth expectation of issue 16 on one phantom.
+/// Every truth expectation of the void analysis on one phantom.
 void expectAnalysisMatchesTruth(const Generated& g, const PartAnalysis& a)
 {
     const PartTruth& t = g.truth;

@@ -1,4 +1,4 @@
-// Re-runs, cache keys, corruption and crash safety of a study (issue: TBB dataflow with a
+// Re-runs, cache keys, corruption and crash safety of a study (TBB dataflow with a
 // content-addressed per-stage cache).
 
 #include "pipeline/artifact_io.h"

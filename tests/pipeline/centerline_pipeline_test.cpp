@@ -1,5 +1,5 @@
-// Centerline on the synthetic phantoms, measured against their ground truth (the issue's
-// accuracy targets), and on the real TotalSegmentator colon label (mask-only input).
+// Centerline on the synthetic phantoms, measured against their ground truth (the accuracy
+// targets), and on the real TotalSegmentator colon label (mask-only input).
 #include "colon/phantom.h"
 #include "colon/centerline.h"
 #include "volume/image_io.h"
@@ -51,7 +51,7 @@ openvdb::FloatGrid::Ptr phantomSdf(const Phantom& ph)
     return segmentLumen(*hu, SegmentParams{}).sdf;
 }
 
-/// What the issue measures on a phantom: distance to the true centerline (10 mm at each end
+/// What is measured on a phantom: distance to the true centerline (10 mm at each end
 /// excluded), length, the sharpest turn between steps, the points outside the lumen.
 struct Measured {
     double meanMm = 0, p95Mm = 0, maxMm = 0;

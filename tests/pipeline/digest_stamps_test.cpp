@@ -1,6 +1,6 @@
 // Digest stamps (pipeline/digest_stamps.h): a file's digest is taken from its stamp only while
 // the file has not been written since; any write — in place with its old modification time
-// restored, or by replacement — makes it hashed again (issue 15: the unchanged re-run).
+// restored, or by replacement — makes it hashed again (an unchanged re-run stays fast yet safe).
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/artifact_store.h"

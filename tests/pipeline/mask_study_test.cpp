@@ -205,11 +205,11 @@ TEST_F(MaskStudy, CliMaskRectumAndStepOptions)
     ASSERT_EQ(runCli(base + " --rectum-mm " + at.str() + " --step-mm 2"), 0);
     const Centerline second = centerlineFromJson(readJson(study + "/centerline.json"), "centerline.json");
     EXPECT_DOUBLE_EQ(second.stepMm, 2.0);
-    // The same curve from either end (issue 14, defect 1): this partial colon's lumen is in
+    // The same curve from either end: this partial colon's lumen is in
     // two pieces and has cycles (the first contact search cut three links on it, contacts v2
     // none: none has a long way round); the hinted piece
     // used to be traced from the hint to its farthest voxel, another way round a cycle than the
-    // first path (up to 23 mm off it, 7-8% longer). The issue's standard: 5 mm, 5%.
+    // first path (up to 23 mm off it, 7-8% longer). The standard: 5 mm, 5%.
     EXPECT_LT(distance(second.points.front().positionMm, end), 5.0);
     EXPECT_LT(distance(second.points.back().positionMm, first.points.front().positionMm), 5.0);
     EXPECT_NEAR(second.lengthMm(), first.lengthMm(), 0.05 * first.lengthMm());

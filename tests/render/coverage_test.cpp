@@ -343,7 +343,7 @@ TEST(Coverage, RejectsBadParameters)
 
 // A worker's marker (hit image, walk state) is the thread's own: while a thread waits for the
 // tiles of its view's rays (a nested parallel loop), TBB may hand it another position, which
-// must not take over that marker halfway (issue 15: frames and coverage differed between runs
+// must not take over that marker halfway (else frames and coverage differ between runs
 // under load). Many threads on few cores make such steals frequent; every run must flag
 // exactly the triangles one thread flags.
 TEST(Coverage, SameFlagsOnAnyNumberOfThreadsUnderNestedStealing)

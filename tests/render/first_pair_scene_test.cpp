@@ -1,7 +1,8 @@
-// The first fly-over pair from a scene of only the triangles it can meet (issue 15): its frame
-// radius from the triangles its fan rays can reach (frameRadiusTriangles, the same double as
-// flyoverFrameRadii), its pair from the two cameras' frustum cull (frustumTriangles, the same
-// pixels as the scene of the whole surface), on phantoms where other loops show behind.
+// The first fly-over pair from a scene of only the triangles it can meet, so that it comes
+// sooner: its frame radius from the triangles its fan rays can reach (frameRadiusTriangles, the
+// same double as flyoverFrameRadii), its pair from the two cameras' frustum cull
+// (frustumTriangles, the same pixels as the scene of the whole surface), on phantoms where
+// other loops show behind.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "colon/phantom.h"

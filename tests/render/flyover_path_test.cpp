@@ -152,7 +152,7 @@ TEST(FlyoverFrameRadii, SmoothAlongThePathAndNeverBelowWhatAPointNeeds)
     EXPECT_LT(maxStep, 1.0) << "largest change of R between 1 mm steps (mm)";
 }
 
-// One point's R from the points within its reach only (the first pair's, issue 15): the same
+// One point's R from the points within its reach only (as the first pair takes it): the same
 // double as the whole function's, with and without the Gaussian, at every point.
 TEST(FlyoverFrameRadii, OnePointsRadiusIsTheSameDoubleAsTheWholeFunctions)
 {

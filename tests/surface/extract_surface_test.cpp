@@ -188,7 +188,7 @@ TEST(ExtractSurface, OrientationFollowsTheSignNotTheShape)
 
 TEST(LumenSideTest, ReadsTheLevelSetExactlyAsOpenVdbsBoxSampler)
 {
-    // The orientation tests read the level set with corners taken from their leaf (issue 15:
+    // The orientation tests read the level set with corners taken from their leaf (for speed:
     // the guard after smoothing classifies every face before the first pair); the values must
     // be GridSampler<ConstAccessor, BoxSampler>'s, bit for bit: at random points, at points on
     // and around the leaves' faces (x, y or z of the lower corner at 7 mod 8, negative
@@ -230,7 +230,7 @@ TEST(LumenSideTest, ReadsTheLevelSetExactlyAsOpenVdbsBoxSampler)
     EXPECT_LT(inLeafCorners, checked) << "no sample needed the tree look-ups";
 }
 
-/// The orientation test as it was written before issue 15's faster classification (kept here
+/// The orientation test as it was written before the faster classification (kept here
 /// as the reference): the normal against a central difference of six
 /// GridSampler<ConstAccessor, BoxSampler>::wsSample values (the transform's virtual
 /// worldToIndex, eight tree look-ups each).
@@ -307,7 +307,7 @@ int64_t expectSameSidesAsReference(const openvdb::FloatGrid& sdf, const TriMesh&
 
 TEST(LumenSideTest, ClassifiesAsTheReferenceOnThePhantomsLumen)
 {
-    // Issue 15: the classification reads the six samples of its gradient through an inlined
+    // For speed, the classification reads the six samples of its gradient through an inlined
     // ScaleTranslateMap and from one leaf when they share it; side and gradient must be those
     // of the plain GridSampler code, bit for bit, on a real lumen (the small phantom through
     // ingest and segmentation): every face of its mesh and random triangles around it.
@@ -507,7 +507,7 @@ TEST(ExtractSurface, HonoursCancellation)
 
 TEST(ExtractSurface, CountsOnlyStatsKeepTheCountsAndTheMesh)
 {
-    // surfaceStats = false (the pipeline's mesh stage, issue 15): the same mesh and counts,
+    // surfaceStats = false (as the pipeline's mesh stage asks): the same mesh and counts,
     // without the surface-wide measures.
     auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(8.f, openvdb::Vec3f(0.4f, 0.2f, -0.3f),
                                                                          0.5f, 3.f);

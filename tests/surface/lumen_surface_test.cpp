@@ -311,7 +311,7 @@ void expectSameMeasures(const LumenSurfaceReport& a, const LumenSurfaceReport& b
 
 TEST(LumenSurface, FinalChecksMadeLaterGiveTheSameReport)
 {
-    // The pipeline leaves the final checks until after the first pair (issue 15): the mesh
+    // The pipeline leaves the final checks until after the first pair: the mesh
     // and every checked figure must be those of the checks made at once.
     const double bigR = 12.0, r = 4.0, voxel = 0.4;
     auto grid = test::sampleSdf(
@@ -395,7 +395,7 @@ TEST(LumenSurface, GuardRestoresFacesTurnedAwayFromTheLumen)
     EXPECT_EQ(after.outward, 0);
     EXPECT_EQ(after.inward, int64_t(mesh.n_faces()));
     // The guard's own counts (its first pass, updated for the faces it checked again) are
-    // those of a fresh pass over the mesh it leaves (issue 15: handed to the final checks).
+    // those of a fresh pass over the mesh it leaves (they are handed to the final checks).
     EXPECT_EQ(orientationCounts(counted), orientationCounts(after)) << "expected a fresh pass's counts";
     // Nothing left to restore: a second call is a no-op, and counts the same.
     FaceOrientation again;

@@ -205,7 +205,7 @@ TEST(MeshChecks, SphereInsideASphericalShellNestsTwice)
 TEST(MeshChecks, MeasuresAtOtherPositionsAreThoseOfTheMovedMesh)
 {
     // measureMesh and meanDihedralAngleDeg with positions given apart (the mesh stage measures
-    // the extracted surface after smoothing moved it, issue 15) must give the figures of a mesh
+    // the extracted surface after smoothing moved it) must give the figures of a mesh
     // whose vertices are at those positions, bit for bit: several components (nested spheres,
     // an open box whose loop is capped).
     auto grid = test::sampleSdf(
