@@ -1,7 +1,7 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
-#include "colon/speculative_mesh.h"
+#include "colon/uncut_lumen.h"
 #include "colon/centerline.h"
 #include "colon/segment.h"
 
@@ -19,15 +19,23 @@ namespace flyover {
 json runCenterline(StudyRun& run, Progress* progress)
 {
     auto sdf = run.sdf();
-    // The segment stage's centerline of this very lumen, traced beside its contact cut, when it
-    // traced one; else traced here. The rectal tube's tip (found by segment) is the rectum hint
-    // unless --rectum-mm gave one.
-    std::shared_ptr<SpeculativeCenterline> speculative = std::move(run.state.speculativeCenterline);
+    // The early node's centerline of this very lumen, traced beside the segment stage's contact
+    // cut, when it traced one and the cut removed nothing; else traced here. The rectal tube's
+    // tip (found by segment) is the rectum hint unless --rectum-mm gave one.
+    const std::shared_ptr<UncutLumen> uncut = run.state.uncutLumen;
+    const bool besideCut = uncut && uncut->isFinal() && uncut->centerline.has_value();
     bool fromTube = false;
     const CenterlineParams params = centerlineParamsFor(*sdf, run.opt.params.centerline, fromTube);
     CenterlineReport cr;
-    if (speculative) reportProgress(progress, 0.0, "waiting for the centerline traced beside the contact cut");
-    Centerline c = speculative ? speculative->take(cr, fromTube) : extractCenterline(*sdf, params, progress, &cr);
+    Centerline c;
+    if (besideCut) {
+        c = std::move(*uncut->centerline);
+        uncut->centerline.reset();
+        cr = uncut->centerlineReport;
+        fromTube = uncut->centerlineFromTube;
+    } else {
+        c = extractCenterline(*sdf, params, progress, &cr);
+    }
     writeJson(run.path("centerline.json"), centerlineToJson(c));
     run.state.centerline = std::move(c);
     const Centerline& cl = *run.state.centerline;
@@ -86,7 +94,7 @@ json runCenterline(StudyRun& run, Progress* progress)
             run.opt.log->message(line.str());
         }
     }
-    return json{{"traced_beside_contact_cut", bool(speculative)},
+    return json{{"traced_beside_contact_cut", besideCut},
                 {"points", pts.size()},
                 {"length_mm", cl.lengthMm()},
                 {"world_frame", "LPS"},

@@ -3,12 +3,8 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/grid_write.h"
 #include "pipeline/deferred_writes.h"
-#include "colon/speculative_mesh.h"
 #include "volume/image_io.h"
-#include "volume/threads.h"
 #include "volume/ingest.h"
-
-#include <sys/resource.h>
 
 #include <filesystem>
 
@@ -24,16 +20,16 @@ json runIngest(StudyRun& run, Progress* progress)
     options.dicomSeriesUid = params.dicomSeries;
     options.allowGaps = params.allowGaps;
     openvdb::FloatGrid::Ptr grid;
-    // Writing and hashing ct.vdb is one thread's work: the segmentation begins beside it (the
-    // segment stage takes it, speculative_mesh.h), not with --threads 1.
-    const bool threads = threadsThatMayRun() > 1;
-    auto beginSegment = [&run](const openvdb::FloatGrid::Ptr& hu) {
-        run.state.speculativeSegmentation = std::make_shared<SpeculativeSegmentation>(hu, run.opt.params.segment);
+    // Writing and hashing ct.vdb is one thread's work: the HU grid is handed on before it, for
+    // the segmentation made beside it (the early node "segmentation beside ct.vdb's write").
+    auto handOn = [&run](const openvdb::FloatGrid::Ptr& hu) {
+        run.state.hu = hu;
+        run.handOn("ingest:hu");
     };
     json report = ingestToCtVdb(run, params, options, "ct_hu", progress, grid,
-                                threads && run.state.segmentWanted ? beginSegment
-                                                                   : std::function<void(const openvdb::FloatGrid::Ptr&)>());
-    run.state.hu = grid;
+                                run.earlyReaders("ingest:hu") > 0 ? handOn
+                                                                  : std::function<void(const openvdb::FloatGrid::Ptr&)>());
+    if (!run.state.hu) run.state.hu = grid;  // handed on already: the early node may be reading it
     return report;
 }
 

@@ -2,9 +2,8 @@
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/deferred_writes.h"
-#include "colon/speculative_mesh.h"
+#include "colon/uncut_lumen.h"
 #include "surface/lumen_surface.h"
-#include "volume/threads.h"
 
 #include <algorithm>
 #include <filesystem>
@@ -109,23 +108,27 @@ json runMesh(StudyRun& run, Progress* progress)
     // The checks of the final mesh are left to be made behind the next stages (before the
     // stage's record is written) when its artifacts are written behind.
     DeferredWrites* behind = DeferredWrites::active();
-    // The segment stage's mesh of this very lumen, made beside its contact cut, when it made one.
-    std::shared_ptr<SpeculativeMesh> speculative = std::move(run.state.speculativeMesh);
-    if (speculative) reportProgress(progress, 0.0, "waiting for the mesh made beside the contact cut");
-    run.state.mesh = speculative ? speculative->take(r)
-                                 : makeLumenSurface(*sdf, params, &r, progress, true, behind != nullptr);
-    // The render scenes' arrays and normals from the mesh in memory at once, beside the writing
-    // and hashing of surface.ply and the frames step's cache lookup (not with --threads 1).
-    if (run.state.renderWanted && threadsThatMayRun() > 1) run.beginSurfaceArrays();
+    // The early node's mesh of this very lumen, made beside the segment stage's contact cut,
+    // when it made one and the cut removed nothing.
+    const std::shared_ptr<UncutLumen> uncut = run.state.uncutLumen;
+    const bool besideCut = uncut && uncut->isFinal() && uncut->mesh.has_value();
+    if (besideCut) {
+        run.state.mesh = std::move(uncut->mesh);
+        uncut->mesh.reset();
+        r = uncut->meshReport;
+    } else {
+        run.state.mesh = makeLumenSurface(*sdf, params, &r, progress, true, behind != nullptr);
+    }
+    // The render scenes' arrays and normals from the mesh in memory, beside the writing and
+    // hashing of surface.ply (the early node "render:surface-arrays").
+    run.handOn("mesh:mesh");
     writeMesh(run.path("surface.ply"), *run.state.mesh);
-    const bool besideCut = bool(speculative);
     if (r.finalChecksPending && !behind) checkLumenSurface(*run.state.mesh, *sdf, r);
     if (r.finalChecksPending) {
-        // Reads the mesh and the level set beside the render (which reads them too); the run
-        // keeps both until its write-behind is joined.
+        // Made in the write-behind's commit, after the first pair; reads the mesh and the level
+        // set beside the render (which reads them too); the run keeps both until its end.
         const TriMesh* m = &*run.state.mesh;
-        behind->addReportPart([&run, m, sdf, r, params, besideCut](json& report) mutable {
-            run.waitForFirstPair();  // two cores: the checks would slow the first pair down
+        behind->addReportPart([m, sdf, r, params, besideCut](json& report) mutable {
             checkLumenSurface(*m, *sdf, r);
             report = meshReportJson(r, params, besideCut);
             report["checked_behind"] = true;

@@ -14,8 +14,6 @@
 // study's frames/ at once and announced (report: first_pair_seconds).
 #include "pipeline/stage_context.h"
 
-#include "colon/local_first_pair.h"
-
 #include "pipeline/artifact_io.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/render_output.h"
@@ -399,26 +397,20 @@ std::unique_ptr<SurfaceArrays> arraysOfMesh(const TriMesh& mesh)
 
 } // namespace
 
-void StudyRun::beginSurfaceArrays()
+void StudyRun::prepareSurfaceArrays()
 {
-    if (mSurfaceBegun.valid() || !state.mesh) return;
-    const TriMesh* mesh = &*state.mesh;
-    mSurfaceBegun = std::async(std::launch::async, [mesh] {
-        auto arrays = arraysOfMesh(*mesh);
-        arrays->begunByMeshStage = true;
-        return arrays;
-    });
+    const std::lock_guard<std::mutex> lock(mSurfaceMutex);
+    if (mSurface || !state.mesh) return;
+    mSurface = arraysOfMesh(*state.mesh);
+    mSurface->preparedEarly = true;
 }
 
 SurfaceArrays& StudyRun::surfaceArrays()
 {
     const std::lock_guard<std::mutex> lock(mSurfaceMutex);
     if (mSurface) return *mSurface;
-    // The arrays begun by the mesh stage, or straight from the mesh in memory, or from
-    // surface.ply's arrays (no topology).
-    if (mSurfaceBegun.valid()) {
-        mSurface = mSurfaceBegun.get();  // rethrows what preparing them threw
-    } else if (state.mesh) {
+    // From the mesh in memory, or from surface.ply's arrays (no topology).
+    if (state.mesh) {
         mSurface = arraysOfMesh(*state.mesh);
     } else {
         const auto t0 = Clock::now();
@@ -455,7 +447,7 @@ const RenderInputs& StudyRun::renderInputs()
         SurfaceArrays& arrays = surfaceArrays();
         in->readSurfaceSeconds = arrays.readSurfaceSeconds;
         in->prepareSurfaceSeconds = arrays.prepareSeconds;
-        in->surfaceBegunByMeshStage = arrays.begunByMeshStage;
+        in->surfacePreparedEarly = arrays.preparedEarly;
         const auto tScene = Clock::now();
         // The normals given are those the scene would compute (the same function): the same bits.
         in->scene = std::make_unique<RayScene>(std::move(arrays.xyz), std::move(arrays.triangles), arrays.normals);
@@ -519,84 +511,33 @@ FirstPairFromSubset firstPairScene(StudyRun& run, const FlyoverParams& fp, const
     return out;
 }
 
-/// Where the first pair's seconds went: with `first`, the wait for the surface's arrays (begun
-/// by the mesh stage), the frame radius's scene and the pair's cull and scene; else the whole
-/// scene and every frame radius (the frames step found them built).
-json firstPairBreakdown(const std::optional<FirstPairFromSubset>& first, const RenderInputs& in,
-                        double renderSeconds, double pngSeconds)
+/// Where the first pair's seconds went: the wait for the surface's arrays (prepared beside the
+/// mesh stage's write), the frame radius's scene and the pair's cull and scene.
+json firstPairBreakdown(const FirstPairFromSubset& first, const RenderInputs& in, double renderSeconds,
+                        double pngSeconds)
 {
-    if (first)
-        return json{{"wait_for_surface", first->surfaceSeconds},
-                    {"read_surface", in.readSurfaceSeconds},
-                    {"prepare_surface", in.prepareSurfaceSeconds},
-                    {"read_centerline", in.readCenterlineSeconds},
-                    {"frame_radius_scene", first->radiusSceneSeconds},
-                    {"frame_radius", first->radiusSeconds},
-                    {"pair_scene", first->pairSceneSeconds},
-                    {"render_pair", renderSeconds},
-                    {"write_png", pngSeconds}};
-    return json{{"read_surface", in.readSurfaceSeconds},
+    return json{{"wait_for_surface", first.surfaceSeconds},
+                {"read_surface", in.readSurfaceSeconds},
                 {"prepare_surface", in.prepareSurfaceSeconds},
-                {"build_scene", in.buildSceneSeconds},
                 {"read_centerline", in.readCenterlineSeconds},
-                {"frame_radii", in.frameRadiiSeconds},
+                {"frame_radius_scene", first.radiusSceneSeconds},
+                {"frame_radius", first.radiusSeconds},
+                {"pair_scene", first.pairSceneSeconds},
                 {"render_pair", renderSeconds},
                 {"write_png", pngSeconds}};
 }
 
 /// Which scene the first pair was rendered from, and how many triangles each kept.
-json firstPairSceneJson(const std::optional<FirstPairFromSubset>& first)
+json firstPairSceneJson(const FirstPairFromSubset& first)
 {
-    if (!first) return json{{"scene", "whole surface"}};
     return json{{"scene", "frustum cull of the whole surface"},
-                {"surface_triangles", first->surfaceTriangles},
-                {"pair_triangles", first->pairTriangles},
-                {"frame_radius_triangles", first->radiusTriangles},
-                {"frame_radius_mm", first->frameRadiusMm}};
+                {"surface_triangles", first.surfaceTriangles},
+                {"pair_triangles", first.pairTriangles},
+                {"frame_radius_triangles", first.radiusTriangles},
+                {"frame_radius_mm", first.frameRadiusMm}};
 }
 
 } // namespace
-
-json makeLocalFirstPair(StudyRun& run, const openvdb::FloatGrid& sdf, const Centerline& centerline)
-{
-    const auto t0 = Clock::now();
-    const RenderParams& rp = run.opt.params.render;
-    const std::size_t index0 = pathIndices(centerline, rp.frameStepMm).front();
-    auto made = std::make_shared<LocalFirstPair>(
-        localFirstPair(sdf, centerline, index0, run.opt.params.mesh, flyoverParamsOf(rp), frameOptionsOf(rp)));
-    json report{{"certified", made->certified},
-                {"clip_leaf_fraction", made->clipLeafFraction},
-                {"exact_box_mm", {vec3Json(made->exactBox.min), vec3Json(made->exactBox.max)}},
-                {"local_triangles", made->localTriangles},
-                {"checked_leaves", made->checkLeaves},
-                {"seconds",
-                 {{"mesh", made->meshSeconds},
-                  {"frame_radius", made->radiusSeconds},
-                  {"render", made->renderSeconds},
-                  {"check", made->checkSeconds}}}};
-    if (!made->certified) {
-        report["reason"] = made->reason;
-        run.state.localFirstPairReport = report;
-        return report;
-    }
-    // In the study's frames/ at once, alone (publishFirstPair), and announced.
-    const std::string staged = run.path(".tmp-" + std::to_string(::getpid()) + "-local-first-pair.png");
-    {
-        const DeferredWrites::Scope now(nullptr);  // written at once, not behind (the segment stage's are)
-        writePng(staged, made->pair);
-    }
-    publishFirstPair(run.dir, staged, pairName(0));
-    std::error_code ec;
-    fs::remove(staged, ec);
-    report["seconds_since_run_start"] = secondsSince(run.start);
-    report["seconds"]["total"] = secondsSince(t0);
-    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
-    crashPoint("frames:first-pair");
-    run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
-    run.state.localFirstPair = std::move(made);
-    run.state.localFirstPairReport = report;
-    return report;
-}
 
 json runFrames(StudyRun& run, Progress* progress)
 {
@@ -622,44 +563,29 @@ json runFrames(StudyRun& run, Progress* progress)
         }
     };
 
-    // The first pair before anything else, in the study's frames/ at once, announced: when the
-    // scene of the whole surface is not built yet, from scenes of only the triangles its rays
-    // can meet (the same pixels: tested), the whole scene after it.
-    std::optional<FirstPairFromSubset> first;
-    const std::shared_ptr<const LocalFirstPair> local = run.state.localFirstPair;
-    if (local) {
-        // Made, written and announced by the segment stage from a local surface
-        // (local_first_pair.h): into this step's folder, confirmed on the whole scene below.
-        writePng(frames.path(pairName(0)), local->pair);
-        firstShown = local->pair;
-    } else if (!run.renderInputsBuilt()) {
-        const Centerline& cl = run.renderCenterline();
-        const std::size_t index0 = pathIndices(cl, rp.frameStepMm).front();
-        std::unique_ptr<RayScene> pairScene;
-        first = firstPairScene(run, flyoverParamsOf(rp), frameOptionsOf(rp), index0, pairScene);
-        renderFramePair(*pairScene, 0, first->cameras);
-    } else {
-        const RenderInputs& in = run.renderInputs();
-        const std::size_t index0 = pathIndices(*in.centerline, rp.frameStepMm).front();
-        renderFramePair(*in.scene, 0,
-                        flyoverCameras(in.centerline->points[index0], flyoverParamsOf(rp), in.frameRadii[index0]));
-    }
-    const double firstPairSeconds = local ? 0.0 : secondsSince(tStart);
-    const double firstPairSinceRunStart =
-        local ? run.state.localFirstPairReport.value("seconds_since_run_start", 0.0) : secondsSince(run.start);
-    if (!local) {
-        publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
-        if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
-        crashPoint("frames:first-pair");
-        run.openFirstPairOutGate();  // the write-behind renames its files now (an open viewer reads them)
-    }
+    // The first pair before anything else, in the study's frames/ at once, announced: from
+    // scenes of only the triangles its rays can meet (the same pixels: tested), the whole
+    // scene after it. The frames step is the first render step to run, so nobody has taken
+    // the surface's arrays into the whole scene yet.
+    if (run.renderInputsBuilt()) throw std::logic_error("frames: the render scene was built before the first pair");
+    const Centerline& firstCl = run.renderCenterline();
+    const std::size_t index0 = pathIndices(firstCl, rp.frameStepMm).front();
+    std::unique_ptr<RayScene> pairScene;
+    const FirstPairFromSubset first = firstPairScene(run, flyoverParamsOf(rp), frameOptionsOf(rp), index0, pairScene);
+    renderFramePair(*pairScene, 0, first.cameras);
+    pairScene.reset();
+    const double firstPairSeconds = secondsSince(tStart);
+    const double firstPairSinceRunStart = secondsSince(run.start);
+    publishFirstPair(run.dir, frames.path(pairName(0)), pairName(0));
+    if (run.opt.log) run.opt.log->firstPair(fs::absolute(run.path("frames/" + pairName(0))).string());
+    crashPoint("frames:first-pair");
 
-    // The whole scene, before the work that waited for the first pair (the mesh checks, the
-    // write-behind's fsyncs) starts: the BVH build's temporaries and theirs would add up.
+    // The whole scene, before the write-behind's commits (the fsyncs, the mesh checks) start:
+    // the BVH build's temporaries and theirs would add up.
     const auto tInputs = Clock::now();
     const RenderInputs& in = run.renderInputs();
     const double inputsSeconds = secondsSince(tInputs);
-    run.openFirstPairGate();
+    run.handOn("frames:first-pair");
     const RayScene& scene = *in.scene;
     const Centerline& cl = *in.centerline;
     const FlyoverSetup s = flyoverSetup(rp, cl);
@@ -667,15 +593,14 @@ json runFrames(StudyRun& run, Progress* progress)
     // The first pair shown came from scenes of a cull (the same pixels in every test): it is
     // confirmed on the whole scene (one pair, ~0.01 s) and, should it differ, replaced, so that
     // frames/ is always the whole scene's rendering; the log and the report say so.
-    json firstConfirmed = json{{"confirmed_on_whole_scene", false}};
-    if (first || local) {
+    json firstConfirmed;
+    {
         const auto cams = flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]);
         const auto lease = buffers.take();
         RgbImage& whole = *lease;
         renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), whole);
         const std::size_t differing = differingPixels(firstShown, whole);
-        const double shownRadius = local ? local->frameRadiusMm : first->frameRadiusMm;
-        const bool sameRadius = shownRadius == in.frameRadii[indices[0]];
+        const bool sameRadius = first.frameRadiusMm == in.frameRadii[indices[0]];
         firstConfirmed = json{{"confirmed_on_whole_scene", true},
                               {"same_frame_radius", sameRadius},
                               {"differing_pixels", differing},
@@ -684,13 +609,9 @@ json runFrames(StudyRun& run, Progress* progress)
             writePng(frames.path(pairName(0)), whole);
             if (run.opt.log) {
                 std::ostringstream msg;
-                msg << "frames: the first pair shown (from ";
-                if (local)
-                    msg << "the local surface round its cameras, " << local->localTriangles;
-                else
-                    msg << "its scene of " << first->pairTriangles << " of " << first->surfaceTriangles;
-                msg << " triangles) differed from the whole scene's in " << differing << " pixels"
-                    << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
+                msg << "frames: the first pair shown (from its scene of " << first.pairTriangles << " of "
+                    << first.surfaceTriangles << " triangles) differed from the whole scene's in " << differing
+                    << " pixels" << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
                     << " is now the whole scene's";
                 run.opt.log->message(msg.str());
             }
@@ -737,20 +658,14 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"triangles", scene.triangleCount()},
                 {"first_pair_seconds", firstPairSeconds},
                 {"first_pair_seconds_since_run_start", firstPairSinceRunStart},
-                {"first_pair_breakdown_seconds",
-                 local ? run.state.localFirstPairReport["seconds"]
-                       : firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
-                {"first_pair_scene", local ? json{{"scene", "local surface round the first cameras (segment stage)"},
-                                                  {"local_triangles", local->localTriangles},
-                                                  {"frame_radius_mm", local->frameRadiusMm}}
-                                           : firstPairSceneJson(first)},
-                {"local_first_pair", run.state.localFirstPairReport},
+                {"first_pair_breakdown_seconds", firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
+                {"first_pair_scene", firstPairSceneJson(first)},
                 {"first_pair_check", firstConfirmed},
-                {"surface_prepared_by_mesh_stage", in.surfaceBegunByMeshStage},
+                {"surface_prepared_early", in.surfacePreparedEarly},
                 {"whole_scene_seconds",
                  {{"wait_for_inputs", inputsSeconds},
-                  {"build_scene", first ? in.buildSceneSeconds : 0.0},
-                  {"frame_radii", first ? in.frameRadiiSeconds : 0.0}}},
+                  {"build_scene", in.buildSceneSeconds},
+                  {"frame_radii", in.frameRadiiSeconds}}},
                 {"other_pairs_seconds", secondsSince(tRest)}};
 }
 

@@ -1,12 +1,13 @@
 #include "pipeline/stage_context.h"
 
 #include "pipeline/artifact_io.h"
-#include "colon/speculative_mesh.h"
+#include "colon/uncut_lumen.h"
 #include "volume/image_io.h"
 #include "volume/threads.h"
 #include "colon/lumen_mask.h"
 #include "colon/segment.h"
 
+#include <tbb/task_arena.h>
 
 #include <filesystem>
 #include <iomanip>
@@ -98,45 +99,19 @@ void reportPieces(const StudyRun& run, const LumenSegmentation& seg)
 
 json writeSegmentation(StudyRun& run, LumenSegmentation& seg)
 {
-    // The mesh and the centerline of the lumen beside the contact cut, kept when the cut
-    // changes nothing (not with --threads 1: those threads would be more).
-    std::shared_ptr<SpeculativeMesh> mesh;
-    std::shared_ptr<SpeculativeCenterline> centerline;
-    const bool threads = threadsThatMayRun() > 1;
-    // With a first pair from a local surface (local_first_pair.h) the whole mesh yields to the
-    // cut and the centerline, which that pair waits for, and to the pair itself; it still fills
-    // the cores they leave idle.
-    const bool localPair = threads && run.state.localFirstPairWanted && run.state.meshWanted &&
-                           run.state.centerlineWanted;
-    if (threads && (run.state.meshWanted || run.state.centerlineWanted) && seg.sdf &&
-        SpeculativeMesh::applicable(*seg.sdf)) {
-        // One copy, read by both (neither changes it).
-        const openvdb::FloatGrid::ConstPtr copy = seg.sdf->deepCopy();
-        // The centerline first: the first pair waits for it, the mesh's checks wait for the pair.
-        if (run.state.centerlineWanted)
-            centerline = std::make_shared<SpeculativeCenterline>(copy, run.opt.params.centerline);
-        // Its final checks are left to the mesh stage, which makes them behind the first pair.
-        if (run.state.meshWanted)
-            mesh = std::make_shared<SpeculativeMesh>(copy, run.opt.params.mesh, true, localPair);
-    }
-    json contacts = cutLumenContacts(run, seg);  // stage_contacts.cpp
-    if (contacts.value("cut", -1) == 0) {
-        if (localPair && centerline) {
-            // The cut changed nothing: the centerline traced beside it is the centerline
-            // stage's. A failed trace is left for that stage to report.
-            const Centerline* traced = nullptr;
-            try {
-                traced = &centerline->result();
-            } catch (const std::exception&) {
-            }
-            if (traced && !traced->points.empty()) makeLocalFirstPair(run, *seg.sdf, *traced);
-            if (mesh) mesh->stopYielding();  // the frames step's first pair, if any, waits for it now
-        }
-        run.state.speculativeMesh = std::move(mesh);
-        run.state.speculativeCenterline = std::move(centerline);
-    }
-    mesh.reset();  // a cut: cancelled, the mesh and centerline stages work on the cut lumen
-    centerline.reset();
+    // The lumen before the cut, for the mesh and the centerline made beside it (uncut_lumen.h;
+    // not with --threads 1: they would wait for the cut anyway).
+    std::shared_ptr<UncutLumen> uncut;
+    const int readers = run.earlyReaders("segment:uncut-lumen");
+    if (readers > 0 && threadsThatMayRun() > 1 && seg.sdf && UncutLumen::applicable(*seg.sdf))
+        uncut = std::make_shared<UncutLumen>(seg.sdf->deepCopy(), readers);
+    run.state.uncutLumen = uncut;
+    run.handOn("segment:uncut-lumen");
+    // Isolated: while waiting inside the cut's parallel loops this thread takes none of the
+    // early nodes' work, which would hold the cut's end back.
+    json contacts = tbb::this_task_arena::isolate([&] { return cutLumenContacts(run, seg); });  // stage_contacts.cpp
+    // A cut: the early nodes stop, the mesh and centerline stages work on the cut lumen.
+    if (uncut && contacts.value("cut", -1) != 0) uncut->superseded = true;
     writeGrids(run.path("lumen.vdb"), {seg.mask, seg.sdf});
     run.state.sdf = seg.sdf;
     reportPieces(run, seg);
@@ -151,12 +126,10 @@ json runSegment(StudyRun& run, Progress* progress)
 {
     if (!run.state.hu)
         run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(run.path("ct.vdb"), "ct_hu"));
-    // Begun beside the ingest stage's writing of ct.vdb when ingest ran in this run.
-    std::shared_ptr<SpeculativeSegmentation> speculative = std::move(run.state.speculativeSegmentation);
-    const bool besideCtWrite = bool(speculative);
-    if (speculative) reportProgress(progress, 0.0, "waiting for the segmentation begun beside ct.vdb's write");
-    LumenSegmentation seg = speculative ? speculative->take() : segmentLumen(*run.state.hu, run.opt.params.segment, progress);
-    speculative.reset();
+    // Made beside the ingest stage's writing of ct.vdb when ingest ran in this run.
+    const std::shared_ptr<LumenSegmentation> early = std::move(run.state.earlySegmentation);
+    const bool besideCtWrite = bool(early);
+    LumenSegmentation seg = early ? std::move(*early) : segmentLumen(*run.state.hu, run.opt.params.segment, progress);
     // No later stage reads the HU grid: its 200+ MB go before the contact cut, the mesh and the
     // centerline allocate theirs (ct.vdb is already written; a later run reads it from there).
     run.state.hu.reset();

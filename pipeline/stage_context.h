@@ -21,8 +21,8 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
-#include <future>
 #include <mutex>
+#include <map>
 #include <optional>
 #include <string>
 #include <utility>
@@ -31,10 +31,8 @@
 namespace flyover {
 
 class RayScene;
-struct LocalFirstPair;
-class SpeculativeMesh;
-class SpeculativeCenterline;
-class SpeculativeSegmentation;
+struct LumenSegmentation;
+struct UncutLumen;
 struct PartAnalysis;
 struct PartSurface;
 
@@ -47,7 +45,7 @@ struct SurfaceArrays {
     std::vector<float> normals;
     double readSurfaceSeconds = 0;  ///< reading surface.ply (0 with the mesh in memory)
     double prepareSeconds = 0;      ///< the arrays from the mesh (or file) and the normals
-    bool begunByMeshStage = false;  ///< prepared beside the mesh stage (StudyRun::beginSurfaceArrays)
+    bool preparedEarly = false;     ///< by the early node beside the mesh stage's write (prepareSurfaceArrays)
 };
 
 /// What every render step renders from: the Embree scene of the surface, the centerline and
@@ -59,8 +57,8 @@ struct RenderInputs {
     std::vector<double> frameRadii;
     double readSurfaceSeconds = 0, prepareSurfaceSeconds = 0, buildSceneSeconds = 0, readCenterlineSeconds = 0,
            frameRadiiSeconds = 0;
-    /// Whether the surface's arrays were prepared beside the mesh stage (beginSurfaceArrays).
-    bool surfaceBegunByMeshStage = false;
+    /// Whether the surface's arrays were prepared beside the mesh stage's write (prepareSurfaceArrays).
+    bool surfacePreparedEarly = false;
     ~RenderInputs();
 };
 
@@ -81,39 +79,17 @@ struct StudyState {
     std::shared_ptr<PartAnalysis> part;          ///< flyover inspect: the voids stage's analysis
     std::shared_ptr<PartSurface> partSurface;    ///< flyover inspect: the surfaces stage's mesh
     std::optional<RenderedPairs> framePairs;  ///< set by the frames step when it ran in this run
-    /// Whether this run computes the mesh stage (set by runPipeline): the segment stage then
-    /// meshes its lumen beside the contact cut (speculative_mesh.h).
-    bool meshWanted = false;
-    /// The same for the centerline stage: the segment stage traces its lumen's centerline
-    /// beside the contact cut.
-    bool centerlineWanted = false;
-    /// Whether this run computes a render step: the mesh stage then begins the render scene
-    /// (StudyRun::beginSurfaceArrays) as soon as its mesh is in memory.
-    bool renderWanted = false;
-    /// Whether this run computes the segment stage from the CT: the ingest stage then begins
-    /// segmentLumen beside its writing of ct.vdb (speculative_mesh.h).
-    bool segmentWanted = false;
-    /// That segmentation, for the segment stage (dropped when the stage is reused instead).
-    std::shared_ptr<SpeculativeSegmentation> speculativeSegmentation;
-    /// The segment stage's mesh of the lumen it handed on, when the contact cut changed nothing.
-    std::shared_ptr<SpeculativeMesh> speculativeMesh;
-    /// ... and its centerline of that lumen.
-    std::shared_ptr<SpeculativeCenterline> speculativeCenterline;
-    /// Whether this run goes through the frames step with frames and a mesh that allow a first
-    /// pair from a local surface (local_first_pair.h; set by runPipeline): the segment stage
-    /// then makes it after the contact cut, and the whole mesh it begins beside the cut yields
-    /// the cores to the cut, the centerline and that pair (SpeculativeMesh's `yielding`).
-    bool localFirstPairWanted = false;
-    /// That pair, when it was certified (and announced), for the frames step.
-    std::shared_ptr<const LocalFirstPair> localFirstPair;
-    /// What the attempt found (null: none was made), for the frames step's report.
-    nlohmann::json localFirstPairReport;
+    /// The segmentation made from `hu` by the early node beside ingest's write of ct.vdb, for
+    /// the segment stage (null: none made).
+    std::shared_ptr<LumenSegmentation> earlySegmentation;
+    /// The lumen before the contact cut and the mesh and centerline the early nodes made of it,
+    /// for the mesh and centerline stages unless the cut superseded it (colon/uncut_lumen.h).
+    std::shared_ptr<UncutLumen> uncutLumen;
 };
 
 class StudyRun {
 public:
     explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir), start(std::chrono::steady_clock::now()) {}
-    /// Waits for the arrays begun by beginSurfaceArrays() (defined in stage_render.cpp).
     ~StudyRun();
 
     std::string path(const std::string& name) const { return (dir / name).string(); }
@@ -130,34 +106,41 @@ public:
     /// Whether renderInputs() has been built.
     bool renderInputsBuilt() const { return bool(mRender); }
 
-    /// The surface's arrays and normals (once): the ones begun by beginSurfaceArrays(), or from
-    /// the mesh in memory, or from surface.ply. The frames step builds the first pair's scenes
-    /// from them before renderInputs() takes them. Not thread-safe against renderInputs().
+    /// The surface's arrays and normals (once): from the mesh in memory, or from surface.ply.
+    /// The frames step builds the first pair's scenes from them before renderInputs() takes
+    /// them. Not thread-safe against renderInputs().
     SurfaceArrays& surfaceArrays();
     /// The centerline of the render steps: from memory, else read from centerline.json (once).
     const Centerline& renderCenterline();
 
-    /// Begins preparing surfaceArrays() from state.mesh on a thread of its own (the mesh stage
-    /// calls it once its mesh is in memory, before writing and hashing surface.ply). Nobody
-    /// changes state.mesh afterwards. It renders nothing: a frames step reused from the cache
-    /// builds the scene from it.
-    void beginSurfaceArrays();
+    /// surfaceArrays() from state.mesh, when the mesh stage ran in this run (the early node
+    /// beside the writing and hashing of surface.ply; a no-op without a mesh in memory).
+    void prepareSurfaceArrays();
 
-    /// Work that should not compete with the first pair (the mesh checks made behind, the
-    /// fsyncs and records of the write-behind) waits here until the frames step has
-    /// announced it and built the whole scene after it, or is reused from the cache, or the stage graph has ended (frames not run
-    /// or failed): runPipeline opens the gate then, before it joins the write-behind.
-    void waitForFirstPair() { mFirstPairGate.wait(); }
-    void openFirstPairGate()
+    /// Mid-body hand-ons: a stage body puts into the graph a result it holds in run.state
+    /// before its artifacts are written, and the early nodes that read it start then (the
+    /// frames step also hands on its first pair, once out and the whole scene built after it,
+    /// which the write-behind's commits wait for).
+    /// This is the one thing an edge from the stage's node cannot say: that node ends only
+    /// with the body. runPipeline hands on, after the body, whatever a body did not (reused,
+    /// not wanted, failed), so each hand-on happens exactly once.
+    /// @param what a name of the stage table's hand-ons ("segment:uncut-lumen", say).
+    void handOn(const std::string& what) const
     {
-        mFirstPairOutGate.open();
-        mFirstPairGate.open();
+        if (mHandOn) mHandOn(what);
     }
-    /// The write-behind's renames (no CPU, no memory) wait only for the first pair's
-    /// announcement, so that an open `flyover view` gets the study at once; opened by the
-    /// frames step right after it, and by openFirstPairGate().
-    void waitForFirstPairOut() { mFirstPairOutGate.wait(); }
-    void openFirstPairOutGate() { mFirstPairOutGate.open(); }
+    /// How many early nodes of this run read `what` (the body keeps what it hands on only for them).
+    int earlyReaders(const std::string& what) const
+    {
+        const auto it = mEarlyReaders.find(what);
+        return it == mEarlyReaders.end() ? 0 : it->second;
+    }
+    /// Set by runPipeline when it builds the graph.
+    void setHandOns(std::function<void(const std::string&)> handOn, std::map<std::string, int> earlyReaders)
+    {
+        mHandOn = std::move(handOn);
+        mEarlyReaders = std::move(earlyReaders);
+    }
 
     const RunOptions& opt;
     std::filesystem::path dir;
@@ -165,27 +148,14 @@ public:
     std::chrono::steady_clock::time_point start;  ///< when runPipeline started
 
 private:
-    /// A one-way gate: wait() blocks until open() (called any number of times, any thread).
-    class Gate {
-    public:
-        void wait() const { mOpened.wait(); }
-        void open() { std::call_once(mOnce, [this] { mPromise.set_value(); }); }
-
-    private:
-        std::once_flag mOnce;
-        std::promise<void> mPromise;
-        std::shared_future<void> mOpened = mPromise.get_future().share();
-    };
-    Gate mFirstPairOutGate, mFirstPairGate;
+    std::function<void(const std::string&)> mHandOn;
+    std::map<std::string, int> mEarlyReaders;
     std::mutex mLoadMutex;
     tbb::collaborative_once_flag mRenderOnce;
     std::unique_ptr<RenderInputs> mRender;
     std::mutex mSurfaceMutex;
     std::unique_ptr<SurfaceArrays> mSurface;
     double mReadCenterlineSeconds = 0;
-    /// The arrays begun by beginSurfaceArrays(). Last: its destructor waits for the work, which
-    /// reads state.mesh.
-    std::future<std::unique_ptr<SurfaceArrays>> mSurfaceBegun;
 };
 
 inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
@@ -215,11 +185,16 @@ nlohmann::json cutLumenContacts(StudyRun& run, LumenSegmentation& seg);
 /// of `centerline` nearest to their two sides; null when there are none recorded.
 nlohmann::json contactsAlongPath(const openvdb::FloatGrid& sdf, const Centerline& centerline);
 nlohmann::json runMesh(StudyRun& run, Progress* progress);
-/// The segment stage's first fly-over pair from the surface round the first centerline point
-/// of `centerline` (local_first_pair.h): when certified, written alone into frames/, announced
-/// (log line, JSON event "first_pair") and kept in run.state for the frames step. Returns what
-/// the attempt found (run.state.localFirstPairReport).
-nlohmann::json makeLocalFirstPair(StudyRun& run, const openvdb::FloatGrid& sdf, const Centerline& centerline);
+// The early nodes of the colon's graph (stage_early.cpp): each runs when what it reads is
+// handed on, and its result waits in run.state for the stage it feeds.
+/// segmentLumen on state.hu beside ingest's write of ct.vdb, into state.earlySegmentation.
+void segmentEarly(StudyRun& run, Progress* progress);
+/// The mesh of state.uncutLumen beside the contact cut (its final checks left to the mesh stage).
+void meshUncutLumen(StudyRun& run, Progress* progress);
+/// The centerline of state.uncutLumen beside the contact cut.
+void traceUncutLumen(StudyRun& run, Progress* progress);
+/// run.prepareSurfaceArrays() beside the mesh stage's write of surface.ply.
+void prepareSurfaceEarly(StudyRun& run, Progress* progress);
 // The render steps: each its own cached step of the graph, side by side after the frames.
 /// Fly-over pairs in frames/; the first pair is rendered, written and announced before the
 /// rest (log line "first fly-over pair", JSON event "first_pair").

@@ -4,8 +4,6 @@
 #include "pipeline/artifact_store.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/digest_stamps.h"
-#include "colon/local_first_pair.h"
-#include "colon/render_settings.h"
 #include "pipeline/stage_context.h"
 #include "volume/error.h"
 
@@ -13,9 +11,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdlib>
 #include <exception>
-#include <future>
+#include <functional>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -124,6 +121,36 @@ const std::vector<StageSpec>& partStageSpecs()
 }
 
 const std::vector<StageSpec>& stageSpecs(StudyKind kind) { return kind == StudyKind::Part ? partStageSpecs() : stageSpecs(); }
+
+/// Work that starts ahead of the stage it feeds, as soon as a result it reads is in memory: a
+/// node of the graph with an edge from that hand-on (StudyRun::handOn, "<stage>:<result>")
+/// and edges to the stages that take its result from run.state. Not cached, not in the
+/// manifest: the stage it feeds records what it took. It runs when a stage it feeds is wanted.
+struct EarlySpec {
+    std::string name;
+    std::string reads;               ///< the hand-on it starts on
+    std::vector<std::string> feeds;  ///< the stages that wait for it
+    void (*body)(StudyRun&, Progress*);
+};
+
+const std::vector<EarlySpec>& earlySpecs(StudyKind kind)
+{
+    static const std::vector<EarlySpec> none;
+    // Writing and hashing ct.vdb, and the contact cut, run mostly on one thread; the surface's
+    // render arrays are prepared while surface.ply is written and hashed.
+    static const std::vector<EarlySpec> colon{
+        {"segmentation beside ct.vdb's write", "ingest:hu", {"segment"}, segmentEarly},
+        {"mesh of the uncut lumen", "segment:uncut-lumen", {"mesh"}, meshUncutLumen},
+        {"centerline of the uncut lumen", "segment:uncut-lumen", {"centerline"}, traceUncutLumen},
+        {"render arrays of the surface", "mesh:mesh", {"frames", "flythrough", "overviews", "video", "coverage"},
+         prepareSurfaceEarly},
+    };
+    return kind == StudyKind::Part ? none : colon;
+}
+
+/// The hand-on the write-behind's commits (fsync, rename, record) wait for: the first pair out
+/// and the whole scene built after it ("" = none: they follow their stage at once).
+std::string commitsAfter(StudyKind kind) { return kind == StudyKind::Part ? "" : "frames:first-pair"; }
 
 const std::string& paramStageOf(const StageSpec& spec) { return spec.paramStage.empty() ? spec.name : spec.paramStage; }
 
@@ -292,18 +319,6 @@ nlohmann::json runPipeline(const RunOptions& options)
     ArtifactStore store(options.studyDir, &stamps);
     store.removeStaleTemporaries();
     StudyRun run(options);
-    run.state.meshWanted = wanted.count("mesh") > 0;
-    run.state.centerlineWanted = wanted.count("centerline") > 0;
-    run.state.segmentWanted = kind == StudyKind::Colon && hasCt && !hasMask && wanted.count("segment") > 0;
-    run.state.renderWanted = kind == StudyKind::Colon && std::any_of(specs.begin(), specs.end(), [&](const StageSpec& s) {
-                                 return s.paramStage == RENDER_GROUP && wanted.count(s.name) > 0;
-                             });
-    // Test hook (tests/pipeline): FLYOVER_TEST_NO_LOCAL_FIRST_PAIR=1 leaves the first pair to the
-    // frames step, to exercise its own ways (the frustum cull, its confirmation).
-    const char* noLocalPair = std::getenv("FLYOVER_TEST_NO_LOCAL_FIRST_PAIR");
-    run.state.localFirstPairWanted = kind == StudyKind::Colon && wanted.count("frames") > 0 &&
-                                     !(noLocalPair && std::string(noLocalPair) == "1") &&
-                                     localFirstPairApplies(options.params.mesh, frameOptionsOf(options.params.render));
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries
@@ -360,12 +375,9 @@ nlohmann::json runPipeline(const RunOptions& options)
         }
         writeJson(run.path("manifest.json"), m);
     };
-    // Write-behind: the finishing of each such stage (fsync, rename, record), joined before the
-    // manifest is written (and, being std::async futures, on any way out of this function).
-    std::vector<std::pair<std::string, std::future<void>>> behind;
-
-    // Whether this run may announce a first pair: write-behind finishes wait for it then.
-    const bool firstPairWanted = kind == StudyKind::Colon && wanted.count("frames") > 0;
+    // Write-behind: the finishing of each such stage (rename, fsync, record), left by its body
+    // for its commit node (or, when the graph failed, for the end of the run).
+    std::map<std::string, std::function<void()>> commits;  // guarded by mutex
     auto execute = [&](const StageSpec& spec) {
         if (!wanted.count(spec.name)) return;
         std::map<std::string, std::string> inputs;
@@ -401,8 +413,6 @@ nlohmann::json runPipeline(const RunOptions& options)
                     usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
                 }
                 recordFinished(spec.name, entry);
-                if (spec.name == "segment") run.state.speculativeSegmentation.reset();  // not needed: cancelled
-                if (spec.name == "frames") run.openFirstPairGate();  // no first pair to wait for
                 if (log) log->stageFinished(spec.name, false, secs, "");
                 return;
             }
@@ -434,22 +444,14 @@ nlohmann::json runPipeline(const RunOptions& options)
         entry["report"] = report;
         json record2 = entry;
         record2.erase("computed");
-        auto finish = [&run, &store, &stamps, &recordFinished, &mutex, &entries, deferred, record2, entry,
-                       name = spec.name, behindFirstPair = spec.writeBehind && firstPairWanted]() mutable {
-            // Nothing here is needed for the first pair (the next stages' keys are the digests
-            // taken above): the fsyncs (the disk's writeback of ct.vdb's 224 MB on the full
-            // phantom), renames and records wait until it is out, so as not to share the two
-            // cores with the way to it (or until the frames step is reused, or the graph ends).
-            if (behindFirstPair) run.waitForFirstPairOut();
+        auto finish = [&store, &stamps, &recordFinished, &mutex, &entries, deferred, record2, entry,
+                       name = spec.name]() mutable {
             crashPoint(("writebehind:" + name + ":before-finish").c_str());
-            // The files under their names as soon as the first pair is announced (an open
-            // `flyover view` shows the study then); their fsyncs, what the body left to be made
-            // behind (the mesh checks, 0.9 s on the full phantom) and the record once the whole
-            // scene is built after it. A run killed in between leaves renamed files without a
-            // record, which the next run recomputes.
+            // The files under their names, then their fsyncs, what the body left to be made
+            // behind (the mesh checks) and the record. A run killed in between leaves renamed
+            // files without a record, which the next run recomputes.
             deferred->rename();
             crashPoint(("writebehind:" + name + ":renamed").c_str());
-            if (behindFirstPair) run.waitForFirstPair();
             deferred->sync();
             deferred->completeReport(record2["report"]);
             entry["report"] = record2["report"];
@@ -476,7 +478,7 @@ nlohmann::json runPipeline(const RunOptions& options)
         }
         if (spec.writeBehind) {
             std::lock_guard<std::mutex> g(mutex);
-            behind.emplace_back(spec.name, std::async(std::launch::async, finish));
+            commits[spec.name] = std::move(finish);  // run by the stage's commit node
         } else {
             finish();
         }
@@ -484,18 +486,87 @@ nlohmann::json runPipeline(const RunOptions& options)
     };
 
     // The stage graph: ingest -> segment -> {centerline, mesh} -> frames -> {flythrough,
-    // overviews, video, coverage}. The flow graph runs centerline and mesh side by side, and the
-    // render steps after the frames side by side; parallel loops run inside each stage. An exception in a
-    // node cancels the graph and is rethrown by wait_for_all().
+    // overviews, video, coverage}; beside it the early nodes (earlySpecs), each from a stage's
+    // hand-on to the stages that take its result, and a commit node after each write-behind
+    // stage (and after the first pair). Parallel loops run inside the nodes. An exception in a
+    // stage's node cancels the graph and is rethrown by wait_for_all().
     using namespace tbb::flow;
     graph g;
     std::map<std::string, std::unique_ptr<continue_node<continue_msg>>> nodes;
+    std::map<std::string, std::unique_ptr<broadcast_node<continue_msg>>> handOns;
+    std::map<std::string, std::once_flag> handedOn;
+    const std::string commitHandOn = commitsAfter(kind);
+    // An early node does its work when a stage it feeds is wanted (else it only passes on).
+    auto earlyRuns = [&](const EarlySpec& early) {
+        return std::any_of(early.feeds.begin(), early.feeds.end(), [&](const std::string& f) { return wanted.count(f) > 0; });
+    };
+    std::map<std::string, int> earlyReaders;
+    for (const auto& early : earlySpecs(kind)) {
+        earlyReaders[early.reads] += earlyRuns(early) ? 1 : 0;
+        handOns[early.reads];
+    }
+    if (!commitHandOn.empty()) handOns[commitHandOn];
+    for (auto& [name, node] : handOns) {
+        node = std::make_unique<broadcast_node<continue_msg>>(g);
+        handedOn[name];
+    }
+    // Puts a hand-on into the graph, once (a stage's body, or its node after the body).
+    auto handOn = [&](const std::string& what) {
+        const auto it = handOns.find(what);
+        if (it != handOns.end()) std::call_once(handedOn.at(what), [&] { it->second->try_put(continue_msg()); });
+    };
+    run.setHandOns(handOn, earlyReaders);
     for (const auto& spec : specs)
         nodes[spec.name] = std::make_unique<continue_node<continue_msg>>(
-            g, [&execute, &spec](const continue_msg&) { execute(spec); }, spec.priority);
+            g,
+            [&execute, &handOn, &handOns, &spec](const continue_msg&) {
+                execute(spec);
+                for (const auto& h : handOns)
+                    if (h.first.rfind(spec.name + ":", 0) == 0) handOn(h.first);
+            },
+            spec.priority);
     for (const auto& spec : specs) {
         for (const auto& u : spec.upstream) make_edge(*nodes[u], *nodes[spec.name]);
         for (const auto& u : spec.after) make_edge(*nodes[u], *nodes[spec.name]);
+    }
+    std::vector<std::unique_ptr<continue_node<continue_msg>>> earlyNodes, commitNodes;
+    for (const auto& early : earlySpecs(kind)) {
+        earlyNodes.push_back(std::make_unique<continue_node<continue_msg>>(g, [&run, &early, runs = earlyRuns(early)](const continue_msg&) {
+            if (!runs) return;
+            try {
+                early.body(run, nullptr);
+            } catch (...) {
+                // Cancelled, or failed: no result, and the stage it feeds does the work itself.
+            }
+        }));
+        make_edge(*handOns.at(early.reads), *earlyNodes.back());
+        for (const auto& f : early.feeds) make_edge(*earlyNodes.back(), *nodes.at(f));
+    }
+    // A commit's failure is the stage's (reported after the graph), not the graph's: the other
+    // stages and commits go on.
+    std::map<std::string, std::exception_ptr> commitErrors;  // guarded by mutex
+    auto commit = [&](const std::string& name) {
+        std::function<void()> finish;
+        {
+            std::lock_guard<std::mutex> g2(mutex);
+            const auto it = commits.find(name);
+            if (it == commits.end()) return;
+            finish = std::move(it->second);
+            commits.erase(it);
+        }
+        try {
+            finish();
+        } catch (...) {
+            std::lock_guard<std::mutex> g2(mutex);
+            commitErrors[name] = std::current_exception();
+        }
+    };
+    for (const auto& spec : specs) {
+        if (!spec.writeBehind) continue;
+        commitNodes.push_back(std::make_unique<continue_node<continue_msg>>(
+            g, [&commit, name = spec.name](const continue_msg&) { commit(name); }));
+        make_edge(*nodes[spec.name], *commitNodes.back());
+        if (!commitHandOn.empty()) make_edge(*handOns.at(commitHandOn), *commitNodes.back());
     }
 
     std::exception_ptr failure;
@@ -505,18 +576,21 @@ nlohmann::json runPipeline(const RunOptions& options)
     } catch (...) {
         failure = std::current_exception();
     }
-    run.openFirstPairGate();  // no first pair in this run (or it is out): behind work waits no more
-    for (auto& [name, done] : behind) {
+    // The graph failed: the commits of the stages that finished, which their nodes did not run.
+    for (const auto& spec : specs)
+        if (spec.writeBehind) commit(spec.name);
+    for (const auto& spec : specs) {
+        const auto it = commitErrors.find(spec.name);
+        if (it == commitErrors.end()) continue;
+        entries.erase(spec.name);
+        if (failure) continue;
         try {
-            done.get();
+            std::rethrow_exception(it->second);
         } catch (const std::exception& e) {
-            entries.erase(name);
-            if (!failure) {
-                try {  // nested like a stage body's failure: the cause's type stays visible
-                    std::throw_with_nested(StageError(name, std::string("writing its artifacts: ") + e.what()));
-                } catch (...) {
-                    failure = std::current_exception();
-                }
+            try {  // nested like a stage body's failure: the cause's type stays visible
+                std::throw_with_nested(StageError(spec.name, std::string("writing its artifacts: ") + e.what()));
+            } catch (...) {
+                failure = std::current_exception();
             }
         }
     }

@@ -273,12 +273,12 @@ TEST_F(StudyTest, FirstPairIsWrittenAndAnnouncedBeforeTheOtherRenderSteps)
     EXPECT_EQ(out2.str().find("first_pair"), std::string::npos) << out2.str();
 }
 
-// The mesh stage begins the render scene's arrays and normals from its mesh in memory as soon
-// as it has it, beside its writing and hashing of surface.ply (issue 15); the frames step renders
-// the first pair from a scene of only the triangles its rays can meet, then builds the whole
-// scene. The frames (pair_0000.png first) are those of the frames step run from surface.ply
-// (the mesh stage reused) and with one thread (nothing begun beside).
-TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
+// The early node "render arrays of the surface" prepares the render scene's arrays and normals
+// from the mesh in memory as soon as the mesh stage hands it on, beside its writing and hashing
+// of surface.ply; the frames step renders the first pair from a scene of only the triangles its
+// rays can meet, then builds the whole scene. The frames (pair_0000.png first) are those of the
+// frames step run from surface.ply (the mesh stage reused) and with one thread.
+TEST_F(StudyTest, SurfaceArraysPreparedEarlyRenderTheSameFrames)
 {
     auto framesReport = [](const nlohmann::json& manifest) {
         for (const auto& s : manifest.at("stages"))
@@ -287,7 +287,7 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
         return nlohmann::json();
     };
     auto begun = [&](const nlohmann::json& manifest) {
-        return framesReport(manifest).at("surface_prepared_by_mesh_stage").get<bool>();
+        return framesReport(manifest).at("surface_prepared_early").get<bool>();
     };
     // The first pair came from a frustum cull that dropped triangles.
     auto expectCulled = [&](const nlohmann::json& manifest, const std::string& what) {
@@ -303,7 +303,7 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
     RunOptions o = options("scenebegun");
     o.untilStage = "frames";
     const nlohmann::json early = runPipeline(o);
-    EXPECT_TRUE(begun(early)) << "the frames step did not take the arrays begun by the mesh stage";
+    EXPECT_TRUE(begun(early)) << "the frames step did not take the arrays prepared beside the mesh stage";
     expectCulled(early, "mesh in memory");
     const std::string firstPair = readBytes(o.studyDir + "/frames/pair_0000.png");
     ASSERT_FALSE(firstPair.empty());
@@ -314,13 +314,14 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
     const nlohmann::json fromFile = runPipeline(o);
     EXPECT_FALSE(computedStages(fromFile).at("mesh"));
     EXPECT_TRUE(computedStages(fromFile).at("frames"));
-    EXPECT_FALSE(begun(fromFile)) << "arrays begun although the mesh stage was reused";
+    EXPECT_FALSE(begun(fromFile)) << "arrays prepared early although the mesh stage was reused";
     expectCulled(fromFile, "surface.ply");
     EXPECT_EQ(readBytes(o.studyDir + "/frames/pair_0000.png"), firstPair)
         << "pair_0000.png from surface.ply differs from the one from the mesh in memory";
     EXPECT_EQ(outputDigests(fromFile).at("frames"), outputDigests(early).at("frames"));
 
-    // One thread: nothing begun beside, the same frames.
+    // One thread: the early node runs between the mesh stage and the frames step (its edges
+    // order it), the same frames.
     RunOptions one = options("scenebegun-onethread");
     one.untilStage = "frames";
     nlohmann::json oneThread;
@@ -328,7 +329,7 @@ TEST_F(StudyTest, SceneBegunByTheMeshStageRendersTheSameFrames)
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
         oneThread = runPipeline(one);
     }
-    EXPECT_FALSE(begun(oneThread)) << "arrays begun beside with --threads 1";
+    EXPECT_TRUE(begun(oneThread)) << "the early node did not run before the frames step with one thread";
     EXPECT_EQ(outputDigests(oneThread).at("mesh"), outputDigests(early).at("mesh"));
     EXPECT_EQ(outputDigests(oneThread).at("frames"), outputDigests(early).at("frames"));
 

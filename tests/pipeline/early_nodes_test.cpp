@@ -1,11 +1,13 @@
-// The mesh and the centerline made beside the segment stage's contact cut
-// (colon/speculative_mesh.h) are those of the lumen the segment stage hands on: kept when
-// the cut removes nothing, dropped when it cuts (issue 15); CancellableWork, which runs them.
+// The early nodes of the stage graph (colon/stage_early.cpp): the segmentation made beside
+// ingest's write of ct.vdb is the segment stage's own; the mesh and the centerline made beside
+// the segment stage's contact cut (colon/uncut_lumen.h) are those of the lumen the segment stage
+// hands on: kept when the cut removes nothing, dropped when it cuts.
 
 #include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
 #include "colon/phantom_io.h"
-#include "colon/speculative_mesh.h"
+#include "colon/uncut_lumen.h"
+#include "pipeline/stage_context.h"
 #include "surface/lumen_surface.h"
 #include "tests/pipeline/study_fixture.h"
 
@@ -161,7 +163,7 @@ TEST_F(StudyTest, SegmentationBegunBesideCtWriteIsTheSegmentStagesOwn)
     EXPECT_EQ(reportB, reportA) << "the segment reports differ";
 
     // Ingest recomputed (its record gone) to the same ct.vdb: the segment stage is reused, and
-    // the segmentation begun beside the write is dropped (the run ends, nothing recomputed).
+    // the segmentation made beside the write is left unused.
     for (const auto& e : fs::directory_iterator(fs::path(one.studyDir) / ".flyover" / "records"))
         if (e.path().filename().string().rfind("ingest-", 0) == 0) fs::remove(e.path());
     const nlohmann::json again = runPipeline(one);
@@ -201,61 +203,34 @@ TEST_F(StudyTest, MeshBesideAContactCutThatCutsIsDropped)
     expectSameMeshEitherWay(one, two, false, 2);
 }
 
-TEST(CancellableWork, AnErrorReachesTheTakerAndOneThreadWorks)
-{
-    {
-        CancellableWork<int> failing([](Progress*) -> int { throw std::runtime_error("broken lumen"); });
-        try {
-            failing.get();
-            ADD_FAILURE() << "get() returned though the work threw";
-        } catch (const std::runtime_error& e) {
-            EXPECT_STREQ(e.what(), "broken lumen");
-        }
-    }
-    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-    CancellableWork<std::string> work([](Progress* p) {
-        EXPECT_FALSE(p->cancelled());
-        return std::string("done");
-    });
-    EXPECT_EQ(work.get(), "done");
-}
-
-TEST(CancellableWork, DroppedWorkIsCancelledAndWaitedFor)
-{
-    std::atomic<bool> sawCancel{false};
-    {
-        CancellableWork<int> work([&](Progress* p) {
-            const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-            while (!p->cancelled() && std::chrono::steady_clock::now() < until) std::this_thread::yield();
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the owner must wait for this
-            sawCancel = p->cancelled();
-            return 0;
-        });
-    }
-    EXPECT_TRUE(sawCancel) << "the destructor returned before the work saw its cancellation";
-}
-
-// A yielding mesh (nice 10, a low-priority TBB arena: the local first pair's runs) is the same
-// mesh, whether stopYielding() comes at once (before its thread may have started) or never.
-TEST(SpeculativeMesh, YieldingMakesTheSameMesh)
+// An uncut lumen superseded by the cut stops its early mesh at its first progress report, and
+// the last of its readers frees the copy; not superseded, the early mesh is makeLumenSurface's.
+TEST(UncutLumen, SupersededWorkStopsAndTheLastReaderFreesTheCopy)
 {
     const openvdb::FloatGrid::ConstPtr sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
         20.0f, openvdb::Vec3f(0.0f), 0.8f);
-    const MeshParams params;
-    auto pointsOf = [](const TriMesh& m) {
-        std::vector<TriMesh::Point> p;
-        for (const auto v : m.vertices()) p.push_back(m.point(v));
-        return p;
-    };
-    LumenSurfaceReport r0, r1, r2;
-    SpeculativeMesh plain(sphere, params, true, false);
-    SpeculativeMesh yielding(sphere, params, true, true);
-    SpeculativeMesh stopped(sphere, params, true, true);
-    stopped.stopYielding();
-    const TriMesh a = plain.take(r0), b = yielding.take(r1), c = stopped.take(r2);
-    ASSERT_GT(a.n_faces(), 0u);
-    EXPECT_EQ(b.n_faces(), a.n_faces());
-    EXPECT_EQ(c.n_faces(), a.n_faces());
-    EXPECT_EQ(pointsOf(b), pointsOf(a)) << "the yielding mesh moved a vertex";
-    EXPECT_EQ(pointsOf(c), pointsOf(a));
+    RunOptions options;
+    options.studyDir = (fs::temp_directory_path() / "flyover-uncut-lumen-test").string();
+    StudyRun run(options);
+
+    run.state.uncutLumen = std::make_shared<UncutLumen>(sphere, 2);
+    run.state.uncutLumen->superseded = true;
+    EXPECT_EQ(sphere.use_count(), 2);
+    EXPECT_THROW(meshUncutLumen(run, nullptr), Cancelled);
+    EXPECT_FALSE(run.state.uncutLumen->mesh.has_value());
+    EXPECT_EQ(sphere.use_count(), 2) << "freed while a reader was left";
+    run.state.uncutLumen->doneReading();
+    EXPECT_EQ(sphere.use_count(), 1) << "the last reader did not free the copy";
+
+    run.state.uncutLumen = std::make_shared<UncutLumen>(sphere, 1);
+    meshUncutLumen(run, nullptr);
+    ASSERT_TRUE(run.state.uncutLumen->mesh.has_value());
+    EXPECT_EQ(sphere.use_count(), 1);
+    LumenSurfaceReport plainReport;
+    const TriMesh plain = makeLumenSurface(*sphere, options.params.mesh, &plainReport, nullptr, true, true);
+    const TriMesh& early = *run.state.uncutLumen->mesh;
+    ASSERT_GT(plain.n_faces(), 0u);
+    ASSERT_EQ(early.n_vertices(), plain.n_vertices());
+    EXPECT_EQ(early.n_faces(), plain.n_faces());
+    for (const auto v : plain.vertices()) ASSERT_EQ(early.point(v), plain.point(v)) << "vertex " << v.idx();
 }
