@@ -603,6 +603,97 @@ std::vector<Vec3d> smoothTwiced(const std::vector<Vec3d>& fine, double sigmaMm)
     return out;
 }
 
+/// Turning angle (degrees) at every sample of an evenly sampled path between the chords of
+/// `chordSamples` samples before and after it; 0 where either chord is cut by an end.
+std::vector<double> chordTurnsDeg(const std::vector<Vec3d>& pts, long chordSamples)
+{
+    const long n = static_cast<long>(pts.size());
+    std::vector<double> turn(pts.size(), 0.0);
+    for (long i = chordSamples; i + chordSamples < n; ++i) {
+        const Vec3d a = normalize(pts[i] - pts[i - chordSamples]), b = normalize(pts[i + chordSamples] - pts[i]);
+        if (length(a) == 0 || length(b) == 0) continue;
+        turn[i] = std::acos(std::clamp(dot(a, b), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+    }
+    return turn;
+}
+
+/// Kinks: where the smoothed path still turns more than MAX_TURN_DEG_PER_MM between consecutive
+/// 1 mm chords (the section centroids jumping between the lobes of an irregular lumen, a seam
+/// where the ridge was kept: a wiggle of a few mm that the cameras would follow with a spin),
+/// the path is smoothed again there, with a Gaussian that widens each round (2 mm, then by
+/// sqrt 2 up to 16 mm), blended in over a window round each kink and out over two more sigma.
+/// A point moves at most half its depth (the ball of lumen round it: never across a wall into
+/// a touching loop), and one that would come closer to the wall than min(MIN_WALL_MM, half its
+/// depth before) is moved back towards where it was until it is not (a tight bend in a narrow lumen
+/// keeps its corner). The bound leaves a margin under 30 degrees per 1 mm step and 15 degrees of camera
+/// normal (the rotation-minimising normal turns no more than the tangent does). `fine` is
+/// evenly sampled every fineMm; so is the result.
+std::vector<Vec3d> removeKinks(const std::vector<Vec3d>& fine, const openvdb::FloatGrid& grid, double fineMm)
+{
+    constexpr double MAX_TURN_DEG_PER_MM = 12.0;
+    constexpr double MIN_WALL_MM = 1.0;
+    constexpr int ROUNDS = 7;
+    const long chord = std::max(1L, std::lround(1.0 / fineMm));
+    std::vector<Vec3d> pts = fine;
+    // The depth of the path as it came, by arc fraction: the bounds below hold against it, not
+    // against the previous round's (which would let each round take another half).
+    std::vector<double> depthBefore(fine.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fine.size(), 256), [&](const tbb::blocked_range<std::size_t>& r) {
+        DepthProbe depth(grid);
+        for (std::size_t i = r.begin(); i != r.end(); ++i) depthBefore[i] = depth(fine[i]);
+    });
+    auto depthBeforeAt = [&](long i, long n) {
+        const long j = n > 1 ? std::lround(double(i) * double(fine.size() - 1) / double(n - 1)) : 0;
+        return depthBefore[std::size_t(std::clamp(j, 0L, static_cast<long>(fine.size()) - 1))];
+    };
+    for (int round = 0; round < ROUNDS && static_cast<long>(pts.size()) > 4 * chord; ++round) {
+        const std::vector<double> turn = chordTurnsDeg(pts, chord);
+        const long n = static_cast<long>(pts.size());
+        const double sigmaMm = 2.0 * std::pow(std::sqrt(2.0), round);
+        const long inner = static_cast<long>(std::ceil(2.0 * sigmaMm / fineMm)), outer = 2 * inner;
+        // Blend weight: 1 within `inner` samples of a kink, falling smoothly to 0 over `outer` more.
+        std::vector<double> w(pts.size(), 0.0);
+        bool any = false;
+        for (long i = 0; i < n; ++i) {
+            if (!(turn[i] > MAX_TURN_DEG_PER_MM)) continue;
+            any = true;
+            for (long j = std::max(0L, i - inner - outer); j <= std::min(n - 1, i + inner + outer); ++j) {
+                const long d = std::abs(j - i);
+                const double x = d <= inner ? 1.0 : 1.0 - double(d - inner) / double(outer);
+                w[j] = std::max(w[j], x * x * (3.0 - 2.0 * x));
+            }
+        }
+        if (!any) break;
+        const std::vector<Vec3d> smooth = gaussianSmooth(pts, sigmaMm / fineMm);
+        std::vector<Vec3d> out(pts.size());
+        tbb::parallel_for(tbb::blocked_range<long>(0, n, 256), [&](const tbb::blocked_range<long>& r) {
+            DepthProbe depth(grid);
+            for (long i = r.begin(); i != r.end(); ++i) {
+                out[i] = pts[i];
+                if (w[i] <= 0.0) continue;
+                const double here = std::max(0.0, depthBeforeAt(i, n));
+                const double floorMm = std::min(MIN_WALL_MM, 0.5 * here);
+                // A move stays within the lumen ball round the point (half its depth), so it
+                // never crosses a wall into another loop however wide the Gaussian.
+                const double maxMoveMm = 0.5 * here;
+                double t = w[i];
+                for (int k = 0; k < 6 && t > 0.0; ++k, t *= 0.5) {
+                    Vec3d move = (smooth[i] - pts[i]) * t;
+                    const double len = length(move);
+                    if (len > maxMoveMm) move = move * (maxMoveMm / len);
+                    const Vec3d q = pts[i] + move;
+                    if (depth(q) >= floorMm) {
+                        out[i] = q;
+                        break;
+                    }
+                }
+            }
+        });
+        pts = resampleEven(out, fineMm);
+    }
+    return pts;
+}
+
 /// Ends, part 2: continues the path straight along its end tangent into the blind end until
 /// D falls to 60% of its value at the end. The path stops about one radius short of the cap
 /// wall (where sections stop being whole); the extension lets the end cameras look into the
@@ -746,7 +837,7 @@ std::vector<Vec3d> refinePath(const std::vector<Vec3d>& raw, const openvdb::Floa
             fine = resampleEven(moved, fineMm);
         }
     if (params.centerSections) fine = keepRidgeWhereShallow(fine, ridge, grid, voxelMm, fineMm);
-    fine = smoothTwiced(fine, params.smoothingMm);
+    fine = removeKinks(smoothTwiced(fine, params.smoothingMm), grid, fineMm);
     extendEnd(fine, depthAt, fineMm);
     std::reverse(fine.begin(), fine.end());
     extendEnd(fine, depthAt, fineMm);
@@ -772,10 +863,68 @@ Vec3d frontOutward(const std::vector<Vec3d>& path, double voxelMm)
     return backOutward(r, voxelMm);
 }
 
-/// Without rectumMm, the rectum is the lowest piece end; when that lies more than this above
-/// the lowest lumen voxel (mm), the farthest pair missed the rectum (the path end stops about a
-/// lumen radius short of the cap wall; a distended rectum is up to ~25 mm in radius).
-constexpr double LOWEST_END_SLACK_MM = 40.0;
+
+/// The end of the tube nearest to `seed` (the lowest lumen voxel, or the lumen voxel nearest to
+/// a --rectum-mm hint), for a piece traced again from there. The end is a voxel farthest along
+/// the lumen from the seed's farthest voxel F (the cecum): globally, when that lies within
+/// END_REACH_MM (in steps) of the seed; else the farthest from F among the voxels within that
+/// reach of the seed, when it lies inside the reach (a local end there: the seed's blind end,
+/// such as a wide rectum whose cap holds the lowest voxel while the piece's other tips, a loop
+/// left over by a contact cut or a branch, lie farther from F); else the global one (the seed
+/// lies at no end: mid-tube). `steps` is overwritten.
+Slot tubeEndNearSeed(const LumenIndex& index, const SlotBits& holes, Slot seed, std::vector<std::int32_t>& steps,
+                     double voxelMm, Progress* progress)
+{
+    constexpr double END_REACH_MM = LOWEST_END_SLACK_MM;
+    const std::int32_t reach = std::max<std::int32_t>(3, static_cast<std::int32_t>(END_REACH_MM / voxelMm));
+    std::vector<Slot> near{seed};
+    std::vector<std::int32_t> nearSteps;
+    breadthFirst(index, holes, near, reach, [&](Slot, std::int32_t n) { nearSteps.push_back(n); }, progress);
+    const Slot far = stepsFrom(index, holes, seed, steps, progress);
+    const Slot globalEnd = stepsFrom(index, holes, far, steps, progress);
+    Slot local = seed;
+    std::int32_t localSteps = 0;
+    bool globalNear = false;
+    for (std::size_t i = 0; i < near.size(); ++i) {
+        if (near[i] == globalEnd) globalNear = true;
+        if (steps[near[i]] > steps[local]) {
+            local = near[i];
+            localSteps = nearSteps[i];
+        }
+    }
+    if (globalNear) return globalEnd;
+    // Inside the reach by a margin: a local maximum of the steps from F, not the reach's rim.
+    return localSteps + 2 < reach ? local : globalEnd;
+}
+
+/// A thin tube at the back end of an evenly sampled path (every fineMm): the last sample at least
+/// APPENDIX_DEPTH_FRACTION as deep as the deepest sample of the path's last 150 mm (the mouth),
+/// when the stretch beyond it is at least 10 mm long and nowhere deeper than that fraction.
+struct ThinEnd {
+    std::size_t index = 0;
+    double lengthMm = 0, thinDepthMm = 0, wideDepthMm = 0;
+};
+std::optional<ThinEnd> thinFarEnd(const std::vector<Vec3d>& pts, DepthProbe& depthAt, double fineMm)
+{
+    constexpr double WINDOW_MM = 150.0, MIN_LENGTH_MM = 10.0;
+    const long n = static_cast<long>(pts.size());
+    const long window = std::min(n, static_cast<long>(WINDOW_MM / fineMm));
+    if (n < 3 || window < 3) return std::nullopt;
+    std::vector<double> d(static_cast<std::size_t>(window));
+    for (long k = 0; k < window; ++k) d[std::size_t(k)] = depthAt(pts[std::size_t(n - window + k)]);
+    const double wide = *std::max_element(d.begin(), d.end());
+    const double bound = APPENDIX_DEPTH_FRACTION * wide;
+    long m = window - 1;
+    while (m > 0 && d[std::size_t(m)] < bound) --m;
+    const double lengthMm = double(window - 1 - m) * fineMm;
+    if (m == 0 || lengthMm < MIN_LENGTH_MM) return std::nullopt;
+    ThinEnd t;
+    t.index = std::size_t(n - window + m);
+    t.lengthMm = lengthMm;
+    t.thinDepthMm = *std::max_element(d.begin() + m + 1, d.end());
+    t.wideDepthMm = wide;
+    return t;
+}
 
 /// One piece's centerline and where it came from.
 struct PiecePath {
@@ -907,7 +1056,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     // Sampling of the paths before the final resampling: a quarter voxel, at most 0.5 mm, and
     // independent of stepMm: the refinement (trimming, sections, smoothing) works on these
     // samples, and on a coarse grid (3 mm voxels) a spacing that followed the output step moved
-    // the path by up to 15 mm between --step-mm 1 and 2 (issue 14: the path from the other
+    // the path by up to 15 mm between --step-mm 1 and 2 (the path from the other
     // end, asked with another step, was another curve). Linear interpolation between samples
     // this close is exact to well under a micrometre on colon bends.
     const double fineMm = std::min(0.25 * voxelMm, 0.5);
@@ -989,10 +1138,7 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         if (from != NO_SLOT) {
             a = from;
         } else if (seed != NO_SLOT) {
-            // The end of the tube nearest to the seed: the voxel farthest from the seed's
-            // farthest voxel (the seed itself when it lies at an end).
-            const Slot far = stepsFrom(index, holes, seed, steps, progress);
-            a = stepsFrom(index, holes, far, steps, progress);
+            a = tubeEndNearSeed(index, holes, seed, steps, voxelMm, progress);
         }
         if (plugged) unreached(label);  // voxels past the plug are not reached: no end may lie there
         const Slot b = stepsFrom(index, plugged ? *plugged : holes, a, steps, progress);
@@ -1177,6 +1323,36 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         }
     }
 
+    // 4c. A thin tube at the far end with no wide end beyond: the appendix (or a thread of
+    // ileum) off the cecum's end, at most APPENDIX_DEPTH_FRACTION as deep as the colon before
+    // it, is no colon to fly: the path ends at its mouth, continued into the cecum's cap, and the
+    // tube's axis is kept for coverage as the ileum's is.
+    if (!farBranch) {
+        const std::size_t lastPos = chain.order.size() - 1;
+        const int last = chain.order[lastPos];
+        const bool reversed = chain.reversed[lastPos];
+        std::vector<Vec3d> pts = paths[std::size_t(last)].pointsMm;
+        if (reversed) std::reverse(pts.begin(), pts.end());
+        if (const auto mouth = thinFarEnd(pts, depthAt, fineMm)) {
+            CenterlineFarBranch info;
+            info.mouthMm = pts[mouth->index];
+            info.endMm = pts.back();
+            info.lengthMm = mouth->lengthMm;
+            info.depthMm = mouth->thinDepthMm;
+            info.wideDepthMm = mouth->wideDepthMm;
+            farBranch = info;
+            leftOutBranch.clear();
+            for (std::size_t i = mouth->index; i < pts.size(); ++i)
+                if (leftOutBranch.empty() || distance(leftOutBranch.back(), pts[i]) >= 2.0) leftOutBranch.push_back(pts[i]);
+            if (leftOutBranch.back() != pts.back()) leftOutBranch.push_back(pts.back());
+            pts.resize(mouth->index + 1);
+            extendEnd(pts, depthAt, fineMm);
+            if (reversed) std::reverse(pts.begin(), pts.end());
+            ends[std::size_t(last)] = {pts.front(), pts.back(), frontOutward(pts, voxelMm), backOutward(pts, voxelMm)};
+            paths[std::size_t(last)].pointsMm = std::move(pts);
+        }
+    }
+
     // 5. One polyline: pieces in chain order, bridges between them.
     struct Bridge {
         double startArc, endArc, startDepth, endDepth;
@@ -1276,6 +1452,23 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         report->lowestLumenMm = lowestMm;
         report->nearWall = nearWall;
         report->farBranchLeftOut = farBranch;
+        report->leftOut = leftOutLumen(index, xf, cl, LEFT_OUT_MIN_ML);
+        auto degrees = [](const Vec3d& a, const Vec3d& b) {
+            const double la = length(a), lb = length(b);
+            if (la == 0 || lb == 0) return 0.0;
+            return std::acos(std::clamp(dot(a, b) / (la * lb), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+        };
+        const auto& cp = cl.points;
+        for (std::size_t i = 1; i < cp.size(); ++i) {
+            if (i + 1 < cp.size()) {
+                const double t = degrees(cp[i].positionMm - cp[i - 1].positionMm, cp[i + 1].positionMm - cp[i].positionMm);
+                report->maxTurnDeg = std::max(report->maxTurnDeg, t);
+                report->turnsOver30 += t > 30.0;
+            }
+            const double nrm = degrees(cp[i - 1].normal, cp[i].normal);
+            report->maxNormalStepDeg = std::max(report->maxNormalStepDeg, nrm);
+            report->normalStepsOver15 += nrm > 15.0;
+        }
         std::vector<int> infoOf(pieces.size.size(), -1);
         for (std::size_t r = 0; r < bySize.size(); ++r) {
             CenterlinePieceInfo info;
@@ -1301,5 +1494,14 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
     reportProgress(progress, 1.0, "centerline done");
     return cl;
 }
+
+namespace detail {
+
+std::vector<Vec3d> removePathKinks(const std::vector<Vec3d>& fine, const openvdb::FloatGrid& sdf, double fineMm)
+{
+    return removeKinks(resampleEven(fine, fineMm), sdf, fineMm);
+}
+
+} // namespace detail
 
 } // namespace flyover

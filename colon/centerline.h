@@ -27,6 +27,7 @@
 /// follow the collapsed bowel through the tissue (there is no lumen there to follow).
 #pragma once
 
+#include "colon/lumen_accounting.h"
 #include "volume/centerline_types.h"
 #include "volume/progress.h"
 
@@ -107,10 +108,22 @@ struct CenterlineFarBranch {
     double wideEndBeyondMouthMm = 0;  ///< how far (26-neighbour steps x voxel) the wide lumen's own end lies beyond the mouth
 };
 
+/// Without a rectum hint, the rectum is the lowest piece end; when that lies more than this above
+/// the lowest lumen voxel (mm), the farthest pair missed the rectum (the path end stops about a
+/// lumen radius short of the cap wall; a distended rectum is up to ~25 mm in radius) and the
+/// piece is traced again from the tube's end nearest to that voxel. A path that still starts
+/// higher is flagged for review.
+inline constexpr double LOWEST_END_SLACK_MM = 40.0;
+
 /// The far end is traced to the wide lumen's own end when it lies at least this many wide
 /// depths beyond the mouth of a narrow tube (the cecum's end 5-8 cm below the valve, its depth
 /// 2.5-4.5 cm; a narrow cecum off a wide ascending colon has no wide end beyond its mouth).
 inline constexpr double FAR_SAC_DEPTHS = 1.5;
+
+/// A narrow tube at the far end with no wide end beyond its mouth is left out when it is at most
+/// this fraction as deep as the wide lumen (the appendix, 1-4 mm in radius, off a cecum of
+/// 20-45 mm; a poorly distended cecum, a third or more as deep as the colon before it, stays).
+inline constexpr double APPENDIX_DEPTH_FRACTION = 0.25;
 
 struct CenterlineReport {
     std::vector<CenterlinePieceInfo> pieces;   ///< largest first
@@ -121,7 +134,17 @@ struct CenterlineReport {
     Vec3d lowestLumenMm;                       ///< the lowest lumen voxel in world z (LPS mm)
     std::vector<CenterlineNearWall> nearWall;  ///< in path order
     std::optional<CenterlineFarBranch> farBranchLeftOut;
+    /// How the output path turns (kinks make the fly-over cameras spin): the largest angle
+    /// between consecutive steps and between consecutive camera normals (degrees), and how many
+    /// steps turn more than 30 degrees and how many normals step more than 15.
+    double maxTurnDeg = 0, maxNormalStepDeg = 0;
+    int turnsOver30 = 0, normalStepsOver15 = 0;
+    /// Lumen the path does not pass through (lumen_accounting.h), regions of LEFT_OUT_MIN_ML and up.
+    std::vector<LeftOutLumen> leftOut;
 };
+
+/// The smallest region of lumen off the path that the report lists (mL).
+inline constexpr double LEFT_OUT_MIN_ML = 3.0;
 
 /// @param sdf      lumen signed distance grid in world mm, negative inside the lumen, with
 ///                 cubic voxels and a linear transform; every lumen voxel active (as
@@ -143,5 +166,12 @@ inline bool pieceLargeEnough(double size, double largestSize, double sizeToMl, c
 {
     return size * sizeToMl >= params.minPieceMl && size >= params.minPieceFraction * largestSize;
 }
+
+namespace detail {
+/// The centerline's kink removal on its own (for tests): `fine` resampled every fineMm, then
+/// smoothed again where it turns more than 12 degrees per 1 mm chord, never closer to the wall of
+/// `sdf` than min(1 mm, where it was).
+std::vector<Vec3d> removePathKinks(const std::vector<Vec3d>& fine, const openvdb::FloatGrid& sdf, double fineMm);
+} // namespace detail
 
 } // namespace flyover

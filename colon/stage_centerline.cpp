@@ -72,10 +72,41 @@ json runCenterline(StudyRun& run, Progress* progress)
                               {"path_length_mm", p->pathLengthMm},
                               {"route_searched_on", p->routeSearchedOn}});
     const double aboveLowest = pts.empty() ? 0.0 : pts.front().positionMm.z - cr.lowestLumenMm.z;
+    // The rectum end far above the lowest lumen point without a hint: the path may have missed
+    // the rectum; the study is flagged for review (`flyover status`), never a silent success.
+    json needsReview = json::array();
+    if (!run.opt.params.centerline.rectumMm && aboveLowest > LOWEST_END_SLACK_MM) {
+        std::ostringstream why;
+        why << std::fixed << std::setprecision(0) << "the path starts " << aboveLowest
+            << " mm above the lowest lumen point (" << cr.lowestLumenMm.x << ", " << cr.lowestLumenMm.y << ", "
+            << cr.lowestLumenMm.z << ") LPS mm, more than " << LOWEST_END_SLACK_MM
+            << " mm: the rectum may be missed; give --rectum-mm";
+        needsReview.push_back(why.str());
+        if (run.opt.log) run.opt.log->message("centerline: warning: " + why.str());
+    }
+    if (cr.turnsOver30 > 0) {
+        std::ostringstream why;
+        why << std::fixed << std::setprecision(0) << "the path turns more than 30 degrees in " << cr.turnsOver30
+            << " steps (largest " << cr.maxTurnDeg << "): the fly-over cameras may spin there";
+        needsReview.push_back(why.str());
+        if (run.opt.log) run.opt.log->message("centerline: warning: " + why.str());
+    }
+    json leftOut = json::array();
+    for (const LeftOutLumen& r : cr.leftOut) {
+        leftOut.push_back(json{{"volume_ml", r.volumeMl},
+                               {"centroid_mm", vec3Json(r.centroidMm)},
+                               {"arc_mm", r.arcMm < 0 ? json() : json(r.arcMm)},
+                               {"extent_mm", r.extentMm},
+                               {"kind", r.kind},
+                               {"reason", r.reason}});
+        if (run.opt.log) run.opt.log->message("centerline: " + std::string(r.kind == "dead end" ? "" : "warning: ") +
+                                              "left out: " + r.reason);
+        if (r.kind == "not entered") needsReview.push_back("lumen left out: " + r.reason);
+    }
     json farBranch;  // null: none left out
     if (const auto& f = cr.farBranchLeftOut) {
         farBranch = json{{"handling", "a narrow tube off the wide lumen at the far end (the terminal ileum, gas-filled "
-                                      "through an open ileocecal valve, off the cecum) is left out: the path ends at "
+                                      "through an open ileocecal valve, or the appendix, off the cecum) is left out: the path ends at "
                                       "the wide lumen's own end"},
                          {"mouth_mm", vec3Json(f->mouthMm)},
                          {"tube_end_mm", vec3Json(f->endMm)},
@@ -88,7 +119,7 @@ json runCenterline(StudyRun& run, Progress* progress)
             line << std::fixed << std::setprecision(0) << "centerline: a narrow tube (radius " << f->depthMm
                  << " mm, " << f->lengthMm << " mm followed) leaves the wide lumen (radius " << f->wideDepthMm
                  << " mm) near its far end at (" << f->mouthMm.x << ", " << f->mouthMm.y << ", " << f->mouthMm.z
-                 << ") LPS mm, as the terminal ileum leaves the cecum; left out: the path ends at the wide lumen's "
+                 << ") LPS mm, as the terminal ileum or the appendix leaves the cecum; left out: the path ends at the wide lumen's "
                     "own end, "
                  << f->wideEndBeyondMouthMm << " mm beyond it";
             run.opt.log->message(line.str());
@@ -103,10 +134,16 @@ json runCenterline(StudyRun& run, Progress* progress)
                 {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")},
                 {"rectum_rule", cr.rectumRule},
                 {"rectum_above_lowest_lumen_mm", aboveLowest},
+                {"needs_review", needsReview},
+                {"turns", {{"max_step_deg", cr.maxTurnDeg},
+                           {"steps_over_30_deg", cr.turnsOver30},
+                           {"max_normal_step_deg", cr.maxNormalStepDeg},
+                           {"normal_steps_over_15_deg", cr.normalStepsOver15}}},
                 {"pieces", pieces},
                 {"bridges", bridges},
                 {"near_wall", nearWall},
                 {"far_branch_left_out", farBranch},
+                {"left_out_lumen", leftOut},
                 {"contacts", contactsAlongPath(*sdf, cl)}};
 }
 

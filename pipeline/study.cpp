@@ -734,6 +734,22 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
     return out;
 }
 
+std::vector<std::string> studyReviewNotes(const json& manifest)
+{
+    std::vector<std::string> notes;
+    if (!manifest.is_object() || !manifest.contains("stages") || !manifest["stages"].is_array()) return notes;
+    for (const auto& e : manifest["stages"]) {
+        if (!e.is_object() || !e.contains("report") || !e["report"].is_object()) continue;
+        const json& r = e["report"];
+        if (!r.contains("needs_review") || !r["needs_review"].is_array()) continue;
+        for (const auto& why : r["needs_review"])
+            if (why.is_string()) notes.push_back(e.value("stage", "?") + ": " + why.get<std::string>());
+    }
+    return notes;
+}
+
+std::vector<std::string> studyReviewNotes(const std::string& studyDir) { return studyReviewNotes(readManifest(studyDir)); }
+
 void copyStudy(const std::string& from, const std::string& to)
 {
     const fs::path src(from), dst(to);

@@ -93,6 +93,12 @@ struct StatusParamText {
 /// @throw InputError when DIR is not a study; ParameterError for a bad --set/--config.
 std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusParamText& given = {});
 
+/// What the stages of a study flagged for a reader's review (each stage report's "needs_review"
+/// strings, as "stage: why"), in stage order: a run that finished but may be wrong (the path's
+/// start far above the lowest lumen point, say). Empty for a study without a manifest.
+std::vector<std::string> studyReviewNotes(const std::string& studyDir);
+std::vector<std::string> studyReviewNotes(const nlohmann::json& manifest);
+
 /// Removes every artifact, the manifest and the cache of a study (takes the lock).
 void cleanStudy(const std::string& studyDir);
 

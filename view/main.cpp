@@ -342,6 +342,7 @@ int main(int argc, char** argv)
             const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             log("study " + fs::absolute(run.studyDir).string() + ": " + std::to_string(computed) + " of " +
                 std::to_string(manifest["stages"].size()) + " stages computed, " + std::to_string(s).substr(0, 5) + " s");
+            for (const auto& note : studyReviewNotes(manifest)) log("warning: the study needs review: " + note);
             return 0;
         }
         if (*inspectCmd) {
@@ -372,6 +373,7 @@ int main(int argc, char** argv)
             for (const auto& st : studyStatus(status, text))
                 std::cout << st.stage << std::string(12 - std::min<std::size_t>(11, st.stage.size()), ' ') << st.state
                           << (st.reason.empty() ? "" : "  (" + st.reason + ")") << "\n";
+            for (const auto& note : studyReviewNotes(status.studyDir)) std::cout << "needs review: " << note << "\n";
             return 0;
         }
         if (*exportCmd) {

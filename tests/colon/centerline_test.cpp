@@ -249,7 +249,7 @@ double farthestFrom(const Centerline& a, const Centerline& b)
 
 TEST(Centerline, PathFromEitherEndIsTheSameCurve)
 {
-    // Issue 14 (defect 1): on a lumen in several pieces with a branch, the path traced from the
+    // On a lumen in several pieces with a branch, the path traced from the
     // other end (rectumMm at the first path's cecum end) went another way and was longer: the
     // hinted piece was traced from the hint to its farthest voxel, not between the ends the
     // unhinted path used. Two pieces: a straight rectum piece, and one with a side branch
@@ -293,7 +293,7 @@ TEST(Centerline, PathFromEitherEndIsTheSameCurve)
 
 TEST(Centerline, CurveDoesNotDependOnTheOutputStep)
 {
-    // Issue 14 (defect 1): on a coarse grid (3 mm voxels, as the TotalSegmentator label) the
+    // On a coarse grid (3 mm voxels, as the TotalSegmentator label) the
     // paths were refined on samples spaced by the output step, and --step-mm 2 gave a curve up
     // to 15 mm away from --step-mm 1. The step now only resamples one curve: every second point
     // at 1 mm is the point at 2 mm.
@@ -367,7 +367,7 @@ TEST(Centerline, SameResultWithOneThread)
 
 TEST(Centerline, HairpinFlexureKeepsToTheDeepLumenRoundTheFold)
 {
-    // A flexure folded back on itself (issue 14: on gca-colon-00020, below the hepatic flexure
+    // A flexure folded back on itself (on gca-colon-00020, below the hepatic flexure
     // and near the cecum, the section centring pulled the path onto the tip of the fold between
     // the limbs): two limbs of radius 9 mm whose axes lie 12 mm apart, joined by a bend of
     // radius 6 mm (tighter than the lumen radius), kept apart by a fold 1.5 mm thick that ends
@@ -658,6 +658,107 @@ TEST(Centerline, FromSegmentedNoisyTube)
     const Centerline cl = extractCenterline(*seg.sdf, CenterlineParams{});
     const Summary s = checkAgainstAxis(cl, tc, CenterlineParams{});
     checkRectumIsLowerEnd(s, tc);
+}
+
+} // namespace
+} // namespace flyover
+
+namespace flyover {
+namespace {
+
+// A wide rectum (the widest lumen, radius 25 mm) whose sigmoid meets, at a junction, both the
+// rest of the colon (to the cecum) and a loop that a contact cut left as a dead end. The piece's
+// farthest pair is the cecum and that loop's tip, both far above the rectum; the end nearest to
+// the lowest lumen voxel along the lumen, traced again from, was the loop's tip too. The path
+// must start in the rectum, with or without a hint there, and run to the cecum.
+TEST(Centerline, WideRectumBesideALongerDeadEndIsStillTheStart)
+{
+    const Frame frame = test::makeFrame(1.5, false);  // local z is world z: the lowest voxel is in the rectum
+    const double Rr = 25.0, r = 10.0, Rc = 12.0;
+    const Vec3d bulb0{0, 0, 0}, bulb1{0, 0, 40}, junction{0, 0, 100}, across{80, 0, 100}, cecum{80, 0, 300},
+        loopSide{-60, 0, 100}, loopTip{-60, 0, 300};
+    auto sdfMm = [&](const Vec3d& p) {
+        return std::min({capsuleSd(p, bulb0, bulb1, Rr), capsuleSd(p, bulb1, junction, r),
+                         capsuleSd(p, junction, across, r), capsuleSd(p, across, cecum, Rc),
+                         capsuleSd(p, junction, loopSide, r), capsuleSd(p, loopSide, loopTip, r)});
+    };
+    auto sdf = sampledSdf(frame, {-60 - r - 5, -Rr - 5, -Rr - 5}, {80 + Rc + 5, Rr + 5, 300 + Rc + 5}, sdfMm);
+    for (const bool hinted : {false, true}) {
+        SCOPED_TRACE(hinted ? "with --rectum-mm at the centre of the rectum's lowest 15 mm" : "no hint");
+        CenterlineParams params;
+        if (hinted) params.rectumMm = frame.worldFromLocal({0, 0, -Rr + 7.5});
+        CenterlineReport report;
+        const Centerline cl = extractCenterline(*sdf, params, nullptr, &report);
+        ASSERT_GE(cl.points.size(), 100u);
+        const Vec3d first = frame.localFromWorld(cl.points.front().positionMm);
+        const Vec3d last = frame.localFromWorld(cl.points.back().positionMm);
+        std::cout << "[ wide rectum ] " << (hinted ? "hint" : "no hint") << ": starts at (" << first.x << ", "
+                  << first.y << ", " << first.z << "), ends at (" << last.x << ", " << last.y << ", " << last.z
+                  << "), rule '" << report.rectumRule << "', length " << cl.lengthMm() << " mm\n";
+        EXPECT_LT(distance(first, bulb0), Rr) << "the path does not start in the rectum's lower half";
+        EXPECT_LT(first.z - (-Rr), 40.0) << "the start lies more than 40 mm above the lowest lumen voxel";
+        EXPECT_LT(distance(last, cecum), Rc + 5.0) << "the path does not end in the cecum";
+    }
+}
+
+} // namespace
+} // namespace flyover
+
+namespace flyover {
+namespace {
+
+/// Largest turn (degrees) between consecutive chords of `chordMm` along an evenly sampled path.
+double largestTurnDeg(const std::vector<Vec3d>& pts, double spacingMm, double chordMm)
+{
+    const long k = std::max(1L, std::lround(chordMm / spacingMm));
+    double worst = 0;
+    for (long i = k; i + k < static_cast<long>(pts.size()); ++i) {
+        const Vec3d a = normalize(pts[i] - pts[i - k]), b = normalize(pts[i + k] - pts[i]);
+        worst = std::max(worst, std::acos(std::clamp(dot(a, b), -1.0, 1.0)) * 180.0 / PI);
+    }
+    return worst;
+}
+
+// A path with a wiggle (2.5 mm sideways, 5 mm wavelength, over 30 mm, as the section centroids
+// give where they jump between the lobes of an irregular lumen) and a fold-back (the path runs
+// 2 mm back on itself) inside a straight 12 mm tube: the kinks go, the path stays within 1.5 mm of
+// the axis and keeps its length; a kink-free stretch elsewhere is not moved.
+TEST(Centerline, KinksAreSmoothedAwayWithoutLeavingTheLumen)
+{
+    const Frame frame = test::makeFrame(0.8, true);
+    const double R = 12.0;
+    const Axis axis = Axis::straight({20, 20, 20}, {20, 20, 220});
+    const auto sdf = test::makeTubeSdf(frame, axis, R);
+    const double fineMm = 0.2;
+    std::vector<Vec3d> local;
+    for (double z = 20; z <= 220 + 1e-9; z += fineMm) {
+        double x = 20;
+        if (z > 80 && z < 110) x += 2.5 * std::sin(2 * PI * (z - 80) / 5.0);
+        local.push_back({x, 20, z});
+        if (std::abs(z - 150) < 1e-9)  // a fold-back: 2 mm back down, then on up
+            for (double back = fineMm; back <= 2.0 + 1e-9; back += fineMm) local.push_back({20, 20, 150 - back});
+        if (std::abs(z - 150) < 1e-9)
+            for (double up = 2.0 - fineMm; up > 1e-9; up -= fineMm) local.push_back({20, 20, 150 - up});
+    }
+    std::vector<Vec3d> world;
+    for (const Vec3d& p : local) world.push_back(frame.worldFromLocal(p));
+    const double before = largestTurnDeg(world, fineMm, 1.0);
+    const std::vector<Vec3d> out = detail::removePathKinks(world, *sdf, fineMm);
+    const double after = largestTurnDeg(out, fineMm, 1.0);
+    double worstOff = 0, movedAway = 0;
+    for (const Vec3d& p : out) {
+        const Vec3d q = frame.localFromWorld(p);
+        worstOff = std::max(worstOff, axis.project(q).distanceMm);
+        if (q.z > 180 && q.z < 215) movedAway = std::max(movedAway, std::hypot(q.x - 20, q.y - 20));
+    }
+    std::cout << "[ kinks ] largest turn per mm " << before << " -> " << after << " deg; farthest from the axis "
+              << worstOff << " mm\n";
+    EXPECT_GT(before, 60.0) << "the test path has no kink to remove";
+    EXPECT_LE(after, 15.0) << "a kink is left";
+    EXPECT_LT(worstOff, 1.5) << "the smoothing moved the path off the axis";
+    EXPECT_LT(movedAway, 1e-6) << "a stretch without kinks was moved";
+    const double length = (out.size() - 1) * fineMm;
+    EXPECT_NEAR(length, 200.0, 6.0) << "the path's length changed";
 }
 
 } // namespace

@@ -92,6 +92,21 @@ TEST(RealColonContacts, GcaPathRunsAnusToCecumWithoutShortcut)
     // the transverse colon, reference arc 1747 -> 1758 mm); bound 16 mm.
     EXPECT_LE(worstJump, 16.0) << "consecutive path points jump along the reference: a shortcut";
     EXPECT_LE(mean, 5.0) << "mean distance to the reference path (mm)";
+    // No kinks: the fly-over cameras must not spin.
+    std::cout << "[ gca-00020 ] turns: largest step " << cr.maxTurnDeg << " deg (" << cr.turnsOver30
+              << " over 30), largest normal step " << cr.maxNormalStepDeg << " deg (" << cr.normalStepsOver15
+              << " over 15); " << cr.leftOut.size() << " regions of lumen off the path\n";
+    for (const LeftOutLumen& r : cr.leftOut) std::cout << "    left out: " << r.reason << "\n";
+    EXPECT_EQ(cr.turnsOver30, 0) << "steps turning more than 30 degrees (largest " << cr.maxTurnDeg << ")";
+    EXPECT_EQ(cr.normalStepsOver15, 0) << "camera normal steps over 15 degrees (largest " << cr.maxNormalStepDeg << ")";
+    // Ends: within 30 mm of the anus and 40 mm of the appendix orifice (or beyond it, in the cecum).
+    const auto refPoint = [&](const char* name) {
+        const auto& p = ref.at("position_mm").at(lm.at(name).at("index").get<std::size_t>());
+        return Vec3d{p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>()};
+    };
+    EXPECT_LT(distance(cl.points.front().positionMm, refPoint("anus")), 30.0) << "the path starts far from the anus";
+    EXPECT_LT(distance(cl.points.back().positionMm, refPoint("appendix_orifice")), 40.0)
+        << "the path ends far from the appendix orifice";
 }
 
 } // namespace
