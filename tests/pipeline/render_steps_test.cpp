@@ -1,4 +1,4 @@
-// The render stage as cached steps (issue 15): each step keyed by its own parameters, the first
+// The render stage as cached steps: each step keyed by its own parameters, the first
 // fly-over pair written and announced first, and `flyover status` comparing the study's files
 // with the record (a study whose frames/ holds another parameter set's output is not fresh).
 
@@ -48,7 +48,7 @@ double psnr(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b)
 
 } // namespace
 
-// The video's frames go to ffmpeg as YUV 4:2:0 made here (issue 15: ffmpeg's RGB conversion
+// The video's frames go to ffmpeg as YUV 4:2:0 made here (ffmpeg's own RGB conversion
 // was half of its CPU time): Rec. 601 limited range, chroma from the mean of each 2 x 2 block.
 TEST(RgbToYuv420, Rec601LimitedRangeWithBlockMeanChroma)
 {
@@ -362,7 +362,7 @@ TEST_F(StudyTest, SurfaceArraysPreparedEarlyRenderTheSameFrames)
 }
 
 // The video, the longest render step, starts first of the steps after the frames (then
-// coverage), so that it does not run alone at the end of the run (issue 15). With one thread
+// coverage), so that it does not run alone at the end of the run. With one thread
 // the order is the whole story; the MP4 must be the same, byte for byte, whether its frames are
 // rendered one at a time or several at once.
 TEST_F(StudyTest, VideoStartsFirstAfterTheFramesAndIsTheSameOnAnyNumberOfThreads)
