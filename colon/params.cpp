@@ -71,6 +71,7 @@ template <typename V> void visit(RenderParams& p, V&& v)
     v("direction", p.direction, "travel direction on screen: right or left");
     v("clip_offset_fraction", p.clipOffsetFraction, "near plane at d - fraction * D(p)");
     v("clip_offset_mm", p.clipOffsetMm, "near plane at d - offset mm (>= 0 overrides fraction)");
+    v("loop_reach_mm", p.loopReachMm, "fly-over and review views pass through walls of the path farther than this along the colon (mm; 0 = every wall)");
     v("frame_step_mm", p.frameStepMm, "distance between saved frame pairs (mm)");
     v("supersample", p.supersample, "n x n rays per pixel");
     v("ost", p.ost, "one-sided transparency (false: plain rendering)");
@@ -259,6 +260,7 @@ void validateParams(const PipelineParams& p)
     require(p.render.videoFps >= 1 && p.render.videoFps <= 120, "render.video_fps", "must be in [1, 120]");
     require(p.render.coveragePx >= 8 && p.render.coveragePx <= 4096, "render.coverage_px", "must be in [8, 4096]");
     require(p.render.coverageStepMm > 0, "render.coverage_step_mm", "must be > 0");
+    require(p.render.loopReachMm >= 0 && p.render.loopReachMm <= 1e6, "render.loop_reach_mm", "must be in 0..1e6 mm");
     require(p.render.reviewTarget > 0 && p.render.reviewTarget <= 1, "render.review_target", "must be in (0, 1]");
 }
 

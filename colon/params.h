@@ -31,6 +31,10 @@ struct RenderParams {
     /// bench/render_bench --clip-sweep and the render stage's notes.
     double clipOffsetFraction = 0.5;
     double clipOffsetMm = -1.0;      ///< if >= 0: near plane at d - this many mm instead
+    /// Loop-local OST: fly-over and review views pass through walls that belong (through the
+    /// lumen, render/loop_ownership.h) to parts of the path more than this far along the colon
+    /// from the view's own place (mm); 0: the thesis' OST, every wall shown.
+    double loopReachMm = 80.0;
     double frameStepMm = 10.0;       ///< distance between saved frame pairs along the centerline (mm)
     int supersample = 1;             ///< n x n rays per pixel
     bool ost = true;                 ///< one-sided transparency (false: plain rendering)
@@ -52,8 +56,9 @@ struct RenderParams {
     bool review = true;              ///< review views for the fly-over's missed regions (review/)
     double reviewTarget = 0.995;     ///< review until fly-over plus review sees this fraction (0..1]
     /// 3: camera elevation from the framed half-width R(p), not D(p); 4: render split into
-    /// steps (frames, flythrough, overviews, video, coverage), the video in video/.
-    static constexpr int VERSION = 4;
+    /// steps (frames, flythrough, overviews, video, coverage), the video in video/; 5:
+    /// loop-local OST.
+    static constexpr int VERSION = 5;
 };
 
 struct PipelineParams {

@@ -21,6 +21,7 @@
 #include "render/camera.h"
 #include "render/coverage.h"
 #include "render/flyover_path.h"
+#include "render/loop_ownership.h"
 #include "render/overview.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"
@@ -192,13 +193,37 @@ void writeSurfaceSeen(const std::string& path, const RayScene& scene, const Cove
     });
 }
 
+/// `ro` for a fly-over or review view standing at centerline index `index`: loop-local when
+/// the run has owners (render.loop_reach_mm > 0).
+RenderOptions loopLocal(RenderOptions ro, const RenderInputs& in, const RenderParams& rp, std::size_t index,
+                        double clStep)
+{
+    if (in.ownerArcMm.empty()) return ro;
+    ro.loop.ownerArcMm = &in.ownerArcMm;
+    ro.loop.reachMm = rp.loopReachMm;
+    ro.loop.arcMm = double(index) * clStep;
+    return ro;
+}
+
+/// What loop-local OST did, for a report: the reach, how the owners were found, the time.
+json loopJson(const RenderInputs& in, const RenderParams& rp)
+{
+    if (in.ownerArcMm.empty()) return json{{"enabled", false}};
+    return json{{"enabled", true},
+                {"reach_mm", rp.loopReachMm},
+                {"owners_by_sight", in.ownersBySight},
+                {"owners_by_neighbour", in.ownersByNeighbour},
+                {"unowned", in.unowned},
+                {"owners_seconds", in.ownersSeconds}};
+}
+
 /// Review views after the fly-over's coverage (render.review): plans them (render/review.h),
 /// renders each into `folder` as review_NNNN.png (a pair like frames/, or one targeted view)
 /// with poses.json, and returns what coverage.json says about them: "flyover_with_review",
 /// "review_views" and "review". With render.review off the folder holds an empty poses.json.
 json renderReview(const RayScene& scene, const Centerline& cl, const CoverageParams& cp,
                   const std::vector<double>& frameRadii, const CoverageResult& cov, const RenderParams& rp,
-                  const RenderOptions& ro, StagedFolder& folder, Progress* progress)
+                  const RenderOptions& ro, const RenderInputs& in, StagedFolder& folder, Progress* progress)
 {
     const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
     json poses = json::array();
@@ -222,10 +247,11 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
         char name[32];
         std::snprintf(name, sizeof name, "review_%04zu.png", k);
         RgbImage image;
+        const RenderOptions vro = loopLocal(ro, in, rp, v.centerlineIndex, clStep);
         if (v.cameras.size() == 2)
-            renderPair(scene, v.cameras[0], v.cameras[1], ro, image);
+            renderPair(scene, v.cameras[0], v.cameras[1], vro, image);
         else
-            renderView(scene, v.cameras[0], ro, image);
+            renderView(scene, v.cameras[0], vro, image);
         writePng(folder.path(name), image);
         json cams = json::array();
         for (const Camera& c : v.cameras) cams.push_back(cameraJson(c));
@@ -458,6 +484,15 @@ const RenderInputs& StudyRun::renderInputs()
         const auto tRadii = Clock::now();
         in->frameRadii = flyoverFrameRadii(*in->scene, *in->centerline, flyoverParamsOf(opt.params.render));
         in->frameRadiiSeconds = secondsSince(tRadii);
+        const RenderParams& rp = opt.params.render;
+        if (rp.ost && rp.loopReachMm > 0) {
+            TriangleOwners owners = triangleOwners(*in->scene, *in->centerline);
+            in->ownerArcMm = std::move(owners.arcMm);
+            in->ownersBySight = owners.bySight;
+            in->ownersByNeighbour = owners.byNeighbour;
+            in->unowned = owners.unowned;
+            in->ownersSeconds = owners.seconds;
+        }
         mRender = std::move(in);
     });
     return *mRender;
@@ -549,11 +584,12 @@ json runFrames(StudyRun& run, Progress* progress)
     // time: a thread waiting for a pair's tiles may take up another pair meanwhile (ObjectPool).
     ObjectPool<RgbImage> buffers([] { return RgbImage{}; });
     RgbImage firstShown;  // pair 0 as rendered from its own scenes, for the confirmation below
-    auto renderFramePair = [&](const RayScene& scene, std::size_t f, const std::array<Camera, 2>& cams) {
+    auto renderFramePair = [&](const RayScene& scene, std::size_t f, const std::array<Camera, 2>& cams,
+                               const RenderOptions& ro, LoopCounts* counts) {
         const auto t0 = Clock::now();
         const auto lease = buffers.take();
         RgbImage& pair = *lease;
-        renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), pair);
+        renderPair(scene, cams[0], cams[1], ro, pair, counts);
         const auto t1 = Clock::now();
         writePng(frames.path(pairName(f)), pair);
         if (f == 0) {
@@ -572,7 +608,7 @@ json runFrames(StudyRun& run, Progress* progress)
     const std::size_t index0 = pathIndices(firstCl, rp.frameStepMm).front();
     std::unique_ptr<RayScene> pairScene;
     const FirstPairFromSubset first = firstPairScene(run, flyoverParamsOf(rp), frameOptionsOf(rp), index0, pairScene);
-    renderFramePair(*pairScene, 0, first.cameras);
+    renderFramePair(*pairScene, 0, first.cameras, frameOptionsOf(rp), nullptr);
     pairScene.reset();
     const double firstPairSeconds = secondsSince(tStart);
     const double firstPairSinceRunStart = secondsSince(run.start);
@@ -593,12 +629,16 @@ json runFrames(StudyRun& run, Progress* progress)
     // The first pair shown came from scenes of a cull (the same pixels in every test): it is
     // confirmed on the whole scene (one pair, ~0.01 s) and, should it differ, replaced, so that
     // frames/ is always the whole scene's rendering; the log and the report say so.
+    // With loop-local OST the whole scene's pair also passes through other loops' walls, which
+    // the first pair's cull (rendered before the owners exist) shows.
     json firstConfirmed;
+    std::vector<LoopCounts> loopCounts(indices.size());
     {
         const auto cams = flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]);
         const auto lease = buffers.take();
         RgbImage& whole = *lease;
-        renderPair(scene, cams[0], cams[1], frameOptionsOf(rp), whole);
+        renderPair(scene, cams[0], cams[1], loopLocal(frameOptionsOf(rp), in, rp, indices[0], s.clStep), whole,
+                   &loopCounts[0]);
         const std::size_t differing = differingPixels(firstShown, whole);
         const bool sameRadius = first.frameRadiusMm == in.frameRadii[indices[0]];
         firstConfirmed = json{{"confirmed_on_whole_scene", true},
@@ -610,9 +650,10 @@ json runFrames(StudyRun& run, Progress* progress)
             if (run.opt.log) {
                 std::ostringstream msg;
                 msg << "frames: the first pair shown (from its scene of " << first.pairTriangles << " of "
-                    << first.surfaceTriangles << " triangles) differed from the whole scene's in " << differing
-                    << " pixels" << (sameRadius ? "" : " (frame radius differed)") << "; frames/" << pairName(0)
-                    << " is now the whole scene's";
+                    << first.surfaceTriangles << " triangles" << (in.ownerArcMm.empty() ? "" : ", every wall shown")
+                    << ") differed from the whole scene's" << (in.ownerArcMm.empty() ? "" : " loop-local pair")
+                    << " in " << differing << " pixels" << (sameRadius ? "" : " (frame radius differed)")
+                    << "; frames/" << pairName(0) << " is now the whole scene's";
                 run.opt.log->message(msg.str());
             }
         }
@@ -628,6 +669,7 @@ json runFrames(StudyRun& run, Progress* progress)
                         {"radius_mm", p.radiusMm},
                         {"frame_radius_mm", in.frameRadii[indices[f]]},
                         {"cameras", json::array({cameraJson(cams[0]), cameraJson(cams[1])})}};
+        if (!in.ownerArcMm.empty()) poses[f]["foreign_wall_share"] = loopCounts[f].passedShare();
     };
     poseOf(0, flyoverCameras(cl.points[indices[0]], s.fp, in.frameRadii[indices[0]]));
 
@@ -635,7 +677,7 @@ json runFrames(StudyRun& run, Progress* progress)
     std::atomic<std::size_t> done{1};
     tbb::parallel_for(std::size_t(1), indices.size(), [&](std::size_t f) {
         const auto cams = flyoverCameras(cl.points[indices[f]], s.fp, in.frameRadii[indices[f]]);
-        renderFramePair(scene, f, cams);
+        renderFramePair(scene, f, cams, loopLocal(frameOptionsOf(rp), in, rp, indices[f], s.clStep), &loopCounts[f]);
         poseOf(f, cams);
         reportProgress(progress, double(++done) / double(indices.size()), "fly-over frame pairs");
     });
@@ -646,8 +688,23 @@ json runFrames(StudyRun& run, Progress* progress)
                    {"layout", "pair images: camera 0 left, camera 1 right"},
                    {"ost", rp.ost},
                    {"render", renderOptionsJson(s.ro)},
+                   {"loop_local", loopJson(in, rp)},
                    {"frames", poses}});
     frames.commit();
+    json loopReport = loopJson(in, rp);
+    if (!in.ownerArcMm.empty()) {
+        double sum = 0, worst = 0;
+        LoopCounts all;
+        for (const LoopCounts& c : loopCounts) {
+            sum += c.passedShare();
+            worst = std::max(worst, c.passedShare());
+            all.wallPixels += c.wallPixels;
+            all.passedPixels += c.passedPixels;
+        }
+        loopReport["foreign_wall_share"] = all.passedShare();
+        loopReport["foreign_wall_share_mean_per_pose"] = sum / double(loopCounts.size());
+        loopReport["foreign_wall_share_max_per_pose"] = worst;
+    }
     RenderedPairs shared;
     for (std::size_t f = 0; f < indices.size(); ++f) {
         shared.centerlineIndices.push_back(indices[f]);
@@ -661,6 +718,7 @@ json runFrames(StudyRun& run, Progress* progress)
                 {"first_pair_breakdown_seconds", firstPairBreakdown(first, in, firstRenderSeconds, firstPngSeconds)},
                 {"first_pair_scene", firstPairSceneJson(first)},
                 {"first_pair_check", firstConfirmed},
+                {"loop_local", loopReport},
                 {"surface_prepared_early", in.surfacePreparedEarly},
                 {"whole_scene_seconds",
                  {{"wait_for_inputs", inputsSeconds},
@@ -817,7 +875,8 @@ json runVideo(StudyRun& run, Progress* progress)
                                         std::to_string(pairWidth) + " x " + std::to_string(rp.heightPx));
                                 ++reused;
                             } else {
-                                renderPair(*in.scene, cams[0], cams[1], s.ro, pair);
+                                renderPair(*in.scene, cams[0], cams[1], loopLocal(s.ro, in, rp, vIdx[k], s.clStep),
+                                           pair);
                             }
                             cameraPoses[k] = json{{"frame", k},
                                                   {"centerline_index", vIdx[k]},
@@ -844,6 +903,7 @@ json runVideo(StudyRun& run, Progress* progress)
                        {"image_size_px", {pairWidth, rp.heightPx}},
                        {"layout", "pair images: camera 0 left, camera 1 right"},
                        {"render", renderOptionsJson(s.ro)},
+                       {"loop_local", loopJson(in, rp)},
                        {"frames", vPoses}});
         frameCount = vIdx.size();
         reusedPairs = reused.load();
@@ -870,10 +930,15 @@ json runCoverage(StudyRun& run, Progress* progress)
         cp.ost = rp.ost;
         cp.flythroughFovDeg = rp.flythroughFovDeg;
         cp.frameRadiiMm = in.frameRadii;  // the cameras of the frames and the video
+        if (!in.ownerArcMm.empty()) {
+            cp.ownerArcMm = &in.ownerArcMm;
+            cp.loopReachMm = rp.loopReachMm;
+        }
         const CoverageResult cov = computeCoverage(scene, *in.centerline, cp);
         const FlyoverParams& fp = cp.flyover;
         const auto tReview = Clock::now();
-        reviewInfo = renderReview(scene, *in.centerline, cp, in.frameRadii, cov, rp, frameOptionsOf(rp), review, progress);
+        reviewInfo = renderReview(scene, *in.centerline, cp, in.frameRadii, cov, rp, frameOptionsOf(rp), in, review,
+                                  progress);
         reviewSeconds = secondsSince(tReview);
         json coverageJson{{"schema", "flyover.coverage/1"},
                        {"world_frame", WORLD_FRAME},
@@ -892,6 +957,7 @@ json runCoverage(StudyRun& run, Progress* progress)
                          {"clip_offset_fraction", fp.clipOffsetFraction},
                          {"clip_offset_mm", fp.clipOffsetMm},
                          {"ost", cp.ost},
+                         {"loop_local", loopJson(in, rp)},
                          {"both_cameras", methodJson(cov.flyover, cp.minRegionMm2)}}},
                        {"flythrough",
                         {{"fov_deg", cp.flythroughFovDeg},

@@ -59,6 +59,12 @@ struct RenderInputs {
            frameRadiiSeconds = 0;
     /// Whether the surface's arrays were prepared beside the mesh stage's write (prepareSurfaceArrays).
     bool surfacePreparedEarly = false;
+    /// Loop-local OST: the owner on the path of every scene triangle (render/loop_ownership.h),
+    /// empty when render.loop_reach_mm is 0 or OST is off; how many were owned by sight and
+    /// by a neighbour, and the seconds it took.
+    std::vector<float> ownerArcMm;
+    std::size_t ownersBySight = 0, ownersByNeighbour = 0, unowned = 0;
+    double ownersSeconds = 0;
     ~RenderInputs();
 };
 

@@ -70,7 +70,7 @@ json runSegmentStage(StudyRun& run, Progress* progress)
 }
 
 // The render parameters each render step depends on.
-#define FLYOVER_CAMERA "fov_deg", "roll_deg", "direction", "clip_offset_fraction", "clip_offset_mm"
+#define FLYOVER_CAMERA "fov_deg", "roll_deg", "direction", "clip_offset_fraction", "clip_offset_mm", "loop_reach_mm"
 #define FLYOVER_IMAGE "width_px", "height_px", "supersample", "ost", "smooth_shading", "depth_cue", "depth_cue_mm"
 
 /// The render steps; `--until render`, `--force render` and "render" in stagesNeededFor /

@@ -301,19 +301,20 @@ ViewMarker::ViewMarker(const ViewMarker& other)
 
 ViewMarker::~ViewMarker() = default;
 
-uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>& out)
+uint64_t ViewMarker::mark(const Camera& camera, bool ost, std::vector<uint32_t>& out, const LoopWindow& loop)
 {
-    return markWith(camera, ost, [&](const uint32_t* begin, const uint32_t* end) { out.insert(out.end(), begin, end); });
+    return markWith(camera, ost, loop, [&](const uint32_t* begin, const uint32_t* end) { out.insert(out.end(), begin, end); });
 }
 
-uint64_t ViewMarker::mark(const Camera& camera, bool ost, uint8_t* seen)
+uint64_t ViewMarker::mark(const Camera& camera, bool ost, uint8_t* seen, const LoopWindow& loop)
 {
-    return markWith(camera, ost, [seen](const uint32_t* begin, const uint32_t* end) {
+    return markWith(camera, ost, loop, [seen](const uint32_t* begin, const uint32_t* end) {
         for (const uint32_t* f = begin; f != end; ++f) seen[*f] = 1;
     });
 }
 
-template <typename Shown> uint64_t ViewMarker::markWith(const Camera& camera, bool ost, const Shown& shown)
+template <typename Shown>
+uint64_t ViewMarker::markWith(const Camera& camera, bool ost, const LoopWindow& loop, const Shown& shown)
 {
     const RayScene::Impl& im = mScene.impl();
     const Topology& vt = *mTopology;
@@ -327,6 +328,7 @@ template <typename Shown> uint64_t ViewMarker::markWith(const Camera& camera, bo
     RenderOptions o;
     o.widthPx = o.heightPx = mViewPx;
     o.ost = ost;
+    o.loop = loop;
     HitImage& hits = w.hits;
     traceHits(mScene, camera, o, hits);
     // Lateral distance between neighbouring rays at depth 1 (dot(dir, forward) == 1).
@@ -450,8 +452,8 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
         for (auto& s : w.seen) s.assign(nf, 0);
         return w;
     });
-    auto mark = [&](Worker& w, const Camera& camera, bool ost, std::vector<uint8_t>& seen) {
-        w.rays += w.marker.mark(camera, ost, seen.data());
+    auto mark = [&](Worker& w, const Camera& camera, bool ost, std::vector<uint8_t>& seen, const LoopWindow& loop = {}) {
+        w.rays += w.marker.mark(camera, ost, seen.data(), loop);
     };
     const std::vector<double> frameRadii = params.frameRadiiMm.empty()
                                                ? flyoverFrameRadii(scene, centerline, params.flyover)
@@ -461,8 +463,9 @@ CoverageResult computeCoverage(const RayScene& scene, const Centerline& centerli
         const auto lease = workers.take();
         Worker& w = *lease;
         const CenterlinePoint& p = centerline.points[positions[k]];
+        const LoopWindow loop = params.loopAt(positions[k], clStep);
         for (const Camera& c : flyoverCameras(p, params.flyover, frameRadii[positions[k]]))
-            mark(w, c, params.ost, w.seen[0]);
+            mark(w, c, params.ost, w.seen[0], loop);
         // Fly-through cameras sit inside the lumen, where OST and plain rays agree.
         if (params.flythrough) {
             mark(w, flythroughCamera(p, true, params.flythroughFovDeg), params.ost, w.seen[1]);

@@ -17,6 +17,7 @@
 
 #include "render/camera.h"
 #include "render/ray_scene.h"
+#include "render/render_view.h"
 #include "volume/centerline_types.h"
 #include "volume/progress.h"
 
@@ -42,6 +43,20 @@ struct CoverageParams {
     /// The fly-over cameras' framed half-widths, one per centerline point, when the caller has
     /// them (flyoverFrameRadii() with the same `flyover`); empty: computed here.
     std::vector<double> frameRadiiMm;
+    /// Loop-local OST for the fly-over (and review) views: each triangle's owner on the path
+    /// (triangleOwners()) and the reach (RenderParams::loopReachMm); null or 0: off. A view
+    /// then counts only what it shows of its own stretch of colon.
+    const std::vector<float>* ownerArcMm = nullptr;
+    double loopReachMm = 0.0;
+    /// The loop window of a fly-over view at centerline index `index`.
+    LoopWindow loopAt(std::size_t index, double centerlineStepMm) const
+    {
+        LoopWindow w;
+        w.ownerArcMm = ownerArcMm;
+        w.reachMm = loopReachMm;
+        w.arcMm = double(index) * (centerlineStepMm > 0 ? centerlineStepMm : 1.0);
+        return w;
+    }
 };
 
 /// A connected set of triangles that no ray of a method hit.
@@ -123,10 +138,11 @@ public:
 
     /// Appends the triangles that `camera` (viewPx x viewPx rays, OST when `ost`) shows to
     /// `out`; a triangle may be appended more than once. @return the rays traced
-    uint64_t mark(const Camera& camera, bool ost, std::vector<uint32_t>& out);
+    /// With `loop` (active), walls of other loops are passed through (loop-local OST).
+    uint64_t mark(const Camera& camera, bool ost, std::vector<uint32_t>& out, const LoopWindow& loop = {});
     /// The same triangles, flagged: seen[f] = 1 for each (`seen` has one byte per triangle of
     /// the scene). @return the rays traced
-    uint64_t mark(const Camera& camera, bool ost, uint8_t* seen);
+    uint64_t mark(const Camera& camera, bool ost, uint8_t* seen, const LoopWindow& loop = {});
 
     struct Topology;
     const Topology& topology() const { return *mTopology; }
@@ -137,7 +153,8 @@ private:
     bool mFootprint;
     std::shared_ptr<const Topology> mTopology;
     /// mark() with `shown(begin, end)` called for each run of triangles shown.
-    template <typename Shown> uint64_t markWith(const Camera& camera, bool ost, const Shown& shown);
+    template <typename Shown>
+    uint64_t markWith(const Camera& camera, bool ost, const LoopWindow& loop, const Shown& shown);
     struct Scratch;
     std::unique_ptr<Scratch> mScratch;
 };

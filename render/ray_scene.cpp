@@ -58,6 +58,31 @@ void ostFilter(const RTCFilterFunctionNArguments* args)
     }
 }
 
+void loopOstFilter(const RTCFilterFunctionNArguments* args)
+{
+    auto* loop = reinterpret_cast<LoopContext*>(args->context);
+    int* valid = args->valid;
+    RTCRayN* ray = args->ray;
+    RTCHitN* hit = args->hit;
+    const unsigned int n = args->N;
+    for (unsigned int i = 0; i < n; ++i) {
+        if (valid[i] != -1) continue;
+        const float d = RTCRayN_dir_x(ray, n, i) * RTCHitN_Ng_x(hit, n, i) +
+                        RTCRayN_dir_y(ray, n, i) * RTCHitN_Ng_y(hit, n, i) +
+                        RTCRayN_dir_z(ray, n, i) * RTCHitN_Ng_z(hit, n, i);
+        if (d > 0.0f) {
+            valid[i] = 0;
+            continue;
+        }
+        const float arc = loop->ownerArc[RTCHitN_primID(hit, n, i)];
+        if (arc < loop->arcLo || arc > loop->arcHi) {  // NaN: no owner, kept
+            valid[i] = 0;
+            float& passed = loop->passedT[RTCRayN_id(ray, n, i) & 15u];
+            passed = std::min(passed, RTCRayN_tfar(ray, n, i));  // the candidate hit's distance
+        }
+    }
+}
+
 void RayScene::Impl::throwIfError(const char* what)
 {
     RTCError code = RTC_ERROR_NONE;
@@ -338,9 +363,26 @@ RayScene::~RayScene() = default;
 RayHit RayScene::intersect(const Vec3d& origin, const Vec3d& dir, double tnear, double tfar,
                            bool ost) const
 {
+    return intersect(origin, dir, tnear, tfar, ost, LoopWindow{});
+}
+
+RayHit RayScene::intersect(const Vec3d& origin, const Vec3d& dir, double tnear, double tfar, bool ost,
+                           const LoopWindow& loop) const
+{
     const DenormalsFlushed flushed;
-    RTCIntersectContext context;
+    LoopContext loopContext;
+    RTCIntersectContext& context = loopContext.context;
     initIntersectContext(context, ost, false);
+    if (ost && loop.active()) {
+        if (loop.ownerArcMm->size() != mImpl->triangles)
+            throw ParameterError("RayScene::intersect: " + std::to_string(loop.ownerArcMm->size()) +
+                                 " triangle owners for a scene of " + std::to_string(mImpl->triangles) + " triangles");
+        context.filter = &loopOstFilter;
+        loopContext.ownerArc = loop.ownerArcMm->data();
+        loopContext.arcLo = float(loop.arcMm - loop.reachMm);
+        loopContext.arcHi = float(loop.arcMm + loop.reachMm);
+        std::fill(std::begin(loopContext.passedT), std::end(loopContext.passedT), std::numeric_limits<float>::infinity());
+    }
 
     RTCRayHit rh;
     rh.ray.org_x = float(origin.x);

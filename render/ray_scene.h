@@ -49,6 +49,17 @@ void triMeshArrays(const TriMesh& mesh, std::vector<float>& verticesXyz, std::ve
 std::vector<float> smoothVertexNormals(const std::vector<float>& verticesXyz,
                                        const std::vector<uint32_t>& triangleIndices);
 
+/// Loop-local OST: the view shows only the wall of the stretch of colon it flies. A hit on a
+/// triangle whose owner (render/loop_ownership.h: the part of the path that reaches it through
+/// the lumen) lies more than `reachMm` along the path from the view's own place `arcMm` is
+/// passed through like a back face. Triangles without an owner (NaN) are never passed through.
+struct LoopWindow {
+    const std::vector<float>* ownerArcMm = nullptr;  ///< per scene triangle; null: off
+    double arcMm = 0.0;                              ///< the view's place on the path (mm)
+    double reachMm = 0.0;                            ///< 0: off (the thesis' OST)
+    bool active() const { return ownerArcMm != nullptr && reachMm > 0.0; }
+};
+
 class RayScene;
 
 /// A scene of some of a surface's triangles (`triangleIndices`, indices into `verticesXyz`) that
@@ -86,6 +97,10 @@ public:
     /// Closest hit of one ray with t in [tnear, tfar]; `ost` discards back faces.
     RayHit intersect(const Vec3d& origin, const Vec3d& dir, double tnear, double tfar,
                      bool ost) const;
+    /// The same with loop-local OST (`loop` active, with `ost`): other loops' walls passed.
+    /// @throw ParameterError when the window's owners do not match the scene's triangles
+    RayHit intersect(const Vec3d& origin, const Vec3d& dir, double tnear, double tfar, bool ost,
+                     const LoopWindow& loop) const;
 
     Vec3d boundsMin() const;
     Vec3d boundsMax() const;

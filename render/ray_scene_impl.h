@@ -57,6 +57,20 @@ struct RayScene::Impl {
 /// (v1 - v0) x (v2 - v0) — the same convention as the mesh's inward normals.
 void ostFilter(const RTCFilterFunctionNArguments* args);
 
+/// The context of loop-local OST (render_view.h LoopWindow): Embree hands the filter the
+/// context's address, so the window travels with it. A hit on a front face whose owner's arc
+/// lies outside [arcLo, arcHi] is passed through; passedT[ray id] keeps the nearest such hit
+/// (ray ids are the lanes of a packet, 0..15).
+struct LoopContext {
+    RTCIntersectContext context;  ///< first member: the filter casts back from it
+    const float* ownerArc = nullptr;
+    float arcLo = 0.0f, arcHi = 0.0f;
+    float passedT[16];
+};
+
+/// OST and the loop window of a LoopContext in one context filter.
+void loopOstFilter(const RTCFilterFunctionNArguments* args);
+
 /// An intersect context with the OST filter attached only when `ost` is set (plain rendering
 /// pays nothing).
 inline void initIntersectContext(RTCIntersectContext& context, bool ost, bool coherent)

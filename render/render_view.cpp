@@ -97,14 +97,37 @@ void validate(const Camera& camera, int width, int height, int supersample, doub
     throw ParameterError(msg.str());
 }
 
-/// Traces 16-wide packets with OST done by one of the exact methods of OstMethod. One per task:
-/// it keeps the Auto method's switch to the filter for the rest of the task.
+/// A loop window names one owner per triangle of the scene.
+void validateLoop(const RayScene& scene, const LoopWindow& loop)
+{
+    if (!loop.active()) return;
+    if (loop.ownerArcMm->size() != scene.triangleCount()) {
+        std::ostringstream msg;
+        msg << "RenderOptions.loop: " << loop.ownerArcMm->size() << " triangle owners for a scene of "
+            << scene.triangleCount() << " triangles";
+        throw ParameterError(msg.str());
+    }
+    if (!std::isfinite(loop.arcMm) || !std::isfinite(loop.reachMm)) throw ParameterError("RenderOptions.loop: arc and reach must be finite");
+}
+
+/// Traces 16-wide packets with OST done by one of the exact methods of OstMethod, and with
+/// loop-local OST when the options' window is active. One per task: it keeps the Auto method's
+/// switch to the filter for the rest of the task.
 class PacketTracer {
 public:
-    PacketTracer(RTCScene scene, bool ost, OstMethod method) : mScene(scene), mOst(ost), mMethod(method)
+    PacketTracer(RTCScene scene, const RenderOptions& options)
+        : mScene(scene), mOst(options.ost), mMethod(options.ostMethod), mLoopOn(options.ost && options.loop.active())
     {
         initIntersectContext(mPlain, false, true);
         initIntersectContext(mFilter, true, true);
+        initIntersectContext(mLoop.context, true, true);
+        if (mLoopOn) {
+            mLoop.context.filter = &loopOstFilter;
+            mLoop.ownerArc = options.loop.ownerArcMm->data();
+            mLoop.arcLo = float(options.loop.arcMm - options.loop.reachMm);
+            mLoop.arcHi = float(options.loop.arcMm + options.loop.reachMm);
+        }
+        std::fill(std::begin(mLoop.passedT), std::end(mLoop.passedT), INF_F);
     }
 
     void trace(int* valid, RTCRayHit16& packet)
@@ -113,15 +136,20 @@ public:
             rtcIntersect16(valid, mScene, &mPlain, &packet);
             return;
         }
+        RTCIntersectContext* filter = &mFilter;
+        if (mLoopOn) {
+            std::fill(std::begin(mLoop.passedT), std::end(mLoop.passedT), INF_F);
+            filter = &mLoop.context;
+        }
         if (mMethod == OstMethod::Filter || mFilterOnly) {
-            rtcIntersect16(valid, mScene, &mFilter, &packet);
+            rtcIntersect16(valid, mScene, filter, &packet);
             return;
         }
         rtcIntersect16(valid, mScene, &mPlain, &packet);
         // A lane whose closest hit is a back face started outside the lumen: its OST answer is
         // the closest front face beyond that hit. Tracing it again with the filter from just
         // before that hit gives exactly what the filter alone would have given, because no face
-        // of any kind lies closer.
+        // of any kind lies closer. The same holds for a front face of another loop.
         alignas(64) int again[LANES];
         int lanes = 0, retraced = 0;
         for (int i = 0; i < LANES; ++i) {
@@ -132,7 +160,12 @@ public:
             // The filter's own test, in the same float arithmetic (ray_scene.cpp ostFilter).
             const float d = packet.ray.dir_x[i] * packet.hit.Ng_x[i] + packet.ray.dir_y[i] * packet.hit.Ng_y[i] +
                             packet.ray.dir_z[i] * packet.hit.Ng_z[i];
-            if (d > 0.0f) {
+            bool pass = d > 0.0f;
+            if (!pass && mLoopOn) {
+                const float arc = mLoop.ownerArc[packet.hit.primID[i]];
+                pass = arc < mLoop.arcLo || arc > mLoop.arcHi;
+            }
+            if (pass) {
                 again[i] = -1;
                 packet.ray.tnear[i] = std::nextafter(packet.ray.tfar[i], 0.0f);
                 packet.ray.tfar[i] = INF_F;
@@ -141,18 +174,43 @@ public:
                 ++retraced;
             }
         }
-        if (retraced > 0) rtcIntersect16(again, mScene, &mFilter, &packet);
+        if (retraced > 0) rtcIntersect16(again, mScene, filter, &packet);
         if (mMethod == OstMethod::Auto && 2 * retraced > lanes) mFilterOnly = true;
     }
+
+    /// After trace(): adds lane i's pixel to `counts` (a wall under the thesis' OST; passed
+    /// when another loop's wall lay in front of what the view shows).
+    void count(const RTCRayHit16& packet, int i, LoopCounts& counts) const
+    {
+        const bool isHit = packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+        const bool passed = mLoop.passedT[i] < (isHit ? packet.ray.tfar[i] : INF_F);
+        counts.wallPixels += (isHit || passed) ? 1 : 0;
+        counts.passedPixels += passed ? 1 : 0;
+    }
+    bool loopOn() const { return mLoopOn; }
 
 private:
     RTCScene mScene;
     bool mOst;
     OstMethod mMethod;
+    bool mLoopOn;
     bool mFilterOnly = false;
     RTCIntersectContext mPlain;
     RTCIntersectContext mFilter;
+    LoopContext mLoop;
 };
+
+/// Per-task loop counts, summed when the view is done.
+using TaskCounts = tbb::combinable<LoopCounts>;
+
+void addCounts(TaskCounts& tasks, LoopCounts* counts)
+{
+    if (!counts) return;
+    tasks.combine_each([counts](const LoopCounts& c) {
+        counts->wallPixels += c.wallPixels;
+        counts->passedPixels += c.passedPixels;
+    });
+}
 
 /// Headlight diffuse shading of one hit: ambient + diffuse * |cos| between the ray and the
 /// shading normal (the light sits at the eye), divided by the depth cue.
@@ -289,7 +347,7 @@ namespace {
 /// Renders the view into `rgb`, whose rows are `rowPixels` pixels apart: pixel (x, y) of the
 /// view is rgb[3 * (y * rowPixels + x)]. The caller has validated the options.
 void renderInto(const RayScene& scene, const Camera& camera, const RenderOptions& options, uint8_t* rgb,
-                std::size_t rowPixels, HitImage* hits)
+                std::size_t rowPixels, HitImage* hits, LoopCounts* counts)
 {
     const int width = options.widthPx;
     const int height = options.heightPx;
@@ -322,10 +380,12 @@ void renderInto(const RayScene& scene, const Camera& camera, const RenderOptions
     const int centreSample = ss / 2;
     const int passes = ss * ss + ((hits && !centreIsSample) ? 1 : 0);
     const float weight = 1.0f / float(ss * ss);
+    TaskCounts taskCounts;
 
     forEachTileRange(width, height, [&](const tbb::blocked_range2d<int>& range) {
         const DenormalsFlushed flushed;
-        PacketTracer tracer(im.scene, options.ost, options.ostMethod);
+        PacketTracer tracer(im.scene, options);
+        LoopCounts& loopCounts = taskCounts.local();
         RTCRayHit16 packet;
         alignas(64) int valid[LANES];
 
@@ -339,6 +399,7 @@ void renderInto(const RayScene& scene, const Camera& camera, const RenderOptions
                     shader.shadePacket(packet, shades);
                     for (int i = 0; i < LANES; ++i) {
                         if (!valid[i]) continue;
+                        if (counts && tracer.loopOn()) tracer.count(packet, i, loopCounts);
                         const std::size_t row = std::size_t(ty * PACKET + i / PACKET);
                         const std::size_t column = std::size_t(tx * PACKET + i % PACKET);
                         const std::size_t pix = row * std::size_t(width) + column;
@@ -369,12 +430,14 @@ void renderInto(const RayScene& scene, const Camera& camera, const RenderOptions
                     const float oy = centreOnly ? 0.5f : (float(sb) + 0.5f) / float(ss);
                     const bool recordHits =
                         hits && (centreOnly || (centreIsSample && sa == centreSample && sb == centreSample));
+                    const bool countPass = counts && tracer.loopOn() && pass == 0;
 
                     rays.fill(tx, ty, ox, oy, valid, packet);
                     tracer.trace(valid, packet);
 
                     for (int i = 0; i < LANES; ++i) {
                         if (!valid[i]) continue;
+                        if (countPass) tracer.count(packet, i, loopCounts);
                         const bool isHit = packet.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
                         if (recordHits && isHit) {
                             const std::size_t pix = std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
@@ -399,18 +462,26 @@ void renderInto(const RayScene& scene, const Camera& camera, const RenderOptions
             }
         }
     });
+    addCounts(taskCounts, counts);
 }
 
 } // namespace
 
 void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
-                HitImage* hits)
+                HitImage* hits, LoopCounts* counts)
 {
     validate(camera, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
+    validateLoop(scene, options.loop);
     image.width = options.widthPx;
     image.height = options.heightPx;
     image.rgb.resize(std::size_t(image.width) * std::size_t(image.height) * 3);  // every pixel is written
-    renderInto(scene, camera, options, image.rgb.data(), std::size_t(image.width), hits);
+    renderInto(scene, camera, options, image.rgb.data(), std::size_t(image.width), hits, counts);
+}
+
+void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
+                HitImage* hits)
+{
+    renderView(scene, camera, options, image, hits, nullptr);
 }
 
 std::size_t differingPixels(const RgbImage& a, const RgbImage& b)
@@ -426,8 +497,9 @@ std::size_t differingPixels(const RgbImage& a, const RgbImage& b)
 namespace {
 
 void renderPairInto(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
-                    RgbImage& pair, HitImage* leftHits, HitImage* rightHits, int gapPx)
+                    RgbImage& pair, HitImage* leftHits, HitImage* rightHits, int gapPx, LoopCounts* counts = nullptr)
 {
+    validateLoop(scene, options.loop);
     validate(left, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
     validate(right, options.widthPx, options.heightPx, options.supersample, options.depthCueRangeMm);
     if (!(gapPx >= 0 && gapPx <= 65536)) {
@@ -441,8 +513,8 @@ void renderPairInto(const RayScene& scene, const Camera& left, const Camera& rig
     const std::size_t row = 2 * w + gap;
     pair.rgb.resize(row * h * 3);  // every pixel is written
     for (std::size_t y = 0; y < h; ++y) fillSeparator(pair.rgb.data() + (y * row + w) * 3, gap);
-    renderInto(scene, left, options, pair.rgb.data(), row, leftHits);
-    renderInto(scene, right, options, pair.rgb.data() + (w + gap) * 3, row, rightHits);
+    renderInto(scene, left, options, pair.rgb.data(), row, leftHits, counts);
+    renderInto(scene, right, options, pair.rgb.data() + (w + gap) * 3, row, rightHits, counts);
 }
 
 } // namespace
@@ -459,16 +531,26 @@ void renderPair(const RayScene& scene, const Camera& left, const Camera& right, 
     renderPairInto(scene, left, right, options, pair, &leftHits, &rightHits, gapPx);
 }
 
-void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits)
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, LoopCounts* counts, int gapPx)
+{
+    renderPairInto(scene, left, right, options, pair, nullptr, nullptr, gapPx, counts);
+}
+
+void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits,
+               LoopCounts* counts)
 {
     validate(camera, options.widthPx, options.heightPx, 1, options.depthCueRangeMm);
+    validateLoop(scene, options.loop);
+    TaskCounts taskCounts;
     const int width = options.widthPx;
     const int height = options.heightPx;
     const ViewRays rays(camera, width, height);
     resetHits(hits, width, height);
     forEachTileRange(width, height, [&](const tbb::blocked_range2d<int>& range) {
         const DenormalsFlushed flushed;
-        PacketTracer tracer(scene.impl().scene, options.ost, options.ostMethod);
+        PacketTracer tracer(scene.impl().scene, options);
+        LoopCounts& loopCounts = taskCounts.local();
         RTCRayHit16 packet;
         alignas(64) int valid[LANES];
         for (int ty = range.rows().begin(); ty != range.rows().end(); ++ty) {
@@ -476,6 +558,7 @@ void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions&
                 rays.fill(tx, ty, 0.5f, 0.5f, valid, packet);
                 tracer.trace(valid, packet);
                 for (int i = 0; i < LANES; ++i) {
+                    if (valid[i] && counts && tracer.loopOn()) tracer.count(packet, i, loopCounts);
                     if (!valid[i] || packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
                     const std::size_t pix = std::size_t(ty * PACKET + i / PACKET) * std::size_t(width) +
                                             std::size_t(tx * PACKET + i % PACKET);
@@ -485,6 +568,7 @@ void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions&
             }
         }
     });
+    addCounts(taskCounts, counts);
 }
 
 uint64_t traceBare(const RayScene& scene, const Camera& camera, int widthPx, int heightPx)

@@ -29,6 +29,15 @@ enum class OstMethod {
     Retrace,
 };
 
+/// What a loop-local view passed through, counted over its pixel-centre rays (one per pixel):
+/// `wallPixels` had a wall under the thesis' OST, `passedPixels` of them met another loop's
+/// wall first, which was passed through.
+struct LoopCounts {
+    uint64_t wallPixels = 0;
+    uint64_t passedPixels = 0;
+    double passedShare() const { return wallPixels ? double(passedPixels) / double(wallPixels) : 0.0; }
+};
+
 struct RenderOptions {
     int widthPx = 512;        ///< image width (pixels, 1..65536)
     int heightPx = 512;       ///< image height (pixels, 1..65536)
@@ -44,6 +53,8 @@ struct RenderOptions {
     /// face normal (false). Visibility (the OST test) always uses the face's own normal.
     bool smoothShading = true;
     OstMethod ostMethod = OstMethod::Auto;
+    /// Loop-local OST (with `ost` only); off by default.
+    LoopWindow loop;
 };
 
 struct RgbImage {
@@ -61,6 +72,10 @@ struct HitImage {
 /// @throw ParameterError for sizes, supersampling or a camera out of range.
 RgbImage renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options,
                     HitImage* hits = nullptr);
+
+/// The same, adding what a loop-local view passed through to `counts`.
+void renderView(const RayScene& scene, const Camera& camera, const RenderOptions& options, RgbImage& image,
+                HitImage* hits, LoopCounts* counts);
 
 /// The same into `image`, reusing its buffer (no allocation when the size is unchanged): for
 /// loops over many frames.
@@ -83,10 +98,14 @@ void renderPair(const RayScene& scene, const Camera& left, const Camera& right, 
 /// The same, with each view's hit image (as renderView gives it) in `leftHits` and `rightHits`.
 void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
                 RgbImage& pair, HitImage& leftHits, HitImage& rightHits, int gapPx = PAIR_GAP_PX);
+/// The same, adding what the two loop-local views passed through to `counts`.
+void renderPair(const RayScene& scene, const Camera& left, const Camera& right, const RenderOptions& options,
+                RgbImage& pair, LoopCounts* counts, int gapPx = PAIR_GAP_PX);
 
 /// Only the hit image of the pixel-centre rays (no shading, no supersampling): the same rays
 /// and the same OST and near-plane rules as renderView. For coverage and picking.
-void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits);
+void traceHits(const RayScene& scene, const Camera& camera, const RenderOptions& options, HitImage& hits,
+               LoopCounts* counts = nullptr);
 
 /// The bare-throughput reference for benchmarks: the pixel-centre rays of renderView (same
 /// origins, directions, near plane and 16-wide coherent packets), traced once without any

@@ -333,7 +333,8 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
             const auto lease = workers.take();
             Worker& w = *lease;
             w.shown.clear();
-            for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown);
+            const LoopWindow loop = cov.loopAt(cands[k].view.centerlineIndex, cl.stepMm);
+            for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown, loop);
             std::vector<uint32_t>& s = cands[k].shows;
             for (const uint32_t f : w.shown)
                 if (!seen[f]) s.push_back(f);

@@ -3,6 +3,7 @@
 #include "pipeline/artifact_io.h"
 #include "colon/render_settings.h"
 #include "render/flyover_path.h"
+#include "render/loop_ownership.h"
 #include "render/overview.h"
 #include "volume/error.h"
 #include "volume/image.h"
@@ -155,8 +156,12 @@ void ViewStudy::loadNow()
             mCtMax = hi;
             mCtSpacing = {vs.x(), vs.y(), vs.z()};
         }
+        std::vector<float> owners;
+        if (mParams.ost && mParams.loopReachMm > 0 && !mCenterline.points.empty())
+            owners = triangleOwners(*scene, mCenterline).arcMm;
         std::lock_guard<std::mutex> lock(mLoadMutex);
         mScene = std::move(scene);
+        mOwners = std::move(owners);
         mCt = ct;
     } catch (const std::exception& e) {
         error = e.what();
@@ -329,6 +334,17 @@ RenderOptions ViewStudy::renderOptions(int px) const
     return ro;
 }
 
+LoopWindow ViewStudy::loopWindow(std::size_t index, const std::string& mode) const
+{
+    LoopWindow w;
+    waitLoaded();
+    if (mOwners.empty() || mode == "flythrough") return w;
+    w.ownerArcMm = &mOwners;
+    w.reachMm = mParams.loopReachMm;
+    w.arcMm = double(index) * stepMm();
+    return w;
+}
+
 double ViewStudy::frameRadius(std::size_t index, double rollDeg) const
 {
     const long long rollKey = std::llround(rollDeg * 1e6);
@@ -375,10 +391,14 @@ PairRender ViewStudy::renderPair(const ViewPose& pose) const
 {
     PairRender out;
     out.cameras = cameras(pose, &out.centerlineIndex);
-    const RenderOptions ro = renderOptions(pose.px);
+    RenderOptions ro = renderOptions(pose.px);
+    ro.loop = loopWindow(out.centerlineIndex, pose.mode);
     const RayScene& sc = scene();
     RgbImage views[2];
-    tbb::parallel_for(0, 2, [&](int k) { renderView(sc, out.cameras[std::size_t(k)], ro, views[k]); });
+    LoopCounts counts[2];
+    tbb::parallel_for(0, 2, [&](int k) {
+        renderView(sc, out.cameras[std::size_t(k)], ro, views[k], nullptr, &counts[k]);
+    });
     out.image = sideBySide(views[0], views[1]);
     const CenterlinePoint& p = mCenterline.points[out.centerlineIndex];
     out.poseJson = json{{"arc_mm", double(out.centerlineIndex) * stepMm()},
@@ -392,6 +412,13 @@ PairRender ViewStudy::renderPair(const ViewPose& pose) const
                         {"clip_offset_fraction", pose.clipOffsetFraction < 0 ? mParams.clipOffsetFraction
                                                                              : pose.clipOffsetFraction},
                         {"px", pose.px},
+                        {"loop_reach_mm", ro.loop.active() ? json(ro.loop.reachMm) : json(nullptr)},
+                        {"foreign_wall_share",
+                         ro.loop.active()
+                             ? json(LoopCounts{counts[0].wallPixels + counts[1].wallPixels,
+                                               counts[0].passedPixels + counts[1].passedPixels}
+                                        .passedShare())
+                             : json(nullptr)},
                         {"world_frame", WORLD_FRAME},
                         {"cameras", json::array({cameraJson(out.cameras[0]), cameraJson(out.cameras[1])})}};
     return out;
@@ -402,10 +429,11 @@ PickResult ViewStudy::pick(const ViewPose& pose, int view, double x, double y) c
     if (view != 0 && view != 1) throw ParameterError("view: must be 0 or 1");
     if (!(x >= 0 && x <= pose.px) || !(y >= 0 && y <= pose.px))
         throw RangeError("x, y: must lie in [0, px] = [0, " + std::to_string(pose.px) + "]");
-    const Camera cam = cameras(pose)[std::size_t(view)];
+    std::size_t index = 0;
+    const Camera cam = cameras(pose, &index)[std::size_t(view)];
     const Vec3d dir = pixelDirection(cam, pose.px, pose.px, x, y);
     const RayHit h = scene().intersect(cam.position, dir, cam.nearMm, std::numeric_limits<double>::infinity(),
-                                       mParams.ost);
+                                       mParams.ost, loopWindow(index, pose.mode));
     PickResult r;
     if (!h.hit) return r;
     r.hit = true;

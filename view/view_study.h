@@ -156,6 +156,9 @@ public:
 private:
     FlyoverParams flyoverParams(const ViewPose& pose) const;
     RenderOptions renderOptions(int px) const;
+    /// The loop window of a fly-over view at centerline index `index` (inactive without owners
+    /// or for the fly-through).
+    LoopWindow loopWindow(std::size_t index, const std::string& mode) const;
     double frameRadius(std::size_t index, double rollDeg) const;
     void loadNow();
     const RayScene& scene() const;
@@ -169,6 +172,9 @@ private:
     std::string mRunHint;      ///< the `flyover run` command of this study
 
     std::shared_ptr<const RayScene> mScene;
+    /// Loop-local OST: each scene triangle's owner on the path (render/loop_ownership.h),
+    /// computed at load as the render stage computes it; empty when render.loop_reach_mm is 0.
+    std::vector<float> mOwners;
     openvdb::FloatGrid::Ptr mCt;
     std::shared_ptr<const RayScene> mReusedScene;  ///< reuse(): taken instead of surface.ply
     openvdb::FloatGrid::Ptr mReusedCt;             ///< reuse(): taken instead of reading the CT

@@ -163,6 +163,37 @@ inline TriMesh makeLathe(const std::vector<double>& z, const std::vector<double>
     return buildMesh(points, tris, inward);
 }
 
+/// A tube swept along `path` (points about 1 mm apart or closer) with radius `radius[i]` at
+/// point i, `segments` around, open at both ends; rings are perpendicular to the local
+/// direction, carried along by a rotation-minimising frame. `inward` winds faces so that
+/// normals point to the axis (a lumen).
+inline TriMesh makeSweptTube(const std::vector<Vec3d>& path, const std::vector<double>& radius, int segments,
+                             bool inward)
+{
+    std::vector<Vec3d> points;
+    Vec3d u{0, 0, 0};
+    for (std::size_t i = 0; i < path.size(); ++i) {
+        const Vec3d a = path[i == 0 ? 0 : i - 1], b = path[std::min(path.size() - 1, i + 1)];
+        const Vec3d t = normalize(b - a);
+        if (i == 0) u = std::fabs(t.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+        u = normalize(u - t * dot(u, t));
+        const Vec3d v = cross(t, u);
+        for (int j = 0; j < segments; ++j) {
+            const double ang = 2.0 * PI * j / segments;
+            points.push_back(path[i] + (u * std::cos(ang) + v * std::sin(ang)) * radius[i]);
+        }
+    }
+    std::vector<std::array<int, 3>> tris;
+    auto id = [&](std::size_t i, int j) { return int(i) * segments + (j + segments) % segments; };
+    for (std::size_t i = 0; i + 1 < path.size(); ++i)
+        for (int j = 0; j < segments; ++j) {
+            // (u, v, t) is right-handed: d/d(angle) x d/d(arc) points away from the axis.
+            tris.push_back({id(i, j), id(i, j + 1), id(i + 1, j + 1)});
+            tris.push_back({id(i, j), id(i + 1, j + 1), id(i + 1, j)});
+        }
+    return buildMesh(points, tris, inward);
+}
+
 /// A straight lumen along z from 0 to `length` (mm) of radius `radius`, with one annular fold
 /// (a ridge that narrows the lumen to radius - foldDepth) centred at zFold, `foldWidth` wide.
 struct FoldedTube {
