@@ -211,6 +211,7 @@ json loopJson(const RenderInputs& in, const RenderParams& rp)
     if (in.ownerArcMm.empty()) return json{{"enabled", false}};
     return json{{"enabled", true},
                 {"reach_mm", rp.loopReachMm},
+                {"owners_file", OWNERS_FILE},
                 {"owners_by_sight", in.ownersBySight},
                 {"owners_by_neighbour", in.ownersByNeighbour},
                 {"unowned", in.unowned},
@@ -681,6 +682,7 @@ json runFrames(StudyRun& run, Progress* progress)
         poseOf(f, cams);
         reportProgress(progress, double(++done) / double(indices.size()), "fly-over frame pairs");
     });
+    if (!in.ownerArcMm.empty()) writeOwners(frames.path(OWNERS_FILE), in.ownerArcMm);
     writeJson(frames.path("poses.json"),
               json{{"schema", "flyover.poses/1"},
                    {"world_frame", WORLD_FRAME},

@@ -8,6 +8,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -193,6 +198,48 @@ TriangleOwners triangleOwners(const RayScene& scene, const Centerline& cl)
     out.unowned = nf - out.bySight - out.byNeighbour;
     out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return out;
+}
+
+namespace {
+
+bool littleEndian()
+{
+    const uint16_t one = 1;
+    uint8_t first = 0;
+    std::memcpy(&first, &one, 1);
+    return first == 1;
+}
+
+} // namespace
+
+void writeOwners(const std::string& path, const std::vector<float>& arcMm)
+{
+    if (!littleEndian()) throw std::runtime_error(path + ": owners are written little-endian only");
+    const std::string tmp = path + ".tmp";
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        out.write(reinterpret_cast<const char*>(arcMm.data()), std::streamsize(arcMm.size() * sizeof(float)));
+        out.flush();
+        if (!out) throw std::runtime_error(tmp + ": cannot write the triangles' owners");
+    }
+    std::error_code ec;
+    std::filesystem::rename(tmp, path, ec);
+    if (ec) throw std::runtime_error(path + ": cannot rename the owners into place: " + ec.message());
+}
+
+bool readOwners(const std::string& path, std::size_t triangles, std::vector<float>& arcMm)
+{
+    std::error_code ec;
+    const auto bytes = std::filesystem::file_size(path, ec);
+    if (ec || bytes != triangles * sizeof(float) || !littleEndian()) return false;
+    std::ifstream in(path, std::ios::binary);
+    std::vector<float> v(triangles);
+    in.read(reinterpret_cast<char*>(v.data()), std::streamsize(bytes));
+    if (!in) return false;
+    for (const float a : v)
+        if (std::isinf(a)) throw InputError(path + ": an owner that is infinite; remake it with --force frames");
+    arcMm = std::move(v);
+    return true;
 }
 
 } // namespace flyover

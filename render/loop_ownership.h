@@ -18,6 +18,7 @@
 #include "volume/centerline_types.h"
 
 #include <cstddef>
+#include <string>
 #include <vector>
 
 namespace flyover {
@@ -32,5 +33,15 @@ struct TriangleOwners {
 
 /// @throw InputError for an empty centerline
 TriangleOwners triangleOwners(const RayScene& scene, const Centerline& centerline);
+
+/// The owners as the frames step keeps them beside its pairs (frames/owners.f32): one
+/// little-endian float32 per triangle of surface.ply, NaN for none; the viewer reads them
+/// instead of computing them again.
+inline constexpr const char* OWNERS_FILE = "owners.f32";
+/// Writes atomically (a temporary file renamed). @throw std::runtime_error naming the file
+void writeOwners(const std::string& path, const std::vector<float>& arcMm);
+/// @return false when the file is absent or does not hold exactly `triangles` owners (stale:
+/// another surface's); @throw InputError when it holds a value that is neither finite nor NaN
+bool readOwners(const std::string& path, std::size_t triangles, std::vector<float>& arcMm);
 
 } // namespace flyover

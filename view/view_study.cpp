@@ -156,8 +156,10 @@ void ViewStudy::loadNow()
             mCtMax = hi;
             mCtSpacing = {vs.x(), vs.y(), vs.z()};
         }
+        // The frames step's owners when they are this surface's, else computed as it does.
         std::vector<float> owners;
-        if (mParams.ost && mParams.loopReachMm > 0 && !mCenterline.points.empty())
+        if (mParams.ost && mParams.loopReachMm > 0 && !mCenterline.points.empty() &&
+            !readOwners((fs::path(mDir) / "frames" / OWNERS_FILE).string(), scene->triangleCount(), owners))
             owners = triangleOwners(*scene, mCenterline).arcMm;
         std::lock_guard<std::mutex> lock(mLoadMutex);
         mScene = std::move(scene);

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -81,6 +82,42 @@ TEST_F(BadMaskCli, EachBadMaskOneLineExitOneNothingWritten)
     expectRefused(ball, "no voxel holds label 7", " --label 7");
     expectRefused(writeBalls("pieces.nii.gz", {{{25, 25, 25}, 8}, {{70, 70, 50}, 8}, {{30, 70, 80}, 8}}),
                   "no plausible colon");
+}
+
+// A colon whose both ends lie high (a U: the lowest lumen lies halfway along it, 80 mm below
+// either end, and no end lies near it): the path cannot start in a rectum it does not see. The
+// run finishes, says so in a warning line naming the distance, and `flyover status` shows the
+// study as needing review; never a silent success.
+TEST_F(BadMaskCli, ARectumAboveTheLowestLumenIsAWarningAndAStudyToReview)
+{
+    Image3<uint8_t> img;
+    img.geometry.size = {100, 40, 100};
+    img.geometry.originMm = {-50, 20, -700};
+    img.voxels.assign(std::size_t(img.geometry.voxelCount()), 0);
+    // Two limbs at x = 25 and x = 75 from z = 90 down to z = 35, joined by a half circle below (lowest at z = 3).
+    auto axisDistance = [](double x, double z) {
+        if (z >= 35) return std::min(std::fabs(x - 25), std::fabs(x - 75));
+        return std::fabs(std::hypot(x - 50, z - 35) - 25.0);
+    };
+    for (int64_t k = 0; k < 100; ++k)
+        for (int64_t j = 0; j < 40; ++j)
+            for (int64_t i = 0; i < 100; ++i) {
+                const double x = double(i), y = double(j) - 20, z = double(k);
+                if (z > 90 || z < -10) continue;
+                const double d = std::hypot(axisDistance(x, z), y);
+                if (d < 7.0 && k > 0) img.at(i, j, k) = 1;
+            }
+    const std::string mask = (mRoot / "u.nii.gz").string();
+    writeImage(img, mask);
+    const std::string study = (mRoot / "study-u").string();
+    const CliResult r = runFlyover("run --mask " + mask + " --study " + study + " --until centerline");
+    SCOPED_TRACE("stdout: " + r.out + "\nstderr: " + r.err);
+    EXPECT_EQ(r.exitCode, 0);
+    const std::string all = r.out + r.err;
+    EXPECT_NE(all.find("mm above the lowest lumen point"), std::string::npos) << "no warning line";
+    EXPECT_NE(all.find("needs review"), std::string::npos) << "the run does not say the study needs review";
+    const CliResult st = runFlyover("status --study " + study);
+    EXPECT_NE(st.out.find("needs review: centerline: the path starts"), std::string::npos) << "status: " << st.out;
 }
 
 } // namespace

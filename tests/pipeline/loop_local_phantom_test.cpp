@@ -73,7 +73,7 @@ Shares runPacked(uint64_t seed, bool fromMask)
     if (fromMask) run.maskPath = (dir / "mask.nii.gz").string();
     else run.ctPath = (dir / "ct.nii.gz").string();
     run.studyDir = (dir / "study").string();
-    run.untilStage = "coverage";
+    run.untilStage = "render";
     run.params.render.widthPx = run.params.render.heightPx = 96;
     run.params.render.frameStepMm = 20;
     run.params.render.coveragePx = 48;
@@ -128,7 +128,7 @@ TEST(LoopLocalPhantom, PackedLoopsFillNoViewFromTheMask)
     for (uint64_t seed : {1, 2}) {
         const Shares s = runPacked(seed, true);
         EXPECT_LE(s.local, 0.01) << "seed " << seed << ": share of wall pixels from loops > 80 mm away";
-        EXPECT_LE(s.local, s.thesis) << "seed " << seed;
+        EXPECT_LE(s.local, 0.25 * s.thesis) << "seed " << seed << ": loop-local should pass most foreign walls";
         EXPECT_GE(s.withReview, 0.995) << "seed " << seed << ": coverage with review";
     }
 }
@@ -138,6 +138,6 @@ TEST(LoopLocalPhantom, PackedLoopsFillNoViewFromTheCt)
     openvdb::initialize();
     const Shares s = runPacked(3, false);
     EXPECT_LE(s.local, 0.01) << "share of wall pixels from loops > 80 mm away";
-    EXPECT_LE(s.local, s.thesis);
+    EXPECT_LE(s.local, 0.25 * s.thesis) << "loop-local should pass most foreign walls";
     EXPECT_GE(s.withReview, 0.995) << "coverage with review";
 }
