@@ -542,6 +542,7 @@ Phantom makePhantom(const PhantomParams& params)
     options.touching = params.touching;
     options.voxelMm = geometry.spacingMm;
     options.rectalTube = params.rectalTube;
+    options.wideRectum = params.wideRectum;
     PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed, options);
     if (params.collapse)
         addCollapses(anatomy, params.seed);

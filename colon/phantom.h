@@ -71,6 +71,7 @@ struct PhantomParams {
     int touching = 0;        ///< contacts between far-apart loops, 0..PHANTOM_MAX_CONTACTS
     bool redundant = false;  ///< extra sigmoid and transverse loops (about 2.0-2.1 m of colon)
     bool rectalTube = false; ///< an air-filled rectal catheter open to the outside air
+    bool wideRectum = false; ///< the rectum the widest lumen (radius 30 mm 20-60 mm above the anal end)
     /// Voxel size (mm) along i, j, k; all zero: the size's own spacing. The field of view
     /// stays 400 x 400 x 375 mm centred on the origin (sizes rounded to whole voxels).
     Vec3d spacingMm{0, 0, 0};

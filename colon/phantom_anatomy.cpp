@@ -190,7 +190,7 @@ void forEachArcSample(const std::vector<double>& arc, double stepMm, std::size_t
 /// Samples the spline through the control points at a uniform arc-length step, with a
 /// radius that eases between the control radii (no overshoot) and a gentle haustral-scale
 /// modulation, clamped to the anatomical range.
-void buildCenterline(PhantomAnatomy& a, const ControlTable& table)
+void buildCenterline(PhantomAnatomy& a, const ControlTable& table, bool wideRectum)
 {
     constexpr int DENSE_PER_SPAN = 512;
     std::vector<Vec3d> dense;
@@ -222,6 +222,14 @@ void buildCenterline(PhantomAnatomy& a, const ControlTable& table)
         a.centerlineMm[i] = dense[d] * (1.0 - w) + dense[d + 1] * w;
         const double r = denseRadius[d] * (1.0 - w) + denseRadius[d + 1] * w;
         a.radiusMm[i] = std::clamp(r * (1.0 + 0.04 * std::sin(2.0 * PI * s / 90.0 + 0.6)), 12.0, 28.0);
+        if (wideRectum) {
+            // Widening from the anal end (kept clear of the image's border) to 30 mm by 20 mm,
+            // held to 60 mm, back to the colon's own radius by 100 mm.
+            constexpr double WIDE_MM = 30.0;
+            const double up = smoothstep(std::clamp(s / 20.0, 0.0, 1.0));
+            const double down = 1.0 - smoothstep(std::clamp((s - 60.0) / 40.0, 0.0, 1.0));
+            a.radiusMm[i] = std::max(a.radiusMm[i], a.radiusMm[i] + (WIDE_MM - a.radiusMm[i]) * up * down);
+        }
         a.segment[i] = table.points[denseSpan[w < 0.5 ? d : d + 1]].segment;
     });
 }
@@ -1244,8 +1252,8 @@ PhantomAnatomy buildPhantomAnatomy(uint64_t seed, const AnatomyOptions& options)
     a.lungs[0].centerMm = {-85, 15, 152};
     a.lungs[1].centerMm = {85, 15, 152};
     a.lungs[0].semiAxesMm = a.lungs[1].semiAxesMm = {55, 60, 27};
-    a.variantPath = options.redundant || options.touching > 0;
-    buildCenterline(a, options.redundant ? REDUNDANT_COLON : DEFAULT_COLON);
+    a.variantPath = options.redundant || options.touching > 0 || options.wideRectum;
+    buildCenterline(a, options.redundant ? REDUNDANT_COLON : DEFAULT_COLON, options.wideRectum);
     buildFrames(a);
     if (options.touching > 0)
         addContacts(a, options.touching, seed, options.voxelMm);

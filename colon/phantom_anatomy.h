@@ -123,6 +123,9 @@ struct AnatomyOptions {
     /// channels are 1.3-1.7 of the coarser voxel across them, so 1-3 voxels wide.
     Vec3d voxelMm{1, 1, 1};
     bool rectalTube = false;
+    /// The rectum the widest lumen (radius 30 mm from 20 to 60 mm above the anal end, easing
+    /// back to the colon's own by 100 mm), as in a well-distended real colon.
+    bool wideRectum = false;
 };
 
 /// With all options off this is buildPhantomAnatomy(seed), bit for bit. Contacts are drawn

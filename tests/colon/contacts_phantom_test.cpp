@@ -7,6 +7,7 @@
 #include "colon/centerline.h"
 #include "volume/error.h"
 #include "colon/contacts.h"
+#include "colon/lumen_accounting.h"
 #include "volume/ingest.h"
 #include "colon/lumen_mask.h"
 #include "colon/segment.h"
@@ -31,11 +32,14 @@ struct Variant {
     bool collapse = false;
     bool fluid = false;
     bool stricture = false;
+    bool redundant = false;
+    bool wideRectum = false;
     std::string describe() const
     {
         std::ostringstream s;
         s << "phantom small seed=" << seed << " touching=" << touching << (collapse ? " collapse" : "")
-          << (fluid ? " fluid" : "") << (stricture ? " stricture" : "") << (fromCt ? " from CT" : " from the truth mask");
+          << (fluid ? " fluid" : "") << (stricture ? " stricture" : "") << (redundant ? " redundant" : "")
+          << (wideRectum ? " wide rectum" : "") << (fromCt ? " from CT" : " from the truth mask");
         return s.str();
     }
 };
@@ -63,6 +67,8 @@ void runVariant(const Variant& v)
     pp.collapse = v.collapse;
     pp.fluid = v.fluid;
     pp.stricture = v.stricture;
+    pp.redundant = v.redundant;
+    pp.wideRectum = v.wideRectum;
     Phantom ph;
     try {
         ph = makePhantom(pp);
@@ -123,6 +129,12 @@ void runVariant(const Variant& v)
     EXPECT_GT(arc.back(), truthLength - 25.0) << "the path ends in the cecum";
     EXPECT_NEAR(span, truthLength, 0.03 * truthLength) << "truth span of the path";
     EXPECT_NEAR(cl.lengthMm(), span, 0.03 * span) << "path length vs the truth between its ends";
+    // No kink: the camera never spins.
+    EXPECT_EQ(cr.turnsOver30, 0) << "steps turning more than 30 degrees (largest " << cr.maxTurnDeg << ")";
+    EXPECT_EQ(cr.normalStepsOver15, 0) << "camera-normal steps over 15 degrees (largest " << cr.maxNormalStepDeg << ")";
+    EXPECT_TRUE(cr.leftOut.empty() || std::all_of(cr.leftOut.begin(), cr.leftOut.end(), [](const LeftOutLumen& r) {
+        return r.kind != "not entered";
+    })) << "a loop of the phantom's colon was not entered";
 
     // A stricture splits the core of its piece: the route runs the core with corridors, on the
     // whole piece's route, and the path runs through the narrowing on its axis.
@@ -174,6 +186,22 @@ TEST(ContactsPhantom, TouchingWithCollapseAndFluidFromTheCt)
 {
     openvdb::initialize();
     for (uint64_t seed : {1, 2, 3}) runVariant({seed, 2, true, true, true});
+}
+
+// The rectum the widest lumen (radius ~31 mm over its lowest 50 mm) and the sigmoid packed
+// against the other loops with every contact the longer colon has: the path starts in the
+// rectum, never kinks and enters every loop; from the mask and from the CT, several seeds.
+TEST(ContactsPhantom, WideRectumBesidePackedLoops)
+{
+    openvdb::initialize();
+    for (uint64_t seed : {1, 2}) {
+        Variant v{seed, PHANTOM_MAX_CONTACTS, false};
+        v.redundant = true;
+        v.wideRectum = true;
+        runVariant(v);
+        v.fromCt = true;
+        runVariant(v);
+    }
 }
 
 // A stricture (an abrupt narrowing to a radius of 4 mm over 8-12 mm of the transverse colon at

@@ -782,6 +782,26 @@ TEST(PhantomVariants, ProneFluidLiesAnteriorInTheSigmoidAndTransverseColon)
     EXPECT_THROW(makePhantom(dry), ParameterError);
 }
 
+TEST(PhantomVariants, WideRectumIsTheWidestLumenAndKeepsEveryInvariant)
+{
+    for (bool redundant : {false, true}) {
+        PhantomParams pp;
+        pp.wideRectum = true;
+        pp.redundant = redundant;
+        pp.touching = redundant ? PHANTOM_MAX_CONTACTS : 2;
+        const Phantom ph = makePhantom(pp);  // throws naming the invariant a wide rectum breaks
+        const auto& r = ph.truth.radiusMm;
+        double lowest = 1e9, rest = 0;
+        for (std::size_t i = 0; i < r.size(); ++i) {
+            if (i >= 15 && i <= 50) lowest = std::min(lowest, r[i]);
+            if (i > 120) rest = std::max(rest, r[i]);
+        }
+        EXPECT_GE(lowest, 28.0) << "the rectum's radius over its lowest 50 mm";
+        EXPECT_GT(lowest, rest) << "the rectum is the widest lumen";
+        EXPECT_EQ(ph.truth.contacts.size(), std::size_t(pp.touching));
+    }
+}
+
 TEST(PhantomVariants, CollapsedStretchesHaveNoLumen)
 {
     for (uint64_t seed : {1u, 2u}) {

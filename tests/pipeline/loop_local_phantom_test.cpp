@@ -1,5 +1,6 @@
 // Loop-local OST on phantoms whose loops press together (every contact the phantom has, the
-// extra sigmoid and transverse loops), from the CT and from the mask, several seeds: of the
+// extra sigmoid and transverse loops; even seeds with the rectum the widest lumen), from the
+// CT and from the mask, several seeds: of the
 // wall pixels of the fly-over views, the share that belongs to a part of the colon more than
 // 80 mm away along it. Which wall belongs where is decided by the phantom's true centerline
 // (bench/foreign_walls.h: the true centerline point a wall's inward normal runs through), not
@@ -66,6 +67,7 @@ Shares runPacked(uint64_t seed, bool fromMask)
     pp.seed = seed;
     pp.touching = PHANTOM_MAX_CONTACTS;
     pp.redundant = true;
+    pp.wideRectum = seed % 2 == 0;  // and with the rectum the widest lumen
     const Phantom ph = makePhantom(pp);
     writePhantom(ph, pp, (dir / "ct.nii.gz").string(), (dir / "truth.json").string(),
                  fromMask ? (dir / "mask.nii.gz").string() : "");
