@@ -109,12 +109,14 @@ BodyAxes bodyAxesFromPath(const std::vector<Vec3d>& positions)
 Flexures findFlexures(const std::vector<Vec3d>& positions, const BodyAxes& axes, const AnatomySegmentParams& params)
 {
     Flexures f;
-    if (positions.size() < 3) return f;
+    const std::size_t n = positions.size();
+    if (n < 3) return f;
     const Extent lateral = extentAlong(positions, axes.left);
     const double margin = params.flexureLateralFraction * lateral.half();
+    // Splenic: the highest point on the left.
     double bestLeft = -1e300;
     bool haveLeft = false;
-    for (std::size_t i = 0; i < positions.size(); ++i) {
+    for (std::size_t i = 0; i < n; ++i) {
         if (dot(positions[i], axes.left) < lateral.mid() + margin) continue;
         const double s = dot(positions[i], axes.superior);
         if (s > bestLeft) {
@@ -123,19 +125,42 @@ Flexures findFlexures(const std::vector<Vec3d>& positions, const BodyAxes& axes,
             haveLeft = true;
         }
     }
-    if (!haveLeft) return f;
+    if (!haveLeft || f.splenic + 2 >= n) return f;
+    // Hepatic: the top of the right limb, climbed from the lowest point of the path's final
+    // stretch (the cecum) until the path falls or swings medially.
+    const std::size_t tail = std::max<std::size_t>(std::min<std::size_t>(n - f.splenic - 1, 100), n / 10);
+    std::size_t start = n - 1;
+    for (std::size_t i = n > tail ? n - tail : 0; i < n; ++i)
+        if (i > f.splenic && dot(positions[i], axes.superior) < dot(positions[start], axes.superior)) start = i;
+    std::size_t top = start;
+    double topS = dot(positions[start], axes.superior);
+    for (std::size_t i = start; i-- > f.splenic + 1;) {
+        const double s = dot(positions[i], axes.superior);
+        if (s > topS) {
+            topS = s;
+            top = i;
+            continue;
+        }
+        const double medial = dot(positions[i], axes.left) - dot(positions[top], axes.left);
+        if (topS - s > params.limbTurnStopMm || medial > params.limbMedialStopMm) break;
+    }
+    if (dot(positions[top], axes.left) <= lateral.mid() - margin) {
+        f.hepatic = top;
+        f.found = true;
+        return f;
+    }
+    // The right limb's top is not on the right (no ascending colon there): the highest point
+    // on the right after the splenic flexure.
     double bestRight = -1e300;
-    bool haveRight = false;
-    for (std::size_t i = f.splenic + 1; i < positions.size(); ++i) {
+    for (std::size_t i = f.splenic + 1; i < n; ++i) {
         if (dot(positions[i], axes.left) > lateral.mid() - margin) continue;
         const double s = dot(positions[i], axes.superior);
         if (s > bestRight) {
             bestRight = s;
             f.hepatic = i;
-            haveRight = true;
+            f.found = true;
         }
     }
-    f.found = haveRight;
     return f;
 }
 
@@ -153,7 +178,7 @@ std::size_t findDescendingSigmoidJunction(const std::vector<Vec3d>& positions, c
         }
         const double rise = s - lowS;
         const double medial = dot(positions[lowest], axes.left) - dot(positions[i], axes.left);
-        if (rise > params.descendingRiseStopMm || medial > params.descendingMedialStopMm) break;
+        if (rise > params.limbTurnStopMm || medial > params.limbMedialStopMm) break;
     }
     return lowest;
 }

@@ -10,7 +10,7 @@
 ///    (the path's high points on the patient's left come before those on the right, as the
 ///    descending colon comes before the ascending); else from the path alone.
 /// 2. flexures: the splenic flexure is the highest point on the left, the hepatic flexure the
-///    highest on the right after it.
+///    top of the right limb climbed from the cecum.
 /// 3. descending-sigmoid junction: from the splenic flexure back down the left flank, the
 ///    lowest point before the path rises again or swings medially.
 /// 4. rectosigmoid junction: where the path from the anal end stops rising.
@@ -47,11 +47,12 @@ struct BodyAxes {
 struct AnatomySegmentParams {
     /// Flexure candidates lie at least this fraction of the path's half-width off the midline.
     double flexureLateralFraction = 0.25;
-    /// Descending-sigmoid junction: the walk down from the splenic flexure stops where the
-    /// path has risen this much above its lowest point so far ...
-    double descendingRiseStopMm = 20.0;
+    /// The walks along a flank (down the left from the splenic flexure, up the right from the
+    /// cecum) stop where the path has turned back this far from the lowest (highest) point so
+    /// far ...
+    double limbTurnStopMm = 20.0;
     /// ... or lies this much medial of it.
-    double descendingMedialStopMm = 40.0;
+    double limbMedialStopMm = 40.0;
     /// Rectosigmoid junction: the first point past `rectumMinMm` where the chord over the next
     /// `rectumChordMm` climbs less than `rectumMinElevationDeg`; at most `rectumMaxMm`, and
     /// `rectumDefaultMm` when the path never levels off before that.
@@ -97,11 +98,16 @@ struct Flexures {
     bool found = false;
 };
 /// Splenic: the highest point at least flexureLateralFraction of the half-width left of the
-/// path's lateral midline; hepatic: the highest point as far right of it, after the splenic.
+/// path's lateral midline. Hepatic: the top of the right limb, climbed back from the lowest
+/// point of the path's final stretch (its last tenth, at least 100 mm: the cecum) until the
+/// path falls limbTurnStopMm below the highest point so far or lies limbMedialStopMm medial of
+/// it; when that top is not as far right as the splenic flexure is left, the highest point that
+/// far right after the splenic flexure. (The highest point on the right can be the top of a
+/// redundant transverse loop near the midline: the right limb's top is the flexure.)
 Flexures findFlexures(const std::vector<Vec3d>& positions, const BodyAxes& axes, const AnatomySegmentParams& params);
 
 /// From the splenic flexure back towards the rectum: the lowest point reached before the path
-/// rises descendingRiseStopMm above it or lies descendingMedialStopMm medial of it.
+/// rises limbTurnStopMm above it or lies limbMedialStopMm medial of it.
 std::size_t findDescendingSigmoidJunction(const std::vector<Vec3d>& positions, const BodyAxes& axes,
                                           std::size_t splenic, const AnatomySegmentParams& params);
 
