@@ -2,6 +2,7 @@
 
 #include "pipeline/artifact_io.h"
 #include "colon/uncut_lumen.h"
+#include "colon/anatomy_segments.h"
 #include "colon/centerline.h"
 #include "colon/segment.h"
 
@@ -36,6 +37,11 @@ json runCenterline(StudyRun& run, Progress* progress)
     } else {
         c = extractCenterline(*sdf, params, progress, &cr);
     }
+    // Segment names and landmarks from the path's geometry in the patient frame the scan's
+    // header states (anatomy_segments.h: from the path alone where the path contradicts it).
+    addAnatomySegments(c, PatientFrame::Stated);
+    if (run.opt.log && c.segmentsFrame != "patient")
+        run.opt.log->message("centerline: segments labelled from the path alone: " + c.segmentsFrameReason);
     writeJson(run.path("centerline.json"), centerlineToJson(c));
     run.state.centerline = std::move(c);
     const Centerline& cl = *run.state.centerline;
@@ -133,6 +139,7 @@ json runCenterline(StudyRun& run, Progress* progress)
                 {"cecum_mm", pts.empty() ? json() : vec3Json(pts.back().positionMm)},
                 {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")},
                 {"rectum_rule", cr.rectumRule},
+                {"segments_frame", cl.segmentsFrame},
                 {"rectum_above_lowest_lumen_mm", aboveLowest},
                 {"needs_review", needsReview},
                 {"turns", {{"max_step_deg", cr.maxTurnDeg},
