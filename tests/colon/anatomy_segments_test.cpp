@@ -140,6 +140,18 @@ TEST(AnatomySegmentsPhantom, TracedPathLabelledRightMedium)
     EXPECT_GE(tracedPhantomAccuracy(phantomParams(4, PhantomSize::Medium), "medium seed 4"), MIN_ACCURACY);
 }
 
+TEST(AnatomySegmentsPhantom, TracedPathLabelledRightFull)
+{
+    EXPECT_GE(tracedPhantomAccuracy(phantomParams(8, PhantomSize::Full), "full seed 8"), MIN_ACCURACY);
+}
+
+TEST(AnatomySegmentsPhantom, TracedPathLabelledRightAcrossCollapsedSigmoid)
+{
+    PhantomParams collapsed = phantomParams(9, PhantomSize::Small);
+    collapsed.collapse = true;
+    EXPECT_GE(tracedPhantomAccuracy(collapsed, "small collapsed seed 9"), MIN_ACCURACY);
+}
+
 TEST(AnatomySegmentsPhantom, TracedPathsLabelledRightRedundantAndTouching)
 {
     PhantomParams redundant = phantomParams(5, PhantomSize::Small);
