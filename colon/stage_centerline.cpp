@@ -3,6 +3,7 @@
 #include "pipeline/artifact_io.h"
 #include "colon/uncut_lumen.h"
 #include "colon/anatomy_segments.h"
+#include "volume/scan_orientation.h"
 #include "colon/centerline.h"
 #include "colon/segment.h"
 
@@ -38,8 +39,10 @@ json runCenterline(StudyRun& run, Progress* progress)
         c = extractCenterline(*sdf, params, progress, &cr);
     }
     // Segment names and landmarks from the path's geometry in the patient frame the scan's
-    // header states (anatomy_segments.h: from the path alone where the path contradicts it).
-    addAnatomySegments(c, PatientFrame::Stated);
+    // header states (the CT's, else the mask's); from the path alone where it states none, or
+    // where the path contradicts it (anatomy_segments.h).
+    const std::string& scan = run.opt.ctPath.empty() ? run.opt.maskPath : run.opt.ctPath;
+    addAnatomySegments(c, scan.empty() || scanStatesOrientation(scan) ? PatientFrame::Stated : PatientFrame::Unknown);
     if (run.opt.log && c.segmentsFrame != "patient")
         run.opt.log->message("centerline: segments labelled from the path alone: " + c.segmentsFrameReason);
     writeJson(run.path("centerline.json"), centerlineToJson(c));

@@ -14,6 +14,7 @@
 #include "tests/volume/shared_data.h"
 #include "volume/error.h"
 #include "volume/image_io.h"
+#include "volume/scan_orientation.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -25,6 +26,8 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include <unistd.h>
 
 namespace fs = std::filesystem;
 
@@ -345,6 +348,39 @@ TEST(AnatomySegments, WrittenToAndReadFromCenterlineJson)
     bad = j;
     bad["landmarks"]["cecum"]["index"] = c.points.size();
     EXPECT_THROW(centerlineFromJson(bad, "bad.json"), InputError);
+}
+
+// ---- Whether a header states the orientation -------------------------------------------------
+
+TEST(AnatomySegments, HeadersWithoutOrientationAreTold)
+{
+    const fs::path dir = fs::temp_directory_path() / ("flyover_orient_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    Image3<uint8_t> mask;
+    mask.geometry.size = {4, 4, 4};
+    mask.voxels.assign(64, 1);
+    const std::string stated = (dir / "stated.nii").string();
+    writeImage(mask, stated);
+    EXPECT_TRUE(scanStatesOrientation(stated));
+    writeImage(mask, (dir / "stated.nii.gz").string());
+    EXPECT_TRUE(scanStatesOrientation((dir / "stated.nii.gz").string()));
+    // The same file with qform_code and sform_code 0 (bytes 252-255 of a NIfTI-1 header).
+    std::string bytes;
+    {
+        std::ifstream in(stated, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    ASSERT_GT(bytes.size(), 352u);
+    bytes.replace(252, 4, std::string(4, '\0'));
+    const std::string bare = (dir / "bare.nii").string();
+    std::ofstream(bare, std::ios::binary) << bytes;
+    EXPECT_FALSE(scanStatesOrientation(bare));
+    std::ofstream(dir / "space.nhdr") << "NRRD0004\ntype: uchar\ndimension: 3\nspace: left-posterior-superior\n"
+                                         "sizes: 4 4 4\nspace directions: (1,0,0) (0,1,0) (0,0,1)\n\n";
+    EXPECT_TRUE(scanStatesOrientation((dir / "space.nhdr").string()));
+    std::ofstream(dir / "plain.nhdr") << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nspacings: 1 1 1\n\n";
+    EXPECT_FALSE(scanStatesOrientation((dir / "plain.nhdr").string()));
+    fs::remove_all(dir);
 }
 
 // ---- The real colon -----------------------------------------------------------------------------
