@@ -64,7 +64,7 @@ struct CenterlineParams {
     /// and the piece's ends instead of on the whole piece (mm; 0: the whole piece). Not a stage parameter: the
     /// tests and benches compare the two.
     double corridorMm = 5.0;
-    static constexpr int VERSION = 7;
+    static constexpr int VERSION = 8;  // 8: anatomical segments and landmarks in centerline.json
 };
 
 /// One lumen piece as the centerline saw it.

@@ -2,6 +2,8 @@
 
 #include "pipeline/artifact_io.h"
 #include "colon/uncut_lumen.h"
+#include "colon/anatomy_segments.h"
+#include "volume/scan_orientation.h"
 #include "colon/centerline.h"
 #include "colon/segment.h"
 
@@ -36,6 +38,13 @@ json runCenterline(StudyRun& run, Progress* progress)
     } else {
         c = extractCenterline(*sdf, params, progress, &cr);
     }
+    // Segment names and landmarks from the path's geometry in the patient frame the scan's
+    // header states (the CT's, else the mask's); from the path alone where it states none, or
+    // where the path contradicts it (anatomy_segments.h).
+    const std::string& scan = run.opt.ctPath.empty() ? run.opt.maskPath : run.opt.ctPath;
+    addAnatomySegments(c, scan.empty() || scanStatesOrientation(scan) ? PatientFrame::Stated : PatientFrame::Unknown);
+    if (run.opt.log && c.segmentsFrame != "patient")
+        run.opt.log->message("centerline: segments labelled from the path alone: " + c.segmentsFrameReason);
     writeJson(run.path("centerline.json"), centerlineToJson(c));
     run.state.centerline = std::move(c);
     const Centerline& cl = *run.state.centerline;
@@ -133,6 +142,7 @@ json runCenterline(StudyRun& run, Progress* progress)
                 {"cecum_mm", pts.empty() ? json() : vec3Json(pts.back().positionMm)},
                 {"rectum_hint", fromTube ? "rectal tube tip" : (params.rectumMm ? "rectum_mm" : "none")},
                 {"rectum_rule", cr.rectumRule},
+                {"segments_frame", cl.segmentsFrame},
                 {"rectum_above_lowest_lumen_mm", aboveLowest},
                 {"needs_review", needsReview},
                 {"turns", {{"max_step_deg", cr.maxTurnDeg},

@@ -780,6 +780,15 @@ nlohmann::json centerlineToJson(const Centerline& c)
                                       {"axis_mm", axis},
                                       {"radius_mm", c.leftOutBranchRadiusMm}};
     }
+    if (!c.segment.empty()) {  // only on a labelled path (colon/anatomy_segments.h)
+        out["segment"] = c.segment;
+        json landmarks = json::object();
+        for (const CenterlineLandmark& l : c.landmarks)
+            landmarks[l.name] = json{{"index", l.index}, {"arc_mm", l.arcMm}, {"position_mm", v3(l.positionMm)}};
+        out["landmarks"] = landmarks;
+        out["segments_frame"] = c.segmentsFrame;
+        if (!c.segmentsFrameReason.empty()) out["segments_frame_reason"] = c.segmentsFrameReason;
+    }
     return out;
 }
 
@@ -819,6 +828,36 @@ Centerline centerlineFromJson(const nlohmann::json& j, const std::string& source
         c.leftOutBranchRadiusMm = b.value("radius_mm", 0.0);
         if (!(c.leftOutBranchRadiusMm >= 0) || !std::isfinite(c.leftOutBranchRadiusMm))
             fail("left_out_branch: radius_mm must be a finite value >= 0");
+    }
+    // Anatomical segments: optional (files written before them load without).
+    if (j.contains("segment")) {
+        const auto& seg = j.at("segment");
+        if (!seg.is_array() || seg.size() != n) fail("segment: expected one string per point");
+        for (const auto& s : seg) {
+            if (!s.is_string()) fail("segment: expected one string per point");
+            c.segment.push_back(s.get<std::string>());
+        }
+        c.segmentsFrame = j.value("segments_frame", "");
+        c.segmentsFrameReason = j.value("segments_frame_reason", "");
+    }
+    if (j.contains("landmarks")) {
+        const auto& lm = j.at("landmarks");
+        if (!lm.is_object()) fail("landmarks: expected an object");
+        for (auto it = lm.begin(); it != lm.end(); ++it) {
+            const auto& l = it.value();
+            if (!l.is_object() || !l.contains("index") || !l.at("index").is_number_unsigned() ||
+                l.at("index").get<std::size_t>() >= n)
+                fail("landmarks: " + it.key() + ": expected an index of a point");
+            CenterlineLandmark m;
+            m.name = it.key();
+            m.index = l.at("index").get<std::size_t>();
+            m.arcMm = l.value("arc_mm", double(m.index) * c.stepMm);
+            m.positionMm = l.contains("position_mm") ? v3(l.at("position_mm")) : c.points[m.index].positionMm;
+            c.landmarks.push_back(m);
+        }
+        // Path order, as written (a JSON object's keys come back sorted).
+        std::stable_sort(c.landmarks.begin(), c.landmarks.end(),
+                         [](const CenterlineLandmark& a, const CenterlineLandmark& b) { return a.index < b.index; });
     }
     return c;
 }

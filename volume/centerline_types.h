@@ -5,6 +5,8 @@
 
 #include "volume/vec3.h"
 
+#include <cstddef>
+#include <string>
 #include <vector>
 
 namespace flyover {
@@ -18,6 +20,15 @@ struct CenterlinePoint {
     bool bridged = false;  ///< true on stretches that bridge a gap between lumen pieces
 };
 
+/// A named anatomical point on the path (colon/anatomy_segments.h): the point's index, its
+/// arc from the first point and its position.
+struct CenterlineLandmark {
+    std::string name;  ///< rectosigmoid_junction, descending_sigmoid_junction, splenic_flexure, ...
+    std::size_t index = 0;
+    double arcMm = 0;
+    Vec3d positionMm;
+};
+
 struct Centerline {
     std::vector<CenterlinePoint> points;  ///< ordered rectum -> cecum, uniform arc-length step
     double stepMm = 1.0;                  ///< arc-length step between consecutive points (mm)
@@ -27,6 +38,14 @@ struct Centerline {
     /// round it is not the colon's: coverage leaves it out of the wall to see.
     std::vector<Vec3d> leftOutBranchMm;
     double leftOutBranchRadiusMm = 0;
+    /// Anatomical segment per point (rectum ... cecum; colon/anatomy_segments.h), empty when
+    /// the path was not labelled (an older centerline.json).
+    std::vector<std::string> segment;
+    std::vector<CenterlineLandmark> landmarks;
+    /// "patient" (labelled in the patient frame) or "path only" (frame unknown or at odds
+    /// with the path), and why when "path only"; empty when not labelled.
+    std::string segmentsFrame;
+    std::string segmentsFrameReason;
 
     double lengthMm() const
     {
