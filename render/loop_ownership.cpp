@@ -81,30 +81,42 @@ std::vector<Candidate> groupCandidates(const PathSamples& s, const Vec3d& centre
     return best;
 }
 
-/// True when nothing lies between `from` and `to` (the segment's last 0.05 mm excepted, where
-/// the triangle itself and its neighbours are).
-bool clearSight(RTCScene scene, const Vec3d& from, const Vec3d& to)
+/// Occlusion rays from `from` to the centroids of `tris` (at most 16), 16 at a time: clear[k]
+/// is set when nothing lies between (the segment's last 0.05 mm excepted, where the triangle
+/// itself and its neighbours are).
+void clearSights(RTCScene scene, const Vec3d& from, const Vec3d* to, int n, bool* clear)
 {
-    const Vec3d d = to - from;
-    const double len = length(d);
-    if (!(len > 0.1)) return true;
     RTCIntersectContext context;
-    initIntersectContext(context, false, false);
-    RTCRay ray;
-    ray.org_x = float(from.x);
-    ray.org_y = float(from.y);
-    ray.org_z = float(from.z);
-    ray.dir_x = float(d.x / len);
-    ray.dir_y = float(d.y / len);
-    ray.dir_z = float(d.z / len);
-    ray.tnear = 0.0f;
-    ray.tfar = float(len * (1.0 - 1e-4) - 0.05);
-    ray.time = 0.0f;
-    ray.mask = 0xFFFFFFFFu;
-    ray.id = 0;
-    ray.flags = 0;
-    rtcOccluded1(scene, &context, &ray);
-    return ray.tfar >= 0.0f;  // Embree sets tfar to -inf when occluded
+    initIntersectContext(context, false, true);
+    RTCRay16 rays;
+    alignas(64) int valid[16];
+    for (int k = 0; k < 16; ++k) {
+        valid[k] = 0;
+        rays.org_x[k] = float(from.x);
+        rays.org_y[k] = float(from.y);
+        rays.org_z[k] = float(from.z);
+        rays.dir_x[k] = rays.dir_y[k] = 0.0f;
+        rays.dir_z[k] = 1.0f;
+        rays.tnear[k] = 0.0f;
+        rays.tfar[k] = 0.0f;
+        rays.time[k] = 0.0f;
+        rays.mask[k] = 0xFFFFFFFFu;
+        rays.id[k] = unsigned(k);
+        rays.flags[k] = 0;
+        if (k >= n) continue;
+        const Vec3d d = to[k] - from;
+        const double len = length(d);
+        clear[k] = !(len > 0.1);
+        if (clear[k]) continue;
+        valid[k] = -1;
+        rays.dir_x[k] = float(d.x / len);
+        rays.dir_y[k] = float(d.y / len);
+        rays.dir_z[k] = float(d.z / len);
+        rays.tfar[k] = float(len * (1.0 - 1e-4) - 0.05);
+    }
+    rtcOccluded16(valid, scene, &context, &rays);
+    for (int k = 0; k < n; ++k)
+        if (valid[k]) clear[k] = rays.tfar[k] >= 0.0f;  // Embree sets tfar to -inf when occluded
 }
 
 /// Breadth-first over triangles sharing a vertex: each triangle without an owner takes the
@@ -181,15 +193,33 @@ TriangleOwners triangleOwners(const RayScene& scene, const Centerline& cl)
             for (const uint32_t f : tris) centre = centre + centroid[f];
             centre = centre / double(tris.size());
             const std::vector<Candidate> candidates = groupCandidates(samples, centre);
-            for (const uint32_t f : tris) {
-                for (const Candidate& c : candidates) {
-                    const Vec3d& p = samples.position[c.point];
-                    if (!(dot(centroid[f] - p, normal[f]) < 0.0)) continue;  // p sees the back side
-                    if (!clearSight(im.scene, p, centroid[f])) continue;
-                    out.arcMm[f] = samples.arcMm[c.point];
-                    sighted[f] = 1;
-                    break;
+            // Nearest stretch first: each candidate traces to the group's triangles still
+            // without an owner whose front side faces it, 16 rays from one point at a time.
+            std::vector<uint32_t> pending(tris), facing, rest;
+            for (const Candidate& c : candidates) {
+                if (pending.empty()) break;
+                const Vec3d& p = samples.position[c.point];
+                facing.clear();
+                rest.clear();
+                for (const uint32_t f : pending)
+                    (dot(centroid[f] - p, normal[f]) < 0.0 ? facing : rest).push_back(f);
+                for (std::size_t b = 0; b < facing.size(); b += 16) {
+                    const int n = int(std::min<std::size_t>(16, facing.size() - b));
+                    Vec3d to[16];
+                    bool clear[16];
+                    for (int k = 0; k < n; ++k) to[k] = centroid[facing[b + std::size_t(k)]];
+                    clearSights(im.scene, p, to, n, clear);
+                    for (int k = 0; k < n; ++k) {
+                        const uint32_t f = facing[b + std::size_t(k)];
+                        if (!clear[k]) {
+                            rest.push_back(f);
+                            continue;
+                        }
+                        out.arcMm[f] = samples.arcMm[c.point];
+                        sighted[f] = 1;
+                    }
                 }
+                pending.swap(rest);
             }
         }
     });
