@@ -60,6 +60,14 @@ void floodFromPath(const LumenIndex& index, const openvdb::math::Transform& xf, 
     }
 }
 
+/// Distance (mm) from p to the polyline through `line`.
+double distanceToPolyline(const Vec3d& p, const std::vector<Vec3d>& line)
+{
+    double best = line.empty() ? 0.0 : distance(p, line.front());
+    for (std::size_t i = 1; i < line.size(); ++i) best = std::min(best, distanceToSegment(p, line[i - 1], line[i]));
+    return best;
+}
+
 } // namespace
 
 std::vector<LeftOutLumen> leftOutLumen(const LumenIndex& index, const openvdb::math::Transform& xf,
@@ -78,6 +86,8 @@ std::vector<LeftOutLumen> leftOutLumen(const LumenIndex& index, const openvdb::m
         const double reachMm = 2.0 * cl.points[std::size_t(owner[s])].radiusMm + 2.0 * voxelMm;
         return double(steps[s]) * voxelMm <= reachMm;
     });
+    // The far tube the path leaves out (centerline_far_end.h) is reported on its own.
+    const double branchReachMm = 3.0 * cl.leftOutBranchRadiusMm + 2.0 * voxelMm;
     std::vector<Slot> queue;
     for (Slot seed = 0; seed < index.slotCount(); ++seed) {
         if (done.test(seed)) continue;
@@ -86,11 +96,15 @@ std::vector<LeftOutLumen> leftOutLumen(const LumenIndex& index, const openvdb::m
         std::size_t count = 0;
         Vec3d sum{0, 0, 0};
         std::int32_t minSteps = -1, maxSteps = -1, mouthOwner = -1;
+        std::size_t inBranch = 0;
         for (std::size_t head = 0; head < queue.size(); ++head) {
             const Slot s = queue[head];
             ++count;
             const openvdb::Vec3d w = xf.indexToWorld(index.coord(s));
             sum += Vec3d{w[0], w[1], w[2]};
+            if (!cl.leftOutBranchMm.empty() &&
+                distanceToPolyline(Vec3d{w[0], w[1], w[2]}, cl.leftOutBranchMm) <= branchReachMm)
+                ++inBranch;
             if (owner[s] >= 0) {
                 if (minSteps < 0 || steps[s] < minSteps) {
                     minSteps = steps[s];
@@ -111,7 +125,12 @@ std::vector<LeftOutLumen> leftOutLumen(const LumenIndex& index, const openvdb::m
         std::ostringstream why;
         why << std::fixed << std::setprecision(1) << r.volumeMl << " mL of lumen at (" << r.centroidMm.x << ", "
             << r.centroidMm.y << ", " << r.centroidMm.z << ") LPS mm ";
-        if (mouthOwner < 0) {
+        if (2 * inBranch >= count) {
+            r.kind = "far branch";
+            r.arcMm = double(cl.points.size() - 1) * cl.stepMm;
+            why << "is the narrow tube at the far end that the path leaves out (the terminal ileum or the "
+                   "appendix; far_branch_left_out)";
+        } else if (mouthOwner < 0) {
             r.kind = "separate piece";
             why << "is a separate piece that the path does not join (too small beside the largest, or no "
                    "plausible place in the chain)";

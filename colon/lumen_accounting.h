@@ -30,7 +30,8 @@ struct LeftOutLumen {
     /// separate piece (not reached from the path at all).
     double arcMm = -1;
     double extentMm = 0;          ///< how far it reaches beyond that point's reach, along the lumen
-    /// "dead end", "not entered" or "separate piece"
+    /// "dead end", "not entered", "separate piece" or "far branch" (the far tube the path
+    /// leaves out, Centerline::leftOutBranchMm, reported on its own as well)
     std::string kind;
     std::string reason;           ///< a sentence for the report and the run log
 };

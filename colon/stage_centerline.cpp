@@ -108,7 +108,8 @@ json runCenterline(StudyRun& run, Progress* progress)
                                {"extent_mm", r.extentMm},
                                {"kind", r.kind},
                                {"reason", r.reason}});
-        if (run.opt.log) run.opt.log->message("centerline: " + std::string(r.kind == "dead end" ? "" : "warning: ") +
+        const bool expected = r.kind == "dead end" || r.kind == "far branch";
+        if (run.opt.log) run.opt.log->message("centerline: " + std::string(expected ? "" : "warning: ") +
                                               "left out: " + r.reason);
         if (r.kind == "not entered") needsReview.push_back("lumen left out: " + r.reason);
     }

@@ -17,6 +17,7 @@
 #include "pipeline/artifact_io.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/render_output.h"
+#include "colon/anatomy_segments.h"
 #include "colon/render_settings.h"
 #include "render/camera.h"
 #include "render/coverage.h"
@@ -53,6 +54,7 @@
 #include <sstream>
 #include <condition_variable>
 #include <thread>
+#include <limits>
 #include <memory>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -205,17 +207,19 @@ RenderOptions loopLocal(RenderOptions ro, const RenderInputs& in, const RenderPa
     return ro;
 }
 
-/// What loop-local OST did, for a report: the reach, how the owners were found, the time.
-json loopJson(const RenderInputs& in, const RenderParams& rp)
+/// What loop-local OST did: the reach and how the owners were found (artifacts hold no
+/// timings: the same inputs give the same files); `withSeconds` adds the time, for a report.
+json loopJson(const RenderInputs& in, const RenderParams& rp, bool withSeconds = false)
 {
     if (in.ownerArcMm.empty()) return json{{"enabled", false}};
-    return json{{"enabled", true},
+    json j{{"enabled", true},
                 {"reach_mm", rp.loopReachMm},
                 {"owners_file", OWNERS_FILE},
                 {"owners_by_sight", in.ownersBySight},
                 {"owners_by_neighbour", in.ownersByNeighbour},
-                {"unowned", in.unowned},
-                {"owners_seconds", in.ownersSeconds}};
+                {"unowned", in.unowned}};
+    if (withSeconds) j["owners_seconds"] = in.ownersSeconds;
+    return j;
 }
 
 /// Review views after the fly-over's coverage (render.review): plans them (render/review.h),
@@ -224,8 +228,10 @@ json loopJson(const RenderInputs& in, const RenderParams& rp)
 /// "review_views" and "review". With render.review off the folder holds an empty poses.json.
 json renderReview(const RayScene& scene, const Centerline& cl, const CoverageParams& cp,
                   const std::vector<double>& frameRadii, const CoverageResult& cov, const RenderParams& rp,
-                  const RenderOptions& ro, const RenderInputs& in, StagedFolder& folder, Progress* progress)
+                  const RenderOptions& ro, const RenderInputs& in, StagedFolder& folder, Progress* progress,
+                  std::vector<uint8_t>& withReviewSeen)
 {
+    withReviewSeen = cov.flyover.seen;
     const double clStep = cl.stepMm > 0 ? cl.stepMm : 1.0;
     json poses = json::array();
     json out{{"flyover_with_review", nullptr}, {"review_views", 0}};
@@ -241,6 +247,7 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
     params.targetFraction = rp.reviewTarget;
     params.minRegionMm2 = cp.minRegionMm2;
     const ReviewResult review = planReview(scene, cl, cp, frameRadii, cov, params, progress);
+    withReviewSeen = review.withReview.seen;
 
     std::vector<json> views(review.views.size());
     tbb::parallel_for(std::size_t(0), review.views.size(), [&](std::size_t k) {
@@ -300,6 +307,32 @@ json renderReview(const RayScene& scene, const Centerline& cl, const CoveragePar
                          {"rounds", review.rounds},
                          {"rays", review.rays},
                          {"poses", "review/poses.json"}};
+    return out;
+}
+
+/// The seen share of each anatomical segment's wall, by the fly-over and with review: a
+/// triangle's segment is its owner's (loop-local OST: the path point that sees it through the
+/// lumen), or its nearest centerline point's when it has none.
+json segmentCoverageJson(const RayScene& scene, const Centerline& cl, const RenderInputs& in,
+                         const std::vector<uint8_t>& flyoverSeen, const std::vector<uint8_t>& withReviewSeen)
+{
+    const TriangleGeometry geo = triangleGeometry(scene, &cl);
+    const CenterlineLocator locator(cl);
+    const double step = cl.stepMm > 0 ? cl.stepMm : 1.0;
+    std::vector<std::size_t> index(geo.areaMm2.size());
+    for (std::size_t f = 0; f < index.size(); ++f) {
+        const float arc = in.ownerArcMm.empty() ? std::numeric_limits<float>::quiet_NaN() : in.ownerArcMm[f];
+        index[f] = std::isnan(arc) ? locator.nearest(geo.centroidMm[f])
+                                   : std::min(cl.points.size() - 1, std::size_t(std::lround(double(arc) / step)));
+    }
+    const auto alone = segmentSeenShares(flyoverSeen, geo.areaMm2, index, cl.segment);
+    const auto reviewed = segmentSeenShares(withReviewSeen, geo.areaMm2, index, cl.segment);
+    json out = json::array();
+    for (std::size_t k = 0; k < alone.size(); ++k)
+        out.push_back(json{{"segment", alone[k].segment},
+                           {"area_mm2", alone[k].areaMm2},
+                           {"flyover", alone[k].fraction},
+                           {"flyover_with_review", k < reviewed.size() ? reviewed[k].fraction : alone[k].fraction}});
     return out;
 }
 
@@ -693,7 +726,7 @@ json runFrames(StudyRun& run, Progress* progress)
                    {"loop_local", loopJson(in, rp)},
                    {"frames", poses}});
     frames.commit();
-    json loopReport = loopJson(in, rp);
+    json loopReport = loopJson(in, rp, true);
     if (!in.ownerArcMm.empty()) {
         double sum = 0, worst = 0;
         LoopCounts all;
@@ -939,8 +972,9 @@ json runCoverage(StudyRun& run, Progress* progress)
         const CoverageResult cov = computeCoverage(scene, *in.centerline, cp);
         const FlyoverParams& fp = cp.flyover;
         const auto tReview = Clock::now();
+        std::vector<uint8_t> withReviewSeen;
         reviewInfo = renderReview(scene, *in.centerline, cp, in.frameRadii, cov, rp, frameOptionsOf(rp), in, review,
-                                  progress);
+                                  progress, withReviewSeen);
         reviewSeconds = secondsSince(tReview);
         json coverageJson{{"schema", "flyover.coverage/1"},
                        {"world_frame", WORLD_FRAME},
@@ -974,6 +1008,8 @@ json runCoverage(StudyRun& run, Progress* progress)
                                                        "terminal ileum off the cecum); not in total_area_mm2 nor in "
                                                        "any fraction"}};
         for (auto it = reviewInfo.begin(); it != reviewInfo.end(); ++it) coverageJson[it.key()] = it.value();
+        if (!in.centerline->segment.empty())
+            coverageJson["segments"] = segmentCoverageJson(scene, *in.centerline, in, cov.flyover.seen, withReviewSeen);
         writeJson(coverage.path("coverage.json"), coverageJson);
         writeSurfaceSeen(coverage.path("surface_seen.ply"), scene, cov);
         summary = json{{"flyover", cov.flyover.fraction},
