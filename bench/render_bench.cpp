@@ -41,7 +41,7 @@
 #include "pipeline/artifact_io.h"
 #include "colon/phantom_io.h"
 #include "colon/render_settings.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "render/camera.h"
 #include "render/coverage.h"
 #include "render/flyover_path.h"

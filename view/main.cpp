@@ -7,7 +7,9 @@
 #include "colon/export.h"
 #include "inspect/part_phantom_io.h"
 #include "colon/phantom_io.h"
+#include "colon/colon_study.h"
 #include "colon/params.h"
+#include "inspect/inspect_study.h"
 #include "pipeline/stage_command.h"
 #include "pipeline/study.h"
 #include "view/view_server.h"
@@ -161,8 +163,7 @@ int main(int argc, char** argv)
     // flyover inspect (industrial CT of a solid part; inspect/stage_inspect.cpp)
     auto* inspectCmd = app.add_subcommand("inspect", "industrial CT of a solid part: ingest -> voids (pores, cracks) -> "
                                                      "surfaces -> OST overviews and turntable, into a study folder");
-    RunOptions inspect;
-    inspect.kind = StudyKind::Part;
+    InspectRunOptions inspect;
     std::vector<std::string> inspectAssignments;
     std::string inspectConfig;
     double inspectThreshold = 0, inspectVoxelMm = 0;
@@ -185,7 +186,7 @@ int main(int argc, char** argv)
 
     // flyover status / clean
     auto* statusCmd = app.add_subcommand("status", "list each stage of a study as fresh, stale or missing, and why");
-    StatusOptions status;
+    StudyStatusOptions status;
     std::vector<std::string> statusAssignments;
     std::string statusConfig;
     statusCmd->add_option("--study", status.studyDir, "study folder")->required();
@@ -267,6 +268,9 @@ int main(int argc, char** argv)
 
     try {
         openvdb::initialize();
+        // The applications whose studies status, stage and clean open.
+        registerStudyPipeline(colonPipeline());
+        registerStudyPipeline(inspectPipeline());
         if (*paramsCmd) {
             std::cout << "Stage parameters (set with --set stage.param=value or --config FILE):\n"
                       << describeParams()
@@ -347,16 +351,16 @@ int main(int argc, char** argv)
         }
         if (*inspectCmd) {
             if (!inspectConfig.empty())
-                applyInspectParamsJson(inspect.inspect, readConfigFile(inspectConfig), inspectConfig);
-            for (const auto& a : inspectAssignments) applyInspectAssignment(inspect.inspect, a);
+                applyInspectParamsJson(inspect.params, readConfigFile(inspectConfig), inspectConfig);
+            for (const auto& a : inspectAssignments) applyInspectAssignment(inspect.params, a);
             if (*thresholdOpt) {
                 if (!std::isfinite(inspectThreshold)) throw ParameterError("--threshold: must be finite");
-                inspect.inspect.voids.threshold = inspectThreshold;
+                inspect.params.voids.threshold = inspectThreshold;
             }
-            if (*inspectVoxelOpt) inspect.inspect.ingest.voxelMm = inspectVoxelMm;
+            if (*inspectVoxelOpt) inspect.params.ingest.voxelMm = inspectVoxelMm;
             inspect.log = &runLog;
             const auto t0 = std::chrono::steady_clock::now();
-            const auto manifest = runPipeline(inspect);
+            const auto manifest = runInspect(inspect);
             int computed = 0;
             for (const auto& s : manifest["stages"]) computed += s.value("computed", false) ? 1 : 0;
             const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -398,14 +402,9 @@ int main(int argc, char** argv)
         }
         if (*viewCmd) return runViewCommand(viewStudy, viewPort, viewCt, std::cout);
         if (*stageCmd) {
-            resolveStageKind(stageOpt);  // inspect:NAME, or a part study's manifest: inspect's parameters
-            if (stageOpt.kind == StudyKind::Part) {
-                if (!stageConfig.empty()) applyInspectParamsJson(stageOpt.inspect, readConfigFile(stageConfig), stageConfig);
-                for (const auto& a : stageAssignments) applyInspectAssignment(stageOpt.inspect, a);
-            } else {
-                if (!stageConfig.empty()) applyParamsJson(stageOpt.params, readConfigFile(stageConfig), stageConfig);
-                for (const auto& a : stageAssignments) applyParamAssignment(stageOpt.params, a);
-            }
+            resolveStagePipeline(stageOpt);  // inspect:NAME, or a part study's manifest: inspect's parameters
+            if (!stageConfig.empty()) stageOpt.params->applyJson(readConfigFile(stageConfig), stageConfig);
+            for (const auto& a : stageAssignments) stageOpt.params->applyAssignment(a);
             stageOpt.log = &runLog;
             const auto receipt = runStageCommand(stageOpt);
             log("study " + fs::absolute(stageOpt.studyDir).string() + ": " + stageOpt.stage + " " +
