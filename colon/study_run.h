@@ -7,6 +7,7 @@
 
 #include "colon/colon_study.h"
 #include "pipeline/ingest_to_vdb.h"
+#include "pipeline/json_io.h"
 #include "pipeline/stage_run.h"
 #include "surface/mesh_types.h"
 #include "volume/centerline_types.h"
@@ -169,7 +170,5 @@ nlohmann::json runFlythrough(StudyRun& run, Progress* progress);
 nlohmann::json runOverviews(StudyRun& run, Progress* progress);
 nlohmann::json runVideo(StudyRun& run, Progress* progress);
 nlohmann::json runCoverage(StudyRun& run, Progress* progress);
-
-inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
 
 } // namespace flyover

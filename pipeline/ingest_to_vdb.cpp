@@ -19,8 +19,6 @@ namespace flyover {
 
 namespace {
 
-json vec3Json(const Vec3d& v) { return json::array({v.x, v.y, v.z}); }
-
 json matrixJson(const Mat3d& m)
 {
     json rows = json::array();
