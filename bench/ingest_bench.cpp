@@ -14,6 +14,7 @@
 //   ingest_bench ingest FILE [OUT.vdb]     one ingest (child of compare); prints a JSON line
 //   ingest_bench baseline                  loads the libraries and exits (RSS floor)
 
+#include "volume/seconds_since.h"
 #include "colon/phantom.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
@@ -50,7 +51,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // ------------------------------------------------------------------ phantom-kind generator
 

@@ -37,11 +37,12 @@
 // third-party headers only.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include "volume/seconds_since.h"
 #include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
 #include "colon/phantom_io.h"
 #include "colon/render_settings.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "render/camera.h"
 #include "render/coverage.h"
 #include "render/flyover_path.h"
@@ -84,7 +85,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 /// CPU seconds used by the whole process so far (all threads).
 double processCpuSeconds()

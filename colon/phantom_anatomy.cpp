@@ -1,4 +1,5 @@
 #include "colon/phantom_anatomy.h"
+#include "colon/phantom_anatomy_detail.h"
 
 #include "volume/error.h"
 
@@ -12,9 +13,10 @@
 
 namespace flyover::phantom {
 
+using namespace detail;
+
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 
 /// Colon control points, rectum -> cecum. `segment` names the span that starts at the
 /// point (the last point starts none). Radii are the lumen radius at the point.
@@ -116,76 +118,6 @@ const ControlTable REDUNDANT_COLON{REDUNDANT_CONTROL_POINTS,
 /// Folds, their spacing and depth are part of the fixed anatomy: same for every seed.
 constexpr uint64_t ANATOMY_SEED = 0x0C010A11A70D1ull;
 
-double uniform01(std::mt19937_64& rng) { return double(rng() >> 11) * 0x1.0p-53; }
-double uniform(std::mt19937_64& rng, double lo, double hi) { return lo + (hi - lo) * uniform01(rng); }
-double standardNormal(std::mt19937_64& rng)
-{
-    const double u1 = (double(rng() >> 11) + 0.5) * 0x1.0p-53;
-    const double u2 = uniform01(rng);
-    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * PI * u2);
-}
-
-/// Interpolating C2 cubic spline through points, parameterised by chord length, with
-/// natural ends: curvature is continuous, so it does not peak at the control points.
-class ChordCubicSpline {
-public:
-    explicit ChordCubicSpline(const std::vector<Vec3d>& points) : mPoints(points)
-    {
-        const std::size_t n = points.size();
-        mKnots.assign(n, 0.0);
-        for (std::size_t i = 1; i < n; ++i)
-            mKnots[i] = mKnots[i - 1] + distance(points[i - 1], points[i]);
-        // Second derivatives M from the tridiagonal system, natural ends (M = 0).
-        mSecond.assign(n, Vec3d{});
-        std::vector<double> diag(n, 1.0), upper(n, 0.0);
-        std::vector<Vec3d> rhs(n, Vec3d{});
-        for (std::size_t i = 1; i + 1 < n; ++i) {
-            const double h0 = mKnots[i] - mKnots[i - 1], h1 = mKnots[i + 1] - mKnots[i];
-            diag[i] = (h0 + h1) / 3.0;
-            upper[i] = h1 / 6.0;
-            rhs[i] = (points[i + 1] - points[i]) / h1 - (points[i] - points[i - 1]) / h0;
-            // Forward elimination with the row above (lower coefficient h0 / 6).
-            const double lower = h0 / 6.0;
-            const double m = lower / diag[i - 1];
-            diag[i] -= m * upper[i - 1];
-            rhs[i] -= rhs[i - 1] * m;
-        }
-        for (std::size_t i = n - 1; i-- > 1;)
-            mSecond[i] = (rhs[i] - mSecond[i + 1] * upper[i]) / diag[i];
-    }
-
-    /// Point on span [i, i+1] at fraction u in [0, 1] of its parameter interval.
-    Vec3d at(std::size_t i, double u) const
-    {
-        const double h = mKnots[i + 1] - mKnots[i];
-        const double v = 1.0 - u;
-        return mPoints[i] * v + mPoints[i + 1] * u +
-               (mSecond[i] * (v * v * v - v) + mSecond[i + 1] * (u * u * u - u)) * (h * h / 6.0);
-    }
-
-private:
-    std::vector<Vec3d> mPoints;
-    std::vector<double> mKnots;
-    std::vector<Vec3d> mSecond;
-};
-
-double smoothstep(double u) { return u * u * (3.0 - 2.0 * u); }
-
-/// Walks the samples s = i * stepMm (i < count) of a polyline whose cumulative arc lengths are
-/// `arc` (at least two points): f(i, d, w, s) with s between points d and d + 1 at fraction w.
-template <class F>
-void forEachArcSample(const std::vector<double>& arc, double stepMm, std::size_t count, F&& f)
-{
-    std::size_t d = 0;
-    for (std::size_t i = 0; i < count; ++i) {
-        const double s = double(i) * stepMm;
-        while (d + 2 < arc.size() && arc[d + 1] < s)
-            ++d;
-        const double len = arc[d + 1] - arc[d];
-        const double w = len > 0 ? std::clamp((s - arc[d]) / len, 0.0, 1.0) : 0.0;
-        f(i, d, w, s);
-    }
-}
 
 /// Samples the spline through the control points at a uniform arc-length step, with a
 /// radius that eases between the control radii (no overshoot) and a gentle haustral-scale
@@ -234,6 +166,10 @@ void buildCenterline(PhantomAnatomy& a, const ControlTable& table, bool wideRect
     });
 }
 
+} // namespace
+
+namespace detail {
+
 /// Tangents by central differences; normal/binormal by the double-reflection
 /// rotation-minimising frame (Wang et al. 2008), so fold angles do not twist.
 void buildFrames(PhantomAnatomy& a)
@@ -267,6 +203,10 @@ void buildFrames(PhantomAnatomy& a)
         a.binormal[i] = cross(a.tangent[i], a.normal[i]);
 }
 
+} // namespace detail
+
+namespace detail {
+
 std::size_t firstIndexOf(const PhantomAnatomy& a, const std::string& name)
 {
     const auto it = std::find(a.segment.begin(), a.segment.end(), name);
@@ -274,6 +214,10 @@ std::size_t firstIndexOf(const PhantomAnatomy& a, const std::string& name)
         throw std::logic_error("phantom anatomy: no colon segment named " + name);
     return std::size_t(it - a.segment.begin());
 }
+
+} // namespace detail
+
+namespace {
 
 /// Semilunar folds every 25-40 mm from the sigmoid to the cecum (none in the rectum),
 /// each spanning two thirds of the circumference, successive ones rotated by 120 degrees
@@ -299,8 +243,6 @@ void buildFolds(PhantomAnatomy& a)
     }
 }
 
-/// Arc clearance (mm) of polyps, folds and collapsed stretches from the loops at a contact.
-constexpr double POLYP_CONTACT_CLEARANCE_MM = 30.0;
 constexpr double FOLD_CONTACT_CLEARANCE_MM = 20.0;
 
 /// True when arc s lies within `marginMm` of either loop of a contact.
@@ -491,6 +433,10 @@ double distanceToOutlineMm(const std::vector<std::array<double, 2>>& outline, do
 /// contacts (the bends that make them bring other parts a little nearer too).
 constexpr double MIN_WALL_GAP_WITH_CONTACTS_MM = 10.0;
 
+} // namespace
+
+namespace detail {
+
 /// The invariants later tests rely on, as text (empty: all hold).
 std::string anatomyProblems(const PhantomAnatomy& a)
 {
@@ -543,6 +489,10 @@ std::string anatomyProblems(const PhantomAnatomy& a)
     return msg.str();
 }
 
+} // namespace detail
+
+namespace {
+
 /// The invariants later tests rely on; a failure is a bug in the tables above.
 void checkAnatomy(const PhantomAnatomy& a)
 {
@@ -551,6 +501,10 @@ void checkAnatomy(const PhantomAnatomy& a)
         throw std::logic_error("phantom anatomy: " + problems);
 }
 
+} // namespace
+
+namespace detail {
+
 /// Nearest centerline sample of an arc length, clamped to the curve.
 std::size_t sampleAt(const PhantomAnatomy& a, double arcMm)
 {
@@ -558,512 +512,7 @@ std::size_t sampleAt(const PhantomAnatomy& a, double arcMm)
     return std::size_t(std::clamp(std::lround(arcMm / a.stepMm), 0L, last));
 }
 
-
-// ---------------------------------------------------------------------------------------
-// Contacts: loops far apart along the colon bent against each other.
-
-constexpr double CONTACT_MIN_ARC_MM = 150.0;      ///< least arc between the two loops (truth)
-constexpr double CONTACT_PICK_ARC_MM = 175.0;     ///< the same before bending (bends lengthen)
-constexpr double CONTACT_MAX_GAP_MM = 90.0;       ///< wall gap a bend may close
-constexpr double CONTACT_MAX_BEND_CURVATURE = 1.0 / 120.0;  ///< curvature a bend adds (1/mm)
-constexpr double CONTACT_END_MARGIN_MM = 30.0;    ///< from either end of the colon
-constexpr int CONTACT_ATTEMPTS = 300;
-constexpr double CONTACT_SITE_SPACING_MM = 35.0;
-constexpr double CONTACT_LOCAL_MM = 20.0;  ///< neighbourhood in which a site's gap is least  ///< least arc between loops of two contacts
-
-/// Wall-to-wall gap (mm) between two centerline samples: negative when the walls overlap.
-double wallGapMm(const std::vector<Vec3d>& c, const std::vector<double>& r, std::size_t i, std::size_t j)
-{
-    return distance(c[i], c[j]) - r[i] - r[j] - 2.0 * COLON_WALL_MM;
-}
-
-/// Arc half-width (mm) of a bend that moves a loop sideways by shiftMm: a cos^2 bump whose
-/// added curvature shift * pi^2 / (2 L^2) stays under CONTACT_MAX_BEND_CURVATURE.
-double bendHalfWidthMm(double shiftMm, double curvature = CONTACT_MAX_BEND_CURVATURE)
-{
-    return std::clamp(PI * std::sqrt(std::max(shiftMm, 0.0) / (2.0 * curvature)), 30.0, 170.0);
-}
-
-/// Curvatures (1/mm) a bend may add, gentlest first: a site near a tight turn of the colon
-/// needs a short bend that stays off the turn.
-constexpr double BEND_CURVATURES[] = {1.0 / 120.0, 1.0 / 80.0, 1.0 / 55.0, 1.0 / 40.0};
-
-struct ContactSite {
-    std::size_t i = 0, j = 0;   ///< centerline samples (i < j)
-    double gapMm = 0;
-    double windowMm = 0;        ///< bend half-width
-    double curvature = CONTACT_MAX_BEND_CURVATURE;  ///< that the bend may add
-};
-
-/// Closest pair (least wall gap) with i, j within `reach` samples of (i0, j0).
-ContactSite closestPairNear(const std::vector<Vec3d>& c, const std::vector<double>& r, std::size_t i0,
-                            std::size_t j0, std::size_t reach)
-{
-    ContactSite best{i0, j0, 1e300, 0, CONTACT_MAX_BEND_CURVATURE};
-    const std::size_t n = c.size();
-    for (std::size_t i = i0 > reach ? i0 - reach : 0; i <= std::min(n - 1, i0 + reach); ++i)
-        for (std::size_t j = j0 > reach ? j0 - reach : 0; j <= std::min(n - 1, j0 + reach); ++j) {
-            const double g = wallGapMm(c, r, i, j);
-            if (g < best.gapMm)
-                best = {i, j, g, 0, CONTACT_MAX_BEND_CURVATURE};
-        }
-    return best;
-}
-
-/// Places where two loops far apart along the colon come within CONTACT_MAX_GAP_MM of each
-/// other, best (smallest gap) first, their bends' windows apart from each other.
-std::vector<ContactSite> contactCandidates(const PhantomAnatomy& a)
-{
-    const std::vector<Vec3d>& c = a.centerlineMm;
-    const std::size_t n = c.size();
-    const auto pick = std::size_t(CONTACT_PICK_ARC_MM / a.stepMm);
-    const auto margin = std::size_t(CONTACT_END_MARGIN_MM / a.stepMm);
-    // Local minima of the gap over pairs (within +-CONTACT_LOCAL_MM of arc on both loops),
-    // so that the bend does not slide along a valley of near pairs.
-    const auto local = long(CONTACT_LOCAL_MM / a.stepMm);
-    std::vector<ContactSite> pairs;
-    for (std::size_t i = margin; i + margin < n; i += 2)
-        for (std::size_t j = i + pick; j + margin < n; j += 2) {
-            const double g = wallGapMm(c, a.radiusMm, i, j);
-            if (g >= CONTACT_MAX_GAP_MM)
-                continue;
-            bool minimum = true;
-            for (long di = -local; di <= local && minimum; di += 2)
-                for (long dj = -local; dj <= local && minimum; dj += 2) {
-                    const long ii = long(i) + di, jj = long(j) + dj;
-                    if (ii < 0 || jj < 0 || ii >= long(n) || jj >= long(n) || jj - ii < long(NON_ADJACENT_ARC_MM))
-                        continue;
-                    minimum = wallGapMm(c, a.radiusMm, std::size_t(ii), std::size_t(jj)) >= g;
-                }
-            if (minimum)
-                pairs.push_back({i, j, g, bendHalfWidthMm(g), CONTACT_MAX_BEND_CURVATURE});
-        }
-    std::stable_sort(pairs.begin(), pairs.end(),
-                     [](const ContactSite& p, const ContactSite& q) { return p.gapMm < q.gapMm; });
-    return pairs;
-}
-
-/// True when the site's loops are CONTACT_SITE_SPACING_MM clear of every kept site's.
-bool apartFrom(const PhantomAnatomy& a, const ContactSite& p, const std::vector<ContactSite>& kept)
-{
-    for (const ContactSite& q : kept)
-        for (std::size_t u : {p.i, p.j})
-            for (std::size_t v : {q.i, q.j})
-                if (std::abs(double(u) - double(v)) * a.stepMm <= CONTACT_SITE_SPACING_MM)
-                    return false;
-    return true;
-}
-
-/// Resamples a dense polyline (with radii and segment names) at the anatomy's arc step.
-/// `oldToNew` receives the new sample index of every old sample.
-void resampleCenterline(PhantomAnatomy& a, const std::vector<Vec3d>& p, const std::vector<double>& r,
-                        const std::vector<std::string>& seg, std::vector<std::size_t>& oldToNew)
-{
-    std::vector<double> arc(p.size(), 0.0);
-    for (std::size_t k = 1; k < p.size(); ++k)
-        arc[k] = arc[k - 1] + distance(p[k - 1], p[k]);
-    const auto count = std::size_t(std::floor(arc.back() / a.stepMm)) + 1;
-    a.centerlineMm.resize(count);
-    a.radiusMm.resize(count);
-    a.segment.resize(count);
-    forEachArcSample(arc, a.stepMm, count, [&](std::size_t i, std::size_t d, double w, double) {
-        a.centerlineMm[i] = p[d] * (1.0 - w) + p[d + 1] * w;
-        a.radiusMm[i] = r[d] * (1.0 - w) + r[d + 1] * w;
-        a.segment[i] = seg[w < 0.5 ? d : d + 1];
-    });
-    oldToNew.resize(p.size());
-    for (std::size_t k = 0; k < p.size(); ++k)
-        oldToNew[k] = std::min(count - 1, std::size_t(std::lround(arc[k] / a.stepMm)));
-}
-
-double mobility(const std::string& segment)
-{
-    return segment == "sigmoid" || segment == "transverse" ? 1.0 : 0.0;
-}
-
-/// Moves the loops of each site towards each other with cos^2 bumps until their walls meet
-/// (three passes: the closest pair shifts a little as the loops bend).
-std::vector<Vec3d> bendTogether(const PhantomAnatomy& a, std::vector<ContactSite>& sites)
-{
-    std::vector<Vec3d> p = a.centerlineMm;
-    const std::size_t n = p.size();
-    for (int pass = 0; pass < 5; ++pass)
-        for (ContactSite& site : sites) {
-            const ContactSite now = closestPairNear(p, a.radiusMm, site.i, site.j, 25);
-            // The mobile parts (on a mesentery: sigmoid, transverse) move; the fixed ones
-            // (rectum, descending, ascending, cecum) only when both are fixed.
-            const double ma = mobility(a.segment[now.i]), mb = mobility(a.segment[now.j]);
-            const double fa = ma + mb > 0 ? ma / (ma + mb) : 0.5;
-            const double shift[2] = {now.gapMm * fa, -now.gapMm * (1.0 - fa)};
-            if (pass == 0)
-                site.windowMm = bendHalfWidthMm(std::max(std::abs(shift[0]), std::abs(shift[1])), site.curvature);
-            site.i = now.i;
-            site.j = now.j;
-            const Vec3d dir = normalize(p[now.j] - p[now.i]);
-            const double half = site.windowMm;
-            for (std::size_t k = 0; k < n; ++k) {
-                for (int side = 0; side < 2; ++side) {
-                    const double t = (double(k) - double(side == 0 ? now.i : now.j)) * a.stepMm;
-                    if (std::abs(t) >= half)
-                        continue;
-                    const double w = std::cos(0.5 * PI * t / half);
-                    p[k] += dir * (shift[side] * w * w);
-                }
-            }
-        }
-    return p;
-}
-
-/// Fills contact.axis, widthMm and the half-lengths of the channel from the sampled loops.
-/// Returns false when the channel would not reach both lumens.
-bool shapeContactChannel(const PhantomAnatomy& a, PhantomContact& contact, std::size_t ia, std::size_t ib,
-                         const Vec3d& voxelMm, std::mt19937_64& rng)
-{
-    const Vec3d u = normalize(a.centerlineMm[ib] - a.centerlineMm[ia]);
-    const double deep = std::max({voxelMm.x, voxelMm.y, voxelMm.z});
-    const double fraction = uniform(rng, 1.3, 1.7);
-    // How far along -axis (towards A) or +axis (towards B) the channel goes: a voxel past
-    // the first point half a voxel inside that loop's lumen (and still inside it there).
-    const auto lumenSd = [&](std::size_t centre, const Vec3d& q) {
-        double sd = 1e300;
-        for (std::size_t i = centre > 40 ? centre - 40 : 0; i < std::min(a.centerlineMm.size(), centre + 41); ++i)
-            sd = std::min(sd, distance(q, a.centerlineMm[i]) - a.radiusMm[i]);
-        return sd;
-    };
-    const auto reach = [&](std::size_t centre, double sign, double& out) {
-        for (double t = 0.0; t <= 30.0; t += 0.05) {
-            if (lumenSd(centre, contact.positionMm + contact.axis * (sign * t)) < -0.5 * deep) {
-                out = t + deep;
-                return lumenSd(centre, contact.positionMm + contact.axis * (sign * out)) < -0.5 * deep;
-            }
-        }
-        return false;
-    };
-    // The world axes, nearest to the line between the loops first; the first whose channel
-    // reaches into both lumens.
-    int order[3] = {0, 1, 2};
-    std::sort(order, order + 3, [&](int p, int q) { return std::abs(u[p]) > std::abs(u[q]); });
-    for (int k : order) {
-        if (std::abs(u[k]) < 0.3)
-            break;
-        contact.axis = Vec3d{0, 0, 0};
-        contact.axis[k] = u[k] > 0 ? 1.0 : -1.0;
-        const double across = std::max(voxelMm[(k + 1) % 3], voxelMm[(k + 2) % 3]);
-        contact.widthMm = std::round(fraction * across * 100.0) / 100.0;
-        if (reach(ia, -1.0, contact.halfLengthAMm) && reach(ib, 1.0, contact.halfLengthBMm))
-            return true;
-    }
-    return false;
-}
-
-/// Bends the base colon at the sites; the anatomy with its contacts, or the problem.
-bool tryContacts(const PhantomAnatomy& base, std::vector<ContactSite> sites, const Vec3d& voxelMm,
-                 std::mt19937_64& rng, PhantomAnatomy& out, std::string& problem)
-{
-    std::sort(sites.begin(), sites.end(), [](const ContactSite& p, const ContactSite& q) { return p.i < q.i; });
-    PhantomAnatomy trial = base;
-    const std::vector<Vec3d> bent = bendTogether(base, sites);
-    std::vector<std::size_t> oldToNew;
-    resampleCenterline(trial, bent, base.radiusMm, base.segment, oldToNew);
-    buildFrames(trial);
-    bool ok = true;
-    for (const ContactSite& site : sites) {
-        const ContactSite now = closestPairNear(trial.centerlineMm, trial.radiusMm, oldToNew[site.i],
-                                                oldToNew[site.j], 12);
-        const double lumenGap = now.gapMm + 2.0 * COLON_WALL_MM;
-        PhantomContact contact;
-        contact.arcAMm = double(now.i) * trial.stepMm;
-        contact.arcBMm = double(now.j) * trial.stepMm;
-        const Vec3d ca = trial.centerlineMm[now.i], cb = trial.centerlineMm[now.j];
-        contact.positionMm = ca + normalize(cb - ca) * (trial.radiusMm[now.i] + 0.5 * lumenGap);
-        ok = ok && std::abs(now.gapMm) < 0.75 && contact.arcBMm - contact.arcAMm >= CONTACT_MIN_ARC_MM &&
-             shapeContactChannel(trial, contact, now.i, now.j, voxelMm, rng);
-        trial.contacts.push_back(contact);
-        trial.contactWindowMm.push_back(site.windowMm);
-    }
-    // Distinct places: no two contacts share a loop within the site spacing.
-    for (std::size_t x = 0; x < trial.contacts.size(); ++x)
-        for (std::size_t y = x + 1; y < trial.contacts.size(); ++y)
-            for (double u : {trial.contacts[x].arcAMm, trial.contacts[x].arcBMm})
-                for (double v : {trial.contacts[y].arcAMm, trial.contacts[y].arcBMm})
-                    ok = ok && std::abs(u - v) >= CONTACT_SITE_SPACING_MM;
-    if (!ok) {
-        problem = "a bend did not close its gap, or two contacts merged";
-        return false;
-    }
-    problem = anatomyProblems(trial);
-    if (!problem.empty())
-        return false;
-    out = trial;
-    return true;
-}
-
-/// The `touching` variant: `count` contacts, chosen among the sites where a bend alone
-/// keeps every invariant, by a random stream of their own; the first choice whose bent
-/// colon keeps them all.
-void addContacts(PhantomAnatomy& a, int count, uint64_t seed, const Vec3d& voxelMm)
-{
-    std::mt19937_64 rng(splitmix64(seed ^ 0xC0117AC75ull));
-    std::vector<ContactSite> viable;
-    for (ContactSite site : contactCandidates(a)) {
-        // At least one of the two loops must be mobile (sigmoid, transverse), and the site
-        // a place of its own.
-        if (mobility(a.segment[site.i]) + mobility(a.segment[site.j]) == 0.0 || !apartFrom(a, site, viable))
-            continue;
-        for (double curvature : BEND_CURVATURES) {
-            site.curvature = curvature;
-            PhantomAnatomy single;
-            std::string problem;
-            std::mt19937_64 scratch(0);
-            if (tryContacts(a, {site}, voxelMm, scratch, single, problem)) {
-                viable.push_back(site);
-                break;
-            }
-        }
-    }
-    if (int(viable.size()) < count) {
-        std::ostringstream msg;
-        msg << "phantom touching: this colon has room for at most " << viable.size() << " contacts, "
-            << count << " asked (the default colon has room for 2, the redundant one for 5)";
-        throw ParameterError(msg.str());
-    }
-    std::string lastProblem;
-    for (int attempt = 0; attempt < CONTACT_ATTEMPTS; ++attempt) {
-        std::vector<std::size_t> order(viable.size());
-        for (std::size_t k = 0; k < order.size(); ++k)
-            order[k] = k;
-        std::shuffle(order.begin(), order.end(), rng);
-        std::vector<ContactSite> sites;
-        for (int k = 0; k < count; ++k)
-            sites.push_back(viable[order[std::size_t(k)]]);
-        if (tryContacts(a, sites, voxelMm, rng, a, lastProblem))
-            return;
-    }
-    throw std::logic_error("phantom anatomy: could not place " + std::to_string(count) +
-                           " contacts (" + lastProblem + ")");
-}
-
-} // namespace
-
-void addCollapses(PhantomAnatomy& a, uint64_t seed)
-{
-    std::mt19937_64 rng(splitmix64(seed ^ 0xC011A95EDull));
-    const int count = 1 + int(rng() % 2);
-    const double sigmoidStart = double(firstIndexOf(a, "sigmoid")) * a.stepMm;
-    const double descendingStart = double(firstIndexOf(a, "descending")) * a.stepMm;
-    const auto clearOfPolyps = [&](double s0, double s1) {
-        for (const PhantomPolyp& p : a.polyps)
-            if (p.arcMm > s0 - p.radiusMm - 10.0 && p.arcMm < s1 + p.radiusMm + 10.0)
-                return false;
-        return true;
-    };
-    for (int attempt = 0; attempt < 20000; ++attempt) {
-        std::vector<PhantomCollapse> stretches;
-        PhantomCollapse first;
-        first.arcStartMm = std::round(uniform(rng, sigmoidStart + 90.0, sigmoidStart + 230.0));
-        first.arcEndMm = first.arcStartMm + std::round(uniform(rng, 20.0, 40.0));
-        stretches.push_back(first);
-        if (count == 2) {
-            PhantomCollapse second;
-            second.arcStartMm = first.arcEndMm + std::round(uniform(rng, 100.0, 140.0));
-            second.arcEndMm = second.arcStartMm + std::round(uniform(rng, 20.0, 40.0));
-            stretches.push_back(second);
-        }
-        bool ok = stretches.back().arcEndMm < descendingStart - 40.0;
-        for (const PhantomCollapse& c : stretches) {
-            ok = ok && clearOfPolyps(c.arcStartMm, c.arcEndMm);
-            for (const PhantomContact& k : a.contacts)
-                for (double arc : {k.arcAMm, k.arcBMm})
-                    ok = ok && (arc < c.arcStartMm - POLYP_CONTACT_CLEARANCE_MM ||
-                                arc > c.arcEndMm + POLYP_CONTACT_CLEARANCE_MM);
-        }
-        if (ok) {
-            a.collapsed = stretches;
-            return;
-        }
-    }
-    throw std::logic_error("phantom anatomy: could not place a collapsed stretch clear of the polyps");
-}
-
-void addStricture(PhantomAnatomy& a, uint64_t seed, double voxelMm)
-{
-    std::mt19937_64 rng(splitmix64(seed ^ 0x57121C7E5ull));
-    const double minRadius = std::max(3.0, 1.6 * voxelMm);
-    double first = -1, last = -1;  // the transverse colon's arc range
-    for (std::size_t i = 0; i < a.segment.size(); ++i)
-        if (a.segment[i] == "transverse") {
-            if (first < 0) first = double(i) * a.stepMm;
-            last = double(i) * a.stepMm;
-        }
-    if (first < 0) throw std::logic_error("phantom anatomy: no transverse colon for the stricture");
-    constexpr double SHOULDER_MM = 3.0;  // abrupt: the narrowing is nearly all reached in 3 mm
-    for (int attempt = 0; attempt < 20000; ++attempt) {
-        const double halfFlat = std::round(uniform(rng, 4.0, 6.0));
-        const double halfWidth = halfFlat + SHOULDER_MM;
-        const double mid = std::round(uniform(rng, first + 30.0 + halfWidth, last - 30.0 - halfWidth));
-        const double s0 = mid - halfWidth, s1 = mid + halfWidth;
-        bool ok = true;
-        for (const PhantomPolyp& p : a.polyps)
-            ok = ok && (p.arcMm < s0 - p.radiusMm - 10.0 || p.arcMm > s1 + p.radiusMm + 10.0);
-        for (const PhantomContact& k : a.contacts)
-            for (double arc : {k.arcAMm, k.arcBMm})
-                ok = ok && (arc < s0 - POLYP_CONTACT_CLEARANCE_MM || arc > s1 + POLYP_CONTACT_CLEARANCE_MM);
-        for (const PhantomCollapse& c : a.collapsed) ok = ok && (c.arcEndMm < s0 - 20.0 || c.arcStartMm > s1 + 20.0);
-        if (!ok) continue;
-        for (std::size_t i = 0; i < a.radiusMm.size(); ++i) {
-            const double off = std::abs(double(i) * a.stepMm - mid);
-            if (off >= halfWidth) continue;
-            const double u = std::max(0.0, off - halfFlat) / SHOULDER_MM, c = std::sin(0.5 * PI * u);
-            const double R = a.radiusMm[i];
-            a.radiusMm[i] = std::min(R, minRadius + (R - minRadius) * c * c);
-        }
-        std::vector<HaustralFold> folds;
-        for (const HaustralFold& f : a.folds)
-            if (f.arcMm + f.thicknessMm < s0 || f.arcMm - f.thicknessMm > s1) folds.push_back(f);
-        a.folds = std::move(folds);
-        a.strictures = {PhantomStricture{s0, s1, minRadius}};
-        return;
-    }
-    throw std::logic_error("phantom anatomy: could not place the stricture clear of the polyps and contacts");
-}
-
-namespace {
-
-/// The prone pools: anterior of their levels, in the sigmoid and the transverse colon.
-void addProneFluidPools(PhantomAnatomy& a, std::mt19937_64& rng)
-{
-    const double ranges[2][2] = {
-        {double(firstIndexOf(a, "sigmoid")) * a.stepMm, double(firstIndexOf(a, "descending")) * a.stepMm},
-        {double(firstIndexOf(a, "transverse")) * a.stepMm, double(firstIndexOf(a, "ascending")) * a.stepMm},
-    };
-    // How far (mm, LPS y) the lumen's most anterior wall reaches at sample i.
-    const auto front = [&](std::size_t i) { return a.centerlineMm[i].y - a.radiusMm[i]; };
-    for (const auto& r : ranges) {
-        std::size_t deepest = sampleAt(a, r[0]);
-        for (std::size_t i = sampleAt(a, r[0]); i <= sampleAt(a, r[1]); ++i)
-            if (front(i) < front(deepest)) deepest = i;
-        PhantomFluidPool pool;
-        pool.downY = -1.0;
-        const double depthMm = uniform(rng, 0.25, 0.45) * 2.0 * a.radiusMm[deepest];
-        pool.levelYMm = front(deepest) + depthMm;
-        pool.hu = std::round(uniform(rng, 300.0, 600.0));
-        // The pool runs along the colon as far as its lumen reaches below the level, and ends
-        // where the lumen lies 2 mm clear of it (no vertical fluid face).
-        std::size_t lo = deepest, hi = deepest;
-        while (lo > 0 && front(lo - 1) < pool.levelYMm + 2.0) --lo;
-        while (hi + 1 < a.centerlineMm.size() && front(hi + 1) < pool.levelYMm + 2.0) ++hi;
-        pool.arcStartMm = double(lo) * a.stepMm;
-        pool.arcEndMm = double(hi) * a.stepMm;
-        bool overlaps = false;
-        for (const PhantomFluidPool& p : a.fluidPools)
-            overlaps = overlaps || (pool.arcStartMm <= p.arcEndMm && p.arcStartMm <= pool.arcEndMm);
-        if (!overlaps) a.fluidPools.push_back(pool);
-    }
-    std::sort(a.fluidPools.begin(), a.fluidPools.end(),
-              [](const PhantomFluidPool& x, const PhantomFluidPool& y) { return x.arcStartMm < y.arcStartMm; });
-}
-
-} // namespace
-
-void addFluidPools(PhantomAnatomy& a, uint64_t seed, bool prone)
-{
-    std::mt19937_64 rng(splitmix64(seed ^ 0xF1D0F1D0ull));
-    if (prone) {
-        addProneFluidPools(a, rng);
-        return;
-    }
-    const double end = a.lengthMm();
-    // Arc ranges of the dependent (posterior-lying) stretches of a supine patient's colon.
-    const double ranges[3][2] = {
-        {0.0, double(firstIndexOf(a, "sigmoid")) * a.stepMm},
-        {double(firstIndexOf(a, "descending")) * a.stepMm - 60.0,
-         double(firstIndexOf(a, "transverse")) * a.stepMm},
-        {double(firstIndexOf(a, "ascending")) * a.stepMm - 20.0, end},
-    };
-    for (const auto& r : ranges) {
-        PhantomFluidPool pool;
-        pool.arcStartMm = r[0];
-        pool.arcEndMm = r[1];
-        // The deepest point of the stretch: the most posterior lumen wall.
-        std::size_t deepest = sampleAt(a, r[0]);
-        for (std::size_t i = sampleAt(a, r[0]); i <= sampleAt(a, r[1]); ++i)
-            if (a.centerlineMm[i].y + a.radiusMm[i] > a.centerlineMm[deepest].y + a.radiusMm[deepest])
-                deepest = i;
-        const double depthMm = uniform(rng, 0.25, 0.45) * 2.0 * a.radiusMm[deepest];
-        pool.levelYMm = a.centerlineMm[deepest].y + a.radiusMm[deepest] - depthMm;
-        pool.hu = std::round(uniform(rng, 300.0, 600.0));
-        // A pool must end where the lumen rises clear of its level (no vertical fluid face),
-        // except at the ends of the colon.
-        for (double s : {r[0], r[1]}) {
-            const std::size_t i = sampleAt(a, s);
-            if (s > 0.0 && s < end && a.centerlineMm[i].y + a.radiusMm[i] + 2.0 > pool.levelYMm)
-                throw std::logic_error("phantom anatomy: a fluid pool is cut at arc " +
-                                       std::to_string(s) + " mm");
-        }
-        a.fluidPools.push_back(pool);
-    }
-}
-
-void addIleum(PhantomAnatomy& a)
-{
-    constexpr double RADIUS_MM = 11.0, VALVE_ABOVE_END_MM = 50.0;
-    const std::size_t n = a.centerlineMm.size();
-    const auto valve = std::size_t(double(n - 1) - VALVE_ABOVE_END_MM / a.stepMm);
-    const Vec3d c = a.centerlineMm[valve];
-    // From the cecum's axis out through its medial wall (+x: towards the patient's left),
-    // then down into the right pelvis and back towards the right side wall.
-    const std::vector<Vec3d> control = {c,
-                                        c + Vec3d{38.0, 0.0, 0.0},
-                                        {-45.0, 10.0, -84.0},
-                                        {-47.0, 10.0, -106.0},
-                                        {-55.0, 8.0, -126.0},
-                                        {-70.0, 4.0, -138.0},
-                                        {-86.0, 0.0, -143.0}};
-    // The colon's spline through the control points, sampled every 1 mm of arc.
-    const ChordCubicSpline spline(control);
-    std::vector<Vec3d> dense;
-    std::vector<double> denseArc;
-    constexpr int DENSE_PER_SPAN = 256;
-    for (std::size_t span = 0; span + 1 < control.size(); ++span)
-        for (int k = span == 0 ? 0 : 1; k <= DENSE_PER_SPAN; ++k) {
-            const Vec3d p = spline.at(span, double(k) / DENSE_PER_SPAN);
-            denseArc.push_back(dense.empty() ? 0.0 : denseArc.back() + distance(dense.back(), p));
-            dense.push_back(p);
-        }
-    a.ileumMm.resize(std::size_t(std::floor(denseArc.back())) + 1);
-    forEachArcSample(denseArc, 1.0, a.ileumMm.size(), [&](std::size_t i, std::size_t d, double w, double) {
-        a.ileumMm[i] = dense[d] * (1.0 - w) + dense[d + 1] * w;
-    });
-    a.ileumRadiusMm = RADIUS_MM;
-    a.ileumValveArcMm = double(valve) * a.stepMm;
-    // Clear of every other loop of the colon (the cecum round the valve aside), of the spine
-    // and of the skin.
-    const double wallGap = 2.0 * COLON_WALL_MM + 4.0;
-    for (std::size_t s = 0; s < a.ileumMm.size(); ++s) {
-        const Vec3d& q = a.ileumMm[s];
-        for (std::size_t i = 0; i < n; ++i) {
-            const bool nearValve = double(i) * a.stepMm > a.ileumValveArcMm - 120.0 && s < 70;
-            if (nearValve) continue;
-            const double gap = distance(q, a.centerlineMm[i]) - a.radiusMm[i] - RADIUS_MM;
-            if (gap < wallGap)
-                throw std::logic_error("phantom anatomy: the ileum comes within " + std::to_string(gap) +
-                                       " mm of the colon at colon arc " + std::to_string(i) + ", ileum arc " +
-                                       std::to_string(s));
-        }
-        if (std::hypot(q.x, q.y - SPINE_CENTER_Y_MM) - SPINE_RADIUS_MM - RADIUS_MM < 10.0 ||
-            bodySignedDistanceMm(q.x, q.y) > -(RADIUS_MM + COLON_WALL_MM + 10.0))
-            throw std::logic_error("phantom anatomy: the ileum runs into the spine or the skin at ileum arc " +
-                                   std::to_string(s));
-    }
-    std::vector<Ellipsoid> pockets;
-    for (const Ellipsoid& e : a.gasPockets) {
-        bool clear = true;
-        for (const Vec3d& q : a.ileumMm)
-            clear = clear && e.signedDistanceMm(q) > RADIUS_MM + wallGap;
-        if (clear) pockets.push_back(e);
-    }
-    a.gasPockets = std::move(pockets);
-}
+} // namespace detail
 
 double Ellipsoid::volumeMl() const
 {

@@ -2,7 +2,7 @@
 // (colon/contacts.h), carried to the centerline stage inside lumen.vdb as metadata of the
 // lumen_sdf grid (so that the cache, which tracks lumen.vdb, keeps the two together), and
 // placed along the path there.
-#include "pipeline/stage_context.h"
+#include "colon/study_run.h"
 
 #include "colon/contacts.h"
 #include "colon/segment.h"

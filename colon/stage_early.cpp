@@ -2,7 +2,7 @@
 // work that starts on a result a stage hands on before it ends, for a later stage to take. A
 // node that throws leaves no result (runPipeline drops the error): the stage it feeds then does
 // the work itself, and reports what fails.
-#include "pipeline/stage_context.h"
+#include "colon/study_run.h"
 
 #include "colon/segment.h"
 #include "colon/uncut_lumen.h"

@@ -12,7 +12,7 @@
 //   review/                   review_NNNN.png (review views for what the fly-over missed), poses.json
 // The first fly-over pair is rendered and written before anything else, published in the
 // study's frames/ at once and announced (report: first_pair_seconds).
-#include "pipeline/stage_context.h"
+#include "colon/study_run.h"
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/deferred_writes.h"
@@ -28,6 +28,7 @@
 #include "render/render_view.h"
 #include "render/review.h"
 #include "volume/error.h"
+#include "volume/seconds_since.h"
 #include "volume/object_pool.h"
 
 #include <tbb/parallel_for.h>
@@ -70,8 +71,6 @@ namespace flyover {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 /// How a frame was rendered, so that any frame can be reproduced from the JSON alone.
 json renderOptionsJson(const RenderOptions& ro)

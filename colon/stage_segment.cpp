@@ -1,4 +1,4 @@
-#include "pipeline/stage_context.h"
+#include "colon/study_run.h"
 
 #include "pipeline/artifact_io.h"
 #include "colon/uncut_lumen.h"

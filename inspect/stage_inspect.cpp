@@ -16,7 +16,8 @@
 //   turntable  turntable/         turntable.mp4 (OST | normal | legend, one turn about the
 //                                 superior axis) and poses.json
 // Every file is written atomically; folders are staged and renamed (render_output.h).
-#include "pipeline/stage_context.h"
+#include "inspect/inspect_study.h"
+#include "pipeline/ingest_to_vdb.h"
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/render_output.h"
@@ -65,7 +66,7 @@ const char* const CSV_HEADER = "id,kind,volume_mm3,equivalent_diameter_mm,max_ex
 
 /// The CT grid: from memory when this run holds it, else from ct.vdb (with `delayed`, each
 /// leaf's values read only when first accessed: for a stage that reads a small part of them).
-openvdb::FloatGrid::Ptr partGrid(StudyRun& run, bool delayed = false)
+openvdb::FloatGrid::Ptr partGrid(PartRun& run, bool delayed = false)
 {
     if (!run.state.hu)
         run.state.hu = openvdb::gridPtrCast<openvdb::FloatGrid>(delayed ? readGridDelayed(run.path("ct.vdb"), CT_GRID)
@@ -126,7 +127,7 @@ std::vector<VoidInfo> readVoidList(const std::string& path)
 }
 
 /// The voids stage's analysis: from memory when it ran in this run, else from its files.
-std::shared_ptr<PartAnalysis> partAnalysis(StudyRun& run)
+std::shared_ptr<PartAnalysis> partAnalysis(PartRun& run)
 {
     if (run.state.part) return run.state.part;
     auto a = std::make_shared<PartAnalysis>();
@@ -152,7 +153,7 @@ struct PartScene {
     SizeColourScale scale;
 };
 
-PartScene partScene(StudyRun& run)
+PartScene partScene(PartRun& run)
 {
     PartScene ps;
     ps.voids = readVoidList(run.path("voids.json"));
@@ -247,10 +248,10 @@ json legendJson(const PartScene& ps)
 
 } // namespace
 
-json runPartIngest(StudyRun& run, Progress* progress)
+json runPartIngest(PartRun& run, Progress* progress)
 {
     IngestParams params;
-    params.voxelMm = run.opt.inspect.ingest.voxelMm;
+    params.voxelMm = run.opt.params.ingest.voxelMm;
     // No HU: nothing is "air outside the body". Every voxel stays active.
     params.outsideAirHu = double(std::numeric_limits<float>::lowest());
     params.backgroundHu = 0.0;
@@ -263,10 +264,10 @@ json runPartIngest(StudyRun& run, Progress* progress)
     return report;
 }
 
-json runVoids(StudyRun& run, Progress* progress)
+json runVoids(PartRun& run, Progress* progress)
 {
     const openvdb::FloatGrid::Ptr ct = partGrid(run);
-    const VoidParams& vp = run.opt.inspect.voids;
+    const VoidParams& vp = run.opt.params.voids;
     auto analysis = std::make_shared<PartAnalysis>(analysePart(*ct, vp, run.opt.ctPath, progress));
     const double voxelMm = ct->voxelSize()[0];
 
@@ -323,9 +324,9 @@ json runVoids(StudyRun& run, Progress* progress)
                 {"porosity_percent", analysis->porosityPercent}};
 }
 
-json runPartSurfaces(StudyRun& run, Progress* progress)
+json runPartSurfaces(PartRun& run, Progress* progress)
 {
-    validatePartSurfaceParams(run.opt.inspect.surfaces);
+    validatePartSurfaceParams(run.opt.params.surfaces);
     const std::shared_ptr<PartAnalysis> analysis = partAnalysis(run);
     PartField field;
     {
@@ -338,7 +339,7 @@ json runPartSurfaces(StudyRun& run, Progress* progress)
     run.state.hu.reset();
     releaseFreedMemory();
     auto surface = std::make_shared<PartSurface>(
-        meshPartField(std::move(field), *analysis, run.opt.inspect.surfaces, progress));
+        meshPartField(std::move(field), *analysis, run.opt.params.surfaces, progress));
     writeMesh(run.path("part_surface.ply"), surface->mesh);
     json voids = json::array();
     int64_t voidsWithoutFaces = 0;
@@ -379,9 +380,9 @@ json runPartSurfaces(StudyRun& run, Progress* progress)
                 {"smooth_seconds", r.smoothSeconds}};
 }
 
-json runPartOverviews(StudyRun& run, Progress* progress)
+json runPartOverviews(PartRun& run, Progress* progress)
 {
-    const PartRenderParams& rp = run.opt.inspect.render;
+    const PartRenderParams& rp = run.opt.params.render;
     const PartScene ps = partScene(run);
     StagedFolder overviews(run.dir, "overviews");
     const RenderOptions ostOptions = partRenderOptions(rp, rp.overviewPx, true);
@@ -457,9 +458,9 @@ json runPartOverviews(StudyRun& run, Progress* progress)
     return json{{"voids_unseen_in_ost", unseen}, {"voids_seen_in_normal", showingInNormal}};
 }
 
-json runTurntable(StudyRun& run, Progress* progress)
+json runTurntable(PartRun& run, Progress* progress)
 {
-    const PartRenderParams& rp = run.opt.inspect.render;
+    const PartRenderParams& rp = run.opt.params.render;
     StagedFolder folder(run.dir, "turntable");
     int frames = 0;
     if (rp.video) {

@@ -7,6 +7,7 @@
 ///        Sparse OpenVDB grids throughout, so that 1024^3 parts fit in memory.
 #pragma once
 
+#include "inspect/mask_components.h"
 #include "volume/progress.h"
 #include "volume/vec3.h"
 
@@ -54,17 +55,6 @@ PartAnalysis analysePart(const openvdb::FloatGrid& ct, const VoidParams& params,
 /// Pass the voxels of a region's boundary (the farthest pair lies on it). 0 for < 2 voxels.
 double maxVoxelDistance(const std::vector<openvdb::Vec3d>& voxels);
 
-/// The face-connected (6-connected) components of a mask's active voxels (leaf voxels and
-/// active tiles), split by whether they touch a face of `box` (the mask lies within `box`).
-/// A union-find over the components within each leaf and over the active tiles, joined
-/// across leaf and tile faces (in parallel; no tile is voxelised): the same components as
-/// openvdb::tools::extractActiveVoxelSegmentMasks, without its O(components x leaves) grouping
-/// and per-voxel copy of the tiles.
-struct MaskComponents {
-    openvdb::BoolTree::Ptr touching;               ///< all components touching a face of box (values false)
-    std::vector<openvdb::BoolTree::Ptr> enclosed;  ///< each other component, its own mask (values false, voxels only: no tiles)
-};
-MaskComponents faceConnectedComponents(const openvdb::BoolTree& mask, const openvdb::CoordBBox& box);
 
 /// Equivalent diameter (6 V / pi)^(1/3) of a volume V (any unit^3 -> unit).
 double equivalentDiameter(double volume);

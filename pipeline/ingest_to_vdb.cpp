@@ -1,11 +1,12 @@
 // The ingest shared by every application's stage graph: the scan into an isotropic grid and ct.vdb.
-#include "pipeline/stage_context.h"
+#include "pipeline/ingest_to_vdb.h"
 
 #include "pipeline/artifact_io.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/grid_write.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"
+#include "volume/vec3.h"
 
 #include <sys/resource.h>
 
@@ -36,15 +37,15 @@ int64_t peakRssBytes()
 
 } // namespace
 
-json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOptions& options,
+json ingestToCtVdb(StageRun& run, const IngestParams& params, const ImageReadOptions& options,
                    const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid,
                    const std::function<void(const openvdb::FloatGrid::Ptr&)>& beforeWrite)
 {
     IngestReport rep;
     {
-        auto source = openImage(run.opt.ctPath, options);
+        auto source = openImage(run.options.ctPath, options);
         for (const auto& w : source->warnings())
-            if (run.opt.log) run.opt.log->message("ingest: warning: " + w);
+            if (run.options.log) run.options.log->message("ingest: warning: " + w);
         grid = ingestImage(*source, params, &rep, progress);
     }  // the source (and any temporary copy it made) is released before writing
     grid->setName(gridName);

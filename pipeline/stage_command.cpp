@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <new>
+#include <stdexcept>
 #include <system_error>
 
 namespace fs = std::filesystem;
@@ -43,15 +44,23 @@ std::string oneLine(std::string s)
     return s;
 }
 
-/// Stage names a study of this kind knows, by their parameter-level names (colon: stageNames();
-/// part: its five stages, each its own).
-std::vector<std::string> stageNamesOf(StudyKind kind)
+bool startsWith(const std::string& s, const std::string& prefix) { return s.rfind(prefix, 0) == 0; }
+
+/// Whether the stage (or the first of the steps a name stands for) reads the scan itself.
+bool readsScan(const StudyPipeline& pipeline, const std::string& stage)
 {
-    if (kind == StudyKind::Colon) return stageNames();
-    return stagesAffectedBy("ingest", StudyKind::Part);
+    for (const auto& s : pipeline.stages)
+        if (s.name == stage) return std::find(s.inputs.begin(), s.inputs.end(), "input") != s.inputs.end();
+    return false;
 }
 
-bool startsWith(const std::string& s, const std::string& prefix) { return s.rfind(prefix, 0) == 0; }
+/// Whether the stage takes the run's --mask.
+bool takesMaskStage(const StudyPipeline& pipeline, const std::string& stage)
+{
+    for (const auto& s : pipeline.stages)
+        if (s.name == stage) return s.takesMask;
+    return false;
+}
 
 /// Refuses unless every stage upstream of `stage` is fresh for these inputs and parameters.
 void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPath, const std::string& maskPath,
@@ -59,22 +68,22 @@ void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPat
 {
     // Stages by their parameter-level names only: a stage made of cached steps (render) is
     // run whole, its own steps are not "upstream".
-    const std::vector<std::string> names = stageNamesOf(o.kind);
+    const std::vector<std::string>& names = o.pipeline->commandStages;
     std::vector<std::string> upstream;
-    for (const auto& s : stagesNeededFor(o.stage, o.kind))
+    for (const auto& s : stagesNeededFor(*o.pipeline, o.stage))
         if (s != o.stage && std::find(names.begin(), names.end(), s) != names.end()) upstream.push_back(s);
-    if (ctPath.empty()) upstream.erase(std::remove(upstream.begin(), upstream.end(), "ingest"), upstream.end());
+    if (ctPath.empty())
+        upstream.erase(std::remove_if(upstream.begin(), upstream.end(), [&](const std::string& s) { return readsScan(*o.pipeline, s); }),
+                       upstream.end());
     if (upstream.empty()) return;
 
     std::map<std::string, StageStatus> states;
     if (!manifest.is_null()) {
-        StatusOptions so;
+        StudyStatusOptions so;
         so.studyDir = o.studyDir;
         so.ctPath = ctPath;
         so.maskPath = maskPath;
-        so.params = o.params;
-        so.inspect = o.inspect;
-        so.paramsGiven = true;
+        so.params = o.params.get();
         for (const auto& st : studyStatus(so)) states[st.stage] = st;
     }
     for (const auto& u : upstream) {
@@ -90,7 +99,7 @@ void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPat
             throw InputError(o.studyDir + ": " + u + " failed earlier on this study: " +
                              receipt.value("error", std::string("(no message)")));
         const std::string why = it == states.end() ? "has not run" : it->second.state + (it->second.reason.empty() ? "" : " (" + it->second.reason + ")");
-        const std::string prefix = o.kind == StudyKind::Part ? INSPECT_STAGE_PREFIX : "";
+        const std::string& prefix = o.pipeline->stagePrefix;
         throw StageNotReady(o.studyDir + ": cannot run " + prefix + o.stage + ": " + u + " " + why +
                             "; run 'flyover stage " + prefix + u + "' first, with the same inputs and parameters");
     }
@@ -98,15 +107,23 @@ void requireFreshUpstream(const StageCommandOptions& o, const std::string& ctPat
 
 } // namespace
 
-void resolveStageKind(StageCommandOptions& o)
+void resolveStagePipeline(StageCommandOptions& o)
 {
-    if (startsWith(o.stage, INSPECT_STAGE_PREFIX)) {
-        o.stage.erase(0, std::string(INSPECT_STAGE_PREFIX).size());
-        o.kind = StudyKind::Part;
-        return;
+    const StudyPipeline* chosen = nullptr;
+    for (const StudyPipeline* p : studyPipelines())
+        if (!p->stagePrefix.empty() && startsWith(o.stage, p->stagePrefix)) {
+            o.stage.erase(0, p->stagePrefix.size());
+            chosen = p;
+        }
+    if (!chosen) {
+        const json manifest = readIfPresent(fs::path(o.studyDir) / "manifest.json");
+        const std::string name = manifest.is_object() ? manifest.value("pipeline", "") : "";
+        for (const StudyPipeline* p : studyPipelines())
+            if (p->manifestName == name) chosen = p;
+        if (!chosen) throw InputError(o.studyDir + ": a study of an unknown kind (manifest \"pipeline\": \"" + name + "\")");
     }
-    const json manifest = readIfPresent(fs::path(o.studyDir) / "manifest.json");
-    o.kind = manifest.is_object() && manifest.value("pipeline", "") == "inspect" ? StudyKind::Part : StudyKind::Colon;
+    o.pipeline = chosen;
+    o.params = chosen->defaultParams();
 }
 
 std::string receiptPath(const std::string& studyDir, const std::string& stage)
@@ -116,61 +133,57 @@ std::string receiptPath(const std::string& studyDir, const std::string& stage)
 
 json runStageCommand(const StageCommandOptions& o)
 {
-    const std::vector<std::string> names = stageNamesOf(o.kind);
+    if (!o.pipeline || !o.params) throw std::logic_error("runStageCommand: call resolveStagePipeline first");
+    const StudyPipeline& pipeline = *o.pipeline;
+    const std::vector<std::string>& names = pipeline.commandStages;
     if (std::find(names.begin(), names.end(), o.stage) == names.end()) {
         std::string known;
         for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
-        if (o.kind == StudyKind::Colon)
-            for (const auto& n : stageNamesOf(StudyKind::Part)) known += ", " + std::string(INSPECT_STAGE_PREFIX) + n;
-        throw ParameterError("stage: unknown " + std::string(o.kind == StudyKind::Part ? "inspect " : "") + "stage '" +
-                             o.stage + "' (stages: " + known + ")");
+        if (pipeline.stagePrefix.empty())
+            for (const StudyPipeline* p : studyPipelines())
+                if (p != &pipeline)
+                    for (const auto& n : p->commandStages) known += ", " + p->stagePrefix + n;
+        throw ParameterError("stage: unknown " + (pipeline.stagePrefix.empty() ? std::string() : pipeline.name + " ") +
+                             "stage '" + o.stage + "' (stages: " + known + ")");
     }
-    if (o.kind == StudyKind::Part) {
-        validateInspectParams(o.inspect);
-        if (!o.maskPath.empty()) throw ParameterError("stage " + o.stage + ": an inspect stage takes no --mask");
-    } else {
-        validateParams(o.params);
-    }
+    o.params->validate();
+    const bool takesMask = std::any_of(pipeline.stages.begin(), pipeline.stages.end(), [](const StageSpec& s) { return s.takesMask; });
+    if (!takesMask && !o.maskPath.empty())
+        throw ParameterError("stage " + o.stage + ": an " + pipeline.name + " stage takes no --mask");
     // A part study's stage on a colon study (or the other way round) would mix two stage graphs.
     {
         const json m = readIfPresent(fs::path(o.studyDir) / "manifest.json");
         if (m.is_object()) {
-            const bool part = m.value("pipeline", "") == "inspect";
-            if (part != (o.kind == StudyKind::Part))
-                throw InputError(o.studyDir + ": a " + (part ? "part (flyover inspect)" : "colon (flyover run)") +
-                                 " study: stage " + o.stage + " is " + (part ? "the colon's" : "inspect's"));
+            const StudyPipeline& own = studyPipelineOf(m);
+            if (&own != &pipeline)
+                throw InputError(o.studyDir + ": a " + own.studyWord + " study: stage " + o.stage + " is " +
+                                 (pipeline.stagePrefix.empty() ? "the " + pipeline.name + "'s" : pipeline.name + "'s"));
         }
     }
     std::error_code ec;
-    if (!fs::is_directory(o.studyDir, ec) && o.stage != "ingest" && !(o.stage == "segment" && !o.maskPath.empty()))
-        throw StageNotReady(o.studyDir + (o.kind == StudyKind::Part
-                                              ? ": no such study folder; the first stage ('flyover stage inspect:ingest "
-                                                "--ct CT') creates it"
-                                              : ": no such study folder; the first stage ('flyover stage ingest --ct CT' "
-                                                "or 'flyover stage segment --mask FILE') creates it"));
+    const bool startsStudy = readsScan(pipeline, o.stage) || (takesMaskStage(pipeline, o.stage) && !o.maskPath.empty());
+    if (!fs::is_directory(o.studyDir, ec) && !startsStudy)
+        throw StageNotReady(o.studyDir + ": no such study folder; " + pipeline.firstStageHint);
     fs::remove(receiptPath(o.studyDir, o.stage), ec);
 
     const json manifest = readIfPresent(fs::path(o.studyDir) / "manifest.json");
     const std::string ctPath = o.ctPath.empty() ? recordedInput(manifest, "input") : o.ctPath;
     const std::string maskPath = o.maskPath.empty() ? recordedInput(manifest, "mask") : o.maskPath;
-    if (o.stage == "ingest" && ctPath.empty())
-        throw ParameterError("stage ingest: no CT scan: give --ct (the study records none)");
+    if (readsScan(pipeline, o.stage) && ctPath.empty())
+        throw ParameterError("stage " + o.stage + ": no CT scan: give --ct (the study records none)");
     if (ctPath.empty() && maskPath.empty())
         throw StageNotReady(o.studyDir + ": the study records no scan and no mask; give --ct or --mask");
     requireFreshUpstream(o, ctPath, maskPath, manifest);
 
-    RunOptions run;
-    run.kind = o.kind;
-    run.inspect = o.inspect;
+    StudyOptions run;
     run.ctPath = ctPath;
     run.maskPath = maskPath;
     run.studyDir = o.studyDir;
-    run.params = o.params;
     run.untilStage = o.stage;
     run.waitForLock = o.waitForLock;
     run.cacheMaxGb = o.cacheMaxGb;
     run.log = o.log;
-    const json result = runPipeline(run);
+    const json result = pipeline.run(run, *o.params);
 
     // The stage's manifest entry, or the entries of its steps (a stage the manifest records as
     // several cached steps, such as render's frames, overviews, coverage...).
@@ -210,13 +223,16 @@ void writeFailedReceipt(const std::string& studyDir, const std::string& stage, c
 {
     if (exitCode != EXIT_BAD_INPUT && exitCode != EXIT_BAD_PARAMETER) return;
     try {
-        // The name as given (inspect:NAME) or as resolved (NAME).
-        const bool part = startsWith(stage, INSPECT_STAGE_PREFIX);
-        const std::string name = part ? stage.substr(std::string(INSPECT_STAGE_PREFIX).size()) : stage;
-        const auto colon = stageNamesOf(StudyKind::Colon), inspect = stageNamesOf(StudyKind::Part);
-        const auto& names = part ? inspect : colon;
-        const bool known = std::find(names.begin(), names.end(), name) != names.end() ||
-                           std::find(inspect.begin(), inspect.end(), name) != inspect.end();
+        // The name as given (inspect:NAME) or as resolved (NAME), of any registered table.
+        std::string name = stage;
+        bool known = false;
+        for (const StudyPipeline* p : studyPipelines()) {
+            const bool prefixed = !p->stagePrefix.empty() && startsWith(stage, p->stagePrefix);
+            const std::string n = prefixed ? stage.substr(p->stagePrefix.size()) : stage;
+            if (std::find(p->commandStages.begin(), p->commandStages.end(), n) == p->commandStages.end()) continue;
+            if (prefixed || !known) name = n;
+            known = true;
+        }
         if (studyDir.empty() || !known) return;
         std::error_code ec;
         fs::create_directories(fs::path(studyDir) / "stages", ec);

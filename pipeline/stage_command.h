@@ -25,12 +25,12 @@
 /// leaves an "ok" receipt that a later rule trusts.
 #pragma once
 
-#include "inspect/inspect_params.h"
-#include "colon/params.h"
+#include "pipeline/param_set.h"
 #include "pipeline/run_log.h"
 #include "pipeline/study.h"
 
 #include <exception>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -47,28 +47,28 @@ struct StageNotReady : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-/// The prefix of an inspect stage's name, `flyover stage inspect:voids`: a part study's stages
-/// (`flyover inspect`: ingest, voids, surfaces, overviews, turntable). Without it a stage is
-/// the colon's, unless the study's manifest says "pipeline": "inspect".
-inline constexpr const char* INSPECT_STAGE_PREFIX = "inspect:";
-
 struct StageCommandOptions {
-    std::string stage;            ///< ingest, segment, centerline, mesh or render; inspect:NAME
+    /// A stage of the study's table: one of its commandStages, with its table's stagePrefix
+    /// ("inspect:voids") or without it for the table whose prefix is "" (resolveStagePipeline
+    /// strips it).
+    std::string stage;
     std::string studyDir;
     std::string ctPath;           ///< "" = the scan recorded in the study's manifest
     std::string maskPath;         ///< "" = the mask recorded in the manifest (if any)
-    StudyKind kind = StudyKind::Colon;  ///< set by resolveStageKind
-    PipelineParams params;        ///< parameters of this stage and of those upstream (colon)
-    InspectParams inspect;        ///< the same for a part study (kind Part)
+    const StudyPipeline* pipeline = nullptr;  ///< set by resolveStagePipeline
+    /// Parameters of this stage and of those upstream, of the pipeline's kind (set to its
+    /// defaults by resolveStagePipeline).
+    std::unique_ptr<ParamSet> params;
     bool waitForLock = false;     ///< wait for a concurrent run instead of exiting 75
     double cacheMaxGb = 20.0;
     RunLog* log = nullptr;
 };
 
-/// Sets `kind` and strips the "inspect:" prefix from `stage`: Part for "inspect:NAME", or for
-/// a plain name when the study's manifest says "pipeline": "inspect"; else Colon. Call it
-/// before applying --set/--config (a part study takes inspect's parameters).
-void resolveStageKind(StageCommandOptions& options);
+/// Sets `pipeline` (and `params` to its defaults) from the registered tables and strips the
+/// table's prefix from `stage`: the table whose prefix the name starts with, else the one a
+/// study's manifest names, else the one without a prefix. Call it before applying
+/// --set/--config (a part study takes inspect's parameters).
+void resolveStagePipeline(StageCommandOptions& options);
 
 /// Runs one stage (see the file comment) and writes its "ok" receipt.
 /// @return the receipt.

@@ -4,8 +4,9 @@
 #include "pipeline/artifact_store.h"
 #include "pipeline/deferred_writes.h"
 #include "pipeline/digest_stamps.h"
-#include "pipeline/stage_context.h"
+#include "pipeline/stage_run.h"
 #include "volume/error.h"
+#include "volume/image.h"
 
 #include <tbb/flow_graph.h>
 
@@ -24,168 +25,49 @@ using nlohmann::json;
 
 namespace flyover {
 
-openvdb::FloatGrid::Ptr StudyRun::sdf()
-{
-    std::lock_guard<std::mutex> lock(mLoadMutex);
-    if (!state.sdf)
-        state.sdf = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path("lumen.vdb"), "lumen_sdf"));
-    return state.sdf;
-}
-
 namespace {
 
-// ------------------------------------------------------------------------- the stage table
-
-struct StageSpec {
-    std::string name;
-    std::vector<std::string> upstream;  ///< stages whose outputs this stage reads
-    std::vector<std::string> inputs;    ///< artifact names read ("input" = the scan)
-    std::vector<std::string> outputs;   ///< artifact names written
-    json (*body)(StudyRun&, Progress*);
-    /// The parameter section the stage takes its parameters from ("" = its own name), and the
-    /// names it depends on (empty = all of them): a render step is keyed by its own subset of
-    /// render.*, so that changing render.video_fps recomputes the video only.
-    std::string paramStage = "";
-    std::vector<std::string> paramNames = {};
-    /// Steps that run first when both run (order only: no data passes, no key depends on it).
-    std::vector<std::string> after = {};
-    /// Write-behind: the next stages start as soon as the body returns (they take its results
-    /// from memory); the fsync and rename of its artifacts and its cache record follow beside
-    /// them. The artifacts are hashed before, in their temporaries, so that keys stay content
-    /// digests.
-    bool writeBehind = false;
-    /// A stage of a part study (`flyover inspect`): its parameters are InspectParams'.
-    bool part = false;
-    /// Of the stages ready at once, those of higher priority start first (TBB flow graph node
-    /// priority; order only). The video, the longest render step and the one that runs mostly
-    /// on one thread, starts first so that it does not run alone at the end of the run.
-    tbb::flow::node_priority_t priority = tbb::flow::no_priority;
-};
-
-/// The segment stage: from the CT's air, or from the external mask when the run has one.
-json runSegmentStage(StudyRun& run, Progress* progress)
-{
-    return run.opt.maskPath.empty() ? runSegment(run, progress)
-                                    : runSegmentFromMask(run, run.opt.maskPath, progress);
-}
-
-// The render parameters each render step depends on.
-#define FLYOVER_CAMERA "fov_deg", "roll_deg", "direction", "clip_offset_fraction", "clip_offset_mm", "loop_reach_mm"
-#define FLYOVER_IMAGE "width_px", "height_px", "supersample", "ost", "smooth_shading", "depth_cue", "depth_cue_mm"
-
 /// The render steps; `--until render`, `--force render` and "render" in stagesNeededFor /
-/// stagesAffectedBy mean all of them.
+/// stagesAffectedBy mean all of them (the stages whose parameter section is "render").
 const char* const RENDER_GROUP = "render";
 
-const std::vector<StageSpec>& stageSpecs()
+/// Whether a stage reads the scan itself (skipped, "unused", in a study without a CT).
+bool readsScan(const StageSpec& spec)
 {
-    static const std::vector<std::string> renderIn{"surface.ply", "centerline.json"};
-    static const std::vector<std::string> renderUp{"centerline", "mesh"};
-    static const std::vector<StageSpec> specs{
-        {"ingest", {}, {"input"}, {"ct.vdb"}, runIngest, "", {}, {}, true},
-        {"segment", {"ingest"}, {"ct.vdb"}, {"lumen.vdb"}, runSegmentStage, "", {}, {}, true},
-        {"centerline", {"segment"}, {"lumen.vdb"}, {"centerline.json"}, runCenterline, "", {}, {}, true},
-        {"mesh", {"segment"}, {"lumen.vdb"}, {"surface.ply"}, runMesh, "", {}, {}, true},
-        {"frames", renderUp, renderIn, {"frames"}, runFrames, RENDER_GROUP,
-         {FLYOVER_CAMERA, FLYOVER_IMAGE, "frame_step_mm"}},
-        {"flythrough", renderUp, renderIn, {"flythrough"}, runFlythrough, RENDER_GROUP,
-         {"flythrough_frames", "flythrough_fov_deg", "frame_step_mm", FLYOVER_IMAGE}, {"frames"}},
-        {"overviews", renderUp, renderIn, {"overview.png", "overviews"}, runOverviews, RENDER_GROUP,
-         {"overview_px", "overview_marker_mm", "ost", "supersample", "smooth_shading", "depth_cue"}, {"frames"}},
-        {"video", renderUp, renderIn, {"video"}, runVideo, RENDER_GROUP,
-         {"video", "video_step_mm", "video_fps", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}, false, false, 2},
-        {"coverage", renderUp, renderIn, {"coverage", "review"}, runCoverage, RENDER_GROUP,
-         {"coverage", "review", "review_target", "coverage_px", "coverage_step_mm", "flythrough_fov_deg", FLYOVER_CAMERA, FLYOVER_IMAGE}, {"frames"}, false, false, 1},
-    };
-    return specs;
+    return std::find(spec.inputs.begin(), spec.inputs.end(), "input") != spec.inputs.end();
 }
-
-#undef FLYOVER_CAMERA
-#undef FLYOVER_IMAGE
-
-/// The stage graph of a part study (`flyover inspect`, inspect/stage_inspect.cpp).
-const std::vector<StageSpec>& partStageSpecs()
-{
-    static const std::vector<StageSpec> specs{
-        {"ingest", {}, {"input"}, {"ct.vdb"}, runPartIngest, "", {}, {}, true, true},
-        {"voids", {"ingest"}, {"ct.vdb"}, {"voids.csv", "voids.json", "voids.vdb"}, runVoids, "", {}, {}, false, true},
-        {"surfaces", {"voids"}, {"ct.vdb", "voids.vdb", "voids.json"}, {"part_surface.ply", "surfaces.json"},
-         runPartSurfaces, "", {}, {}, false, true},
-        {"overviews", {"surfaces"}, {"part_surface.ply", "surfaces.json", "voids.json"}, {"overview.png", "overviews"},
-         runPartOverviews, RENDER_GROUP, {"overview_px", "supersample", "smooth_shading", "depth_cue"}, {}, false, true},
-        {"turntable", {"surfaces"}, {"part_surface.ply", "surfaces.json", "voids.json"}, {"turntable"}, runTurntable,
-         RENDER_GROUP, {"video", "turntable_frames", "video_fps", "video_px", "supersample", "smooth_shading", "depth_cue"},
-         {"overviews"}, false, true},
-    };
-    return specs;
-}
-
-const std::vector<StageSpec>& stageSpecs(StudyKind kind) { return kind == StudyKind::Part ? partStageSpecs() : stageSpecs(); }
-
-/// Work that starts ahead of the stage it feeds, as soon as a result it reads is in memory: a
-/// node of the graph with an edge from that hand-on (StudyRun::handOn, "<stage>:<result>")
-/// and edges to the stages that take its result from run.state. Not cached, not in the
-/// manifest: the stage it feeds records what it took. It runs when a stage it feeds is wanted.
-struct EarlySpec {
-    std::string name;
-    std::string reads;               ///< the hand-on it starts on
-    std::vector<std::string> feeds;  ///< the stages that wait for it
-    void (*body)(StudyRun&, Progress*);
-};
-
-const std::vector<EarlySpec>& earlySpecs(StudyKind kind)
-{
-    static const std::vector<EarlySpec> none;
-    // Writing and hashing ct.vdb, and the contact cut, run mostly on one thread; the surface's
-    // render arrays are prepared while surface.ply is written and hashed.
-    static const std::vector<EarlySpec> colon{
-        {"segmentation beside ct.vdb's write", "ingest:hu", {"segment"}, segmentEarly},
-        {"mesh of the uncut lumen", "segment:uncut-lumen", {"mesh"}, meshUncutLumen},
-        {"centerline of the uncut lumen", "segment:uncut-lumen", {"centerline"}, traceUncutLumen},
-        {"render arrays of the surface", "mesh:mesh", {"frames", "flythrough", "overviews", "video", "coverage"},
-         prepareSurfaceEarly},
-    };
-    return kind == StudyKind::Part ? none : colon;
-}
-
-/// The hand-on the write-behind's commits (fsync, rename, record) wait for: the first pair out
-/// and the whole scene built after it ("" = none: they follow their stage at once).
-std::string commitsAfter(StudyKind kind) { return kind == StudyKind::Part ? "" : "frames:first-pair"; }
 
 const std::string& paramStageOf(const StageSpec& spec) { return spec.paramStage.empty() ? spec.name : spec.paramStage; }
 
 /// The canonical parameters a stage's key covers.
-json stageParams(const StageSpec& spec, const PipelineParams& params, const InspectParams& inspect)
+json stageParams(const StageSpec& spec, const ParamSet& params)
 {
-    const json all = spec.part ? inspectParamsToJson(inspect, paramStageOf(spec)) : stageParamsToJson(params, paramStageOf(spec));
+    const json all = params.sectionJson(paramStageOf(spec));
     if (spec.paramNames.empty()) return all;
     json subset = json::object();
     for (const auto& n : spec.paramNames) subset[n] = all.at(n);
     return subset;
 }
 
-int stageVersionOf(const StageSpec& spec)
-{
-    return spec.part ? inspectSectionVersion(paramStageOf(spec)) : stageVersion(paramStageOf(spec));
-}
+int stageVersionOf(const StageSpec& spec, const ParamSet& params) { return params.sectionVersion(paramStageOf(spec)); }
 
-const StageSpec& specOf(const std::string& name, StudyKind kind)
+const StageSpec& specOf(const std::string& name, const StudyPipeline& pipeline)
 {
-    for (const auto& s : stageSpecs(kind))
+    for (const auto& s : pipeline.stages)
         if (s.name == name) return s;
     std::string known;
-    for (const auto& s : stageSpecs(kind)) known += (known.empty() ? "" : ", ") + s.name;
+    for (const auto& s : pipeline.stages) known += (known.empty() ? "" : ", ") + s.name;
     throw ParameterError("unknown stage '" + name + "' (stages: " + known + ", or " + RENDER_GROUP +
                          " for all render steps)");
 }
 
 /// The stages a name stands for: itself, or every render step for "render".
-std::vector<std::string> stagesNamed(const std::string& name, StudyKind kind)
+std::vector<std::string> stagesNamed(const std::string& name, const StudyPipeline& pipeline)
 {
     std::vector<std::string> out;
-    for (const auto& s : stageSpecs(kind))
+    for (const auto& s : pipeline.stages)
         if (s.paramStage == name && name == RENDER_GROUP) out.push_back(s.name);
-    if (out.empty()) out.push_back(specOf(name, kind).name);
+    if (out.empty()) out.push_back(specOf(name, pipeline).name);
     return out;
 }
 
@@ -194,10 +76,10 @@ std::vector<std::string> stagesNamed(const std::string& name, StudyKind kind)
 std::string inputDigest(const std::string& ctPath) { return artifactDigest(ctPath); }
 
 /// The artifacts a stage reads in a study with or without a CT and a mask: with a mask the
-/// segment stage also reads the mask ("mask", its content digest), and without a CT only it.
+/// stage that takes it also reads the mask ("mask", its content digest), and without a CT only it.
 std::vector<std::string> stageInputs(const StageSpec& spec, bool hasCt, bool hasMask)
 {
-    if (spec.name != "segment" || !hasMask) return spec.inputs;
+    if (!spec.takesMask || !hasMask) return spec.inputs;
     if (!hasCt) return {"mask"};
     std::vector<std::string> in = spec.inputs;
     in.push_back("mask");
@@ -254,57 +136,88 @@ std::string studyFilesProblem(const ArtifactStore& store, const fs::path& dir, c
     return {};
 }
 
+std::vector<const StudyPipeline*>& registry()
+{
+    static std::vector<const StudyPipeline*> pipelines;
+    return pipelines;
+}
+
+std::mutex& registryMutex()
+{
+    static std::mutex m;
+    return m;
+}
+
 } // namespace
 
-std::vector<std::string> stagesNeededFor(const std::string& stage, StudyKind kind)
+void registerStudyPipeline(const StudyPipeline& pipeline)
 {
-    const auto named = stagesNamed(stage, kind);
+    std::lock_guard<std::mutex> lock(registryMutex());
+    for (const StudyPipeline* p : registry())
+        if (p == &pipeline) return;
+    registry().push_back(&pipeline);
+}
+
+const std::vector<const StudyPipeline*>& studyPipelines() { return registry(); }
+
+const StudyPipeline& studyPipelineOf(const json& manifest)
+{
+    const std::string name = manifest.is_object() ? manifest.value("pipeline", "") : "";
+    for (const StudyPipeline* p : studyPipelines())
+        if (p->manifestName == name) return *p;
+    throw InputError("a study of an unknown kind (manifest \"pipeline\": \"" + name + "\")");
+}
+
+std::vector<std::string> stagesNeededFor(const StudyPipeline& pipeline, const std::string& stage)
+{
+    const auto named = stagesNamed(stage, pipeline);
     std::set<std::string> needed(named.begin(), named.end());
-    for (auto it = stageSpecs(kind).rbegin(); it != stageSpecs(kind).rend(); ++it)
+    for (auto it = pipeline.stages.rbegin(); it != pipeline.stages.rend(); ++it)
         if (needed.count(it->name))
             for (const auto& u : it->upstream) needed.insert(u);
     std::vector<std::string> out;
-    for (const auto& s : stageSpecs(kind))
+    for (const auto& s : pipeline.stages)
         if (needed.count(s.name)) out.push_back(s.name);
     return out;
 }
 
-std::vector<std::string> stagesAffectedBy(const std::string& stage, StudyKind kind)
+std::vector<std::string> stagesAffectedBy(const StudyPipeline& pipeline, const std::string& stage)
 {
-    const auto named = stagesNamed(stage, kind);
+    const auto named = stagesNamed(stage, pipeline);
     std::set<std::string> affected(named.begin(), named.end());
-    for (const auto& s : stageSpecs(kind))
+    for (const auto& s : pipeline.stages)
         for (const auto& u : s.upstream)
             if (affected.count(u)) affected.insert(s.name);
     std::vector<std::string> out;
-    for (const auto& s : stageSpecs(kind))
+    for (const auto& s : pipeline.stages)
         if (affected.count(s.name)) out.push_back(s.name);
     return out;
 }
 
-nlohmann::json runPipeline(const RunOptions& options)
+nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
 {
-    const StudyKind kind = options.kind;
-    const auto& specs = stageSpecs(kind);
-    if (kind == StudyKind::Part) validateInspectParams(options.inspect);
-    else validateParams(options.params);
-    if (kind == StudyKind::Part && !options.maskPath.empty()) throw ParameterError("inspect: takes no --mask");
+    const StudyOptions& options = run.options;
+    const auto& specs = pipeline.stages;
+    run.params.validate();
     std::set<std::string> wanted, forced;
     if (options.untilStage.empty())
         for (const auto& s : specs) wanted.insert(s.name);
     else
-        for (const auto& s : stagesNeededFor(options.untilStage, kind)) wanted.insert(s);
+        for (const auto& s : stagesNeededFor(pipeline, options.untilStage)) wanted.insert(s);
     if (!options.forceStage.empty())
-        for (const auto& s : stagesAffectedBy(options.forceStage, kind)) forced.insert(s);
+        for (const auto& s : stagesAffectedBy(pipeline, options.forceStage)) forced.insert(s);
     if (!(options.cacheMaxGb > 0)) throw ParameterError("--cache-max-gb: must be > 0");
 
     const bool hasCt = !options.ctPath.empty(), hasMask = !options.maskPath.empty();
     if (!hasCt && !hasMask) throw ParameterError("run: no input: give a CT scan, --mask FILE, or both");
-    if (!hasCt) {
-        if (options.untilStage == "ingest") throw ParameterError("--until ingest: there is no CT scan to ingest");
-        wanted.erase("ingest");
-        forced.erase("ingest");
-    }
+    if (!hasCt)
+        for (const auto& spec : specs) {
+            if (!readsScan(spec)) continue;
+            if (options.untilStage == spec.name)
+                throw ParameterError("--until " + spec.name + ": there is no CT scan to " + spec.name);
+            wanted.erase(spec.name);
+            forced.erase(spec.name);
+        }
     std::error_code ec;
     if (hasCt && !fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
     if (hasMask && !fs::is_regular_file(options.maskPath, ec))
@@ -318,7 +231,6 @@ nlohmann::json runPipeline(const RunOptions& options)
     DigestStamps stamps((fs::path(options.studyDir) / ".flyover" / "stamps.json").string());
     ArtifactStore store(options.studyDir, &stamps);
     store.removeStaleTemporaries();
-    StudyRun run(options);
     RunLog* log = options.log;
 
     std::mutex mutex;  // guards digests and entries
@@ -334,16 +246,13 @@ nlohmann::json runPipeline(const RunOptions& options)
     // what finished; the last write says whether every wanted stage finished.
     const json previous = readManifest(run.dir);
     json runParameters = json::object();
-    if (kind == StudyKind::Part)
-        for (const auto& section : inspectSections()) runParameters[section] = inspectParamsToJson(options.inspect, section);
-    else
-        for (const auto& section : stageNames()) runParameters[section] = stageParamsToJson(options.params, section);
+    for (const auto& section : run.params.sections()) runParameters[section] = run.params.sectionJson(section);
     auto manifestOf = [&](const std::map<std::string, json>& done, bool keepPrevious, bool complete) {
         json stages = json::array();
         for (const auto& spec : specs) {
             const auto it = done.find(spec.name);
             if (it != done.end()) stages.push_back(it->second);
-            else if (keepPrevious && !wanted.count(spec.name) && !(spec.name == "ingest" && !hasCt)) {
+            else if (keepPrevious && !wanted.count(spec.name) && !(readsScan(spec) && !hasCt)) {
                 json e = manifestEntry(previous, spec.name);
                 if (!e.is_null()) stages.push_back(e);
             }
@@ -357,7 +266,7 @@ nlohmann::json runPipeline(const RunOptions& options)
                {"complete", complete},
                {"parameters", runParameters},
                {"stages", stages}};
-        if (kind == StudyKind::Part) m["pipeline"] = "inspect";
+        if (!pipeline.manifestName.empty()) m["pipeline"] = pipeline.manifestName;
         return m;
     };
     std::mutex manifestMutex;              // guards finished and the progress writes
@@ -385,8 +294,8 @@ nlohmann::json runPipeline(const RunOptions& options)
             std::lock_guard<std::mutex> g(mutex);
             for (const auto& a : stageInputs(spec, hasCt, hasMask)) inputs[a] = digests.at(a);
         }
-        const json params = stageParams(spec, options.params, options.inspect);
-        const int version = stageVersionOf(spec);
+        const json params = stageParams(spec, run.params);
+        const int version = stageVersionOf(spec, run.params);
         const std::string key = stageKey(spec.name, version, params, inputs);
         json entry{{"stage", spec.name}, {"version", version}, {"key", key},
                    {"parameters", params}, {"inputs", inputs}};
@@ -495,13 +404,13 @@ nlohmann::json runPipeline(const RunOptions& options)
     std::map<std::string, std::unique_ptr<continue_node<continue_msg>>> nodes;
     std::map<std::string, std::unique_ptr<broadcast_node<continue_msg>>> handOns;
     std::map<std::string, std::once_flag> handedOn;
-    const std::string commitHandOn = commitsAfter(kind);
+    const std::string commitHandOn = pipeline.commitsAfter;
     // An early node does its work when a stage it feeds is wanted (else it only passes on).
     auto earlyRuns = [&](const EarlySpec& early) {
         return std::any_of(early.feeds.begin(), early.feeds.end(), [&](const std::string& f) { return wanted.count(f) > 0; });
     };
     std::map<std::string, int> earlyReaders;
-    for (const auto& early : earlySpecs(kind)) {
+    for (const auto& early : pipeline.early) {
         earlyReaders[early.reads] += earlyRuns(early) ? 1 : 0;
         handOns[early.reads];
     }
@@ -524,13 +433,13 @@ nlohmann::json runPipeline(const RunOptions& options)
                 for (const auto& h : handOns)
                     if (h.first.rfind(spec.name + ":", 0) == 0) handOn(h.first);
             },
-            spec.priority);
+            static_cast<node_priority_t>(spec.priority));
     for (const auto& spec : specs) {
         for (const auto& u : spec.upstream) make_edge(*nodes[u], *nodes[spec.name]);
         for (const auto& u : spec.after) make_edge(*nodes[u], *nodes[spec.name]);
     }
     std::vector<std::unique_ptr<continue_node<continue_msg>>> earlyNodes, commitNodes;
-    for (const auto& early : earlySpecs(kind)) {
+    for (const auto& early : pipeline.early) {
         earlyNodes.push_back(std::make_unique<continue_node<continue_msg>>(g, [&run, &early, runs = earlyRuns(early)](const continue_msg&) {
             if (!runs) return;
             try {
@@ -570,7 +479,8 @@ nlohmann::json runPipeline(const RunOptions& options)
     }
 
     std::exception_ptr failure;
-    nodes["ingest"]->try_put(continue_msg());
+    for (const auto& spec : specs)
+        if (spec.upstream.empty() && spec.after.empty()) nodes[spec.name]->try_put(continue_msg());
     try {
         g.wait_for_all();
     } catch (...) {
@@ -611,7 +521,7 @@ nlohmann::json runPipeline(const RunOptions& options)
     return manifest;
 }
 
-std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusParamText& text)
+std::vector<StageStatus> studyStatus(const StudyStatusOptions& options, const StatusParamText& text)
 {
     const fs::path dir(options.studyDir);
     const json manifest = readManifest(dir);
@@ -620,29 +530,22 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
     if (manifest.is_null())
         throw InputError(options.studyDir + ": no stage of this study has finished yet (no manifest.json: its first run "
                                             "was stopped or is still running); run 'flyover run' or 'flyover inspect' again");
-    // A part study (flyover inspect) takes inspect's parameters.
-    const StudyKind kind = manifest.value("pipeline", "") == "inspect" ? StudyKind::Part : StudyKind::Colon;
+    // The study's own stage table and kind of parameters (a part study's are inspect's).
+    const StudyPipeline& pipeline = studyPipelineOf(manifest);
     const bool complete = manifest.value("complete", true);
-    PipelineParams params = options.params;
-    InspectParams inspect = options.inspect;
-    const bool given = options.paramsGiven || !text.assignments.empty() || !text.config.is_null();
+    const std::unique_ptr<ParamSet> paramsOwned = options.params ? options.params->clone() : pipeline.defaultParams();
+    ParamSet& params = *paramsOwned;
+    const bool given = options.params || !text.assignments.empty() || !text.config.is_null();
     if (given) {
-        if (kind == StudyKind::Part) {
-            if (!text.config.is_null()) applyInspectParamsJson(inspect, text.config, text.configSource);
-            for (const auto& a : text.assignments) applyInspectAssignment(inspect, a);
-            validateInspectParams(inspect);
-        } else {
-            if (!text.config.is_null()) applyParamsJson(params, text.config, text.configSource);
-            for (const auto& a : text.assignments) applyParamAssignment(params, a);
-            validateParams(params);
-        }
+        if (!text.config.is_null()) params.applyJson(text.config, text.configSource);
+        for (const auto& a : text.assignments) params.applyAssignment(a);
+        params.validate();
     } else {
         // The last run's: its parameters (all sections), then each stage's recorded ones (a stage
         // that the last run did not touch keeps those of the run that made it).
         auto apply = [&](const json& sections) {
             try {
-                if (kind == StudyKind::Part) applyInspectParamsJson(inspect, sections, "manifest.json");
-                else applyParamsJson(params, sections, "manifest.json");
+                params.applyJson(sections, "manifest.json");
             } catch (const ParameterError&) {
                 // parameters of an older stage version: the stage will show as stale
             }
@@ -650,7 +553,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
         if (manifest.contains("parameters") && manifest["parameters"].is_object())
             for (auto it = manifest["parameters"].begin(); it != manifest["parameters"].end(); ++it)
                 apply(json{{it.key(), it.value()}});
-        for (const auto& spec : stageSpecs(kind)) {
+        for (const auto& spec : pipeline.stages) {
             const json e = manifestEntry(manifest, spec.name);
             if (!e.is_null() && e.contains("parameters")) apply(json{{paramStageOf(spec), e["parameters"]}});
         }
@@ -664,9 +567,9 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
     std::vector<StageStatus> out;
     if (hasCt && fs::exists(ctPath)) digests["input"] = inputDigest(ctPath);
     if (hasMask && fs::is_regular_file(maskPath)) digests["mask"] = inputDigest(maskPath);
-    for (const auto& spec : stageSpecs(kind)) {
+    for (const auto& spec : pipeline.stages) {
         StageStatus st{spec.name, "", ""};
-        if (spec.name == "ingest" && !hasCt) {
+        if (readsScan(spec) && !hasCt) {
             out.push_back({spec.name, "unused", "no CT scan: the study starts from its mask"});
             continue;
         }
@@ -685,8 +588,8 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
             out.push_back(st);
             continue;
         }
-        const json params2 = stageParams(spec, params, inspect);
-        const std::string key = stageKey(spec.name, stageVersionOf(spec), params2, inputs);
+        const json params2 = stageParams(spec, params);
+        const std::string key = stageKey(spec.name, stageVersionOf(spec, params), params2, inputs);
         const auto record = store.findRecord(spec.name, key);
         if (record) {
             std::string problem = store.verifyRecord(*record);
@@ -712,7 +615,7 @@ std::vector<StageStatus> studyStatus(const StatusOptions& options, const StatusP
             st.reason = complete ? "never run" : "not finished by the last run (stopped, failed, or still running)";
         } else {
             st.state = "stale";
-            if (last.value("version", -1) != stageVersionOf(spec)) st.reason = "stage version changed";
+            if (last.value("version", -1) != stageVersionOf(spec, params)) st.reason = "stage version changed";
             else if (last["parameters"] != params2) {
                 std::string changed;
                 for (auto it = params2.begin(); it != params2.end(); ++it)
@@ -775,8 +678,8 @@ void cleanStudy(const std::string& studyDir)
         throw InputError(studyDir + ": not a flyover study (no manifest.json or .flyover/)");
     StudyLock lock(studyDir, false);
     std::error_code ec;
-    for (const StudyKind kind : {StudyKind::Colon, StudyKind::Part})
-        for (const auto& spec : stageSpecs(kind))
+    for (const StudyPipeline* pipeline : studyPipelines())
+        for (const auto& spec : pipeline->stages)
             for (const auto& a : spec.outputs) fs::remove_all(dir / a, ec);
     fs::remove(dir / "manifest.json", ec);
     for (const auto& e : fs::directory_iterator(dir / ".flyover", ec))

@@ -1,5 +1,7 @@
 #include "surface/lumen_surface.h"
 
+#include "volume/seconds_since.h"
+
 #include "surface/mesh_distance.h"
 #include "volume/error.h"
 
@@ -17,11 +19,6 @@
 namespace flyover {
 
 namespace {
-
-double secondsSince(std::chrono::steady_clock::time_point start)
-{
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 /// Reports a sub-step's progress as a slice [lo, hi] of the whole stage.
 class SubProgress : public Progress {

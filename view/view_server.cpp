@@ -218,6 +218,395 @@ std::string exeDir()
     return ec ? std::string() : exe.parent_path().string();
 }
 
+/// One request as the route handlers see it: the request and answer, the server's state they
+/// may use, and (for every path but the page, its assets and the status) the study of the
+/// latest revision.
+struct RouteCall {
+    const httplib::Request& req;
+    httplib::Response& res;
+    const std::string& path;
+    const std::string& method;
+    bool get;
+    const std::map<std::string, ViewServer::Asset>& assets;
+    const std::string& assetDir;
+    const std::string& token;
+    LiveStudy& live;
+    BookmarkStore& bookmarks;
+    std::atomic<unsigned>& shotCounter;
+    std::shared_ptr<const ViewStudy> held;
+    const ViewStudy* study = nullptr;
+    int revision = 0;
+
+    void onlyGet() const
+    {
+        if (!get) throw HttpError(405, method + " " + path + ": only GET");
+    }
+    int defaultPx() const { return std::min(study->renderParams().heightPx, study->maxPx()); }
+
+    /// A pose from the query (pair, pick, screenshot share it).
+    ViewPose poseFrom(const Query& q) const
+    {
+        ViewPose pose;
+        pose.arcMm = q.number("arc_mm", 0.0);
+        pose.rollDeg = q.number("roll_deg", study->renderParams().rollDeg, -3600, 3600);
+        pose.direction = q.choice("direction", study->renderParams().direction, {"right", "left"});
+        pose.mode = q.choice("mode", "flyover", {"flyover", "flythrough"});
+        pose.clipOffsetFraction = q.has("clip_offset_fraction") ? q.number("clip_offset_fraction", 0.5, 0.0, 1.0) : -1.0;
+        pose.px = q.integer("px", defaultPx(), 16, study->maxPx());
+        study->indexOfArc(pose.arcMm);  // 422 when off the path
+        return pose;
+    }
+    ViewPose poseFromJson(const json& body) const
+    {
+        ViewPose pose;
+        pose.arcMm = jsonNumber(body, "arc_mm", 0.0, -1e9, 1e9);
+        pose.rollDeg = jsonNumber(body, "roll_deg", study->renderParams().rollDeg, -3600, 3600);
+        pose.direction = jsonChoice(body, "direction", study->renderParams().direction, {"right", "left"});
+        pose.mode = jsonChoice(body, "mode", "flyover", {"flyover", "flythrough"});
+        pose.clipOffsetFraction = jsonNumber(body, "clip_offset_fraction", -1.0, 0.0, 1.0);
+        if (body.contains("clip_offset_fraction") && body["clip_offset_fraction"].is_null()) pose.clipOffsetFraction = -1;
+        pose.px = int(jsonNumber(body, "px", defaultPx(), 16, study->maxPx()));
+        study->indexOfArc(pose.arcMm);
+        return pose;
+    }
+    json poseSummary(const ViewPose& p) const
+    {
+        return json{{"arc_mm", p.arcMm},
+                    {"roll_deg", p.rollDeg},
+                    {"direction", p.direction},
+                    {"mode", p.mode},
+                    {"clip_offset_fraction", p.clipOffsetFraction < 0 ? study->renderParams().clipOffsetFraction : p.clipOffsetFraction}};
+    }
+};
+
+struct Route {
+    const char* path;
+    bool prefix;  ///< the path starts with it
+    void (*handle)(RouteCall&);
+};
+
+const Route* findRoute(const Route* first, const Route* last, const std::string& path)
+{
+    for (const Route* r = first; r != last; ++r)
+        if (r->prefix ? path.rfind(r->path, 0) == 0 : path == r->path) return r;
+    return nullptr;
+}
+
+/// /, /index.html
+void servePage(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    c.onlyGet();
+    Query q(req, {});
+    const auto it = c.assets.find("index.html");
+    if (it == c.assets.end())
+        throw HttpError(404, "the page is not installed: no index.html in " +
+                                 (c.assetDir.empty() ? std::string("(no asset folder)") : c.assetDir));
+    // The cookie lets <img src> and the page's assets load without the token in every URL.
+    if (req.has_param("token"))
+        res.set_header("Set-Cookie", "flyover_token=" + c.token + "; HttpOnly; SameSite=Strict; Path=/");
+    res.set_header("Content-Security-Policy",
+                   "default-src 'self'; img-src 'self' blob: data:; style-src 'self' 'unsafe-inline'; "
+                   "script-src 'self'; connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'");
+    res.set_content(it->second.body, it->second.mime);
+}
+
+/// /assets/
+void serveAssets(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    auto& path = c.path;
+    c.onlyGet();
+    Query q(req, {});
+    const auto it = c.assets.find(path.substr(8));
+    if (it == c.assets.end()) throw HttpError(404, "no such asset");
+    res.set_content(it->second.body, it->second.mime);
+}
+
+/// /api/status
+void serveApiStatus(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    c.onlyGet();
+    Query q(req, {});
+    sendJson(res, c.live.status());
+}
+
+/// /api/study
+void serveApiStudy(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    const auto revision = c.revision;
+    c.onlyGet();
+    Query q(req, {});
+    json j = study.studyJson();
+    j["revision"] = revision;
+    sendJson(res, j);
+}
+
+/// /api/pair
+void serveApiPair(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    c.onlyGet();
+    Query q(req, {"arc_mm", "roll_deg", "direction", "mode", "clip_offset_fraction", "px", "format", "quality"});
+    const ViewPose pose = c.poseFrom(q);
+    const std::string format = q.choice("format", "jpeg", {"jpeg", "png"});
+    const int quality = q.integer("quality", 88, 1, 100);
+    const PairRender pr = study.renderPair(pose);
+    res.set_header("X-Flyover-Pose", pr.poseJson.dump());
+    if (format == "png") res.set_content(encodePng(pr.image), "image/png");
+    else res.set_content(encodeJpeg(pr.image, quality), "image/jpeg");
+}
+
+/// /api/pick
+void serveApiPick(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    c.onlyGet();
+    Query q(req, {"arc_mm", "roll_deg", "direction", "mode", "clip_offset_fraction", "px", "view", "x", "y"});
+    const ViewPose pose = c.poseFrom(q);
+    const int view = q.integer("view", 0, 0, 1);
+    const double x = q.number("x"), y = q.number("y");
+    if (x < 0 || x > pose.px || y < 0 || y > pose.px)
+        throw HttpError(422, "x, y: must lie in [0, px] = [0, " + std::to_string(pose.px) + "]");
+    const PickResult r = study.pick(pose, view, x, y);
+    json j{{"hit", r.hit}, {"world_frame", WORLD_FRAME}, {"view", view}, {"x", x}, {"y", y}};
+    if (r.hit) {
+        j["point_mm"] = json::array({r.pointMm.x, r.pointMm.y, r.pointMm.z});
+        j["distance_mm"] = r.distanceMm;
+        j["triangle"] = r.triangle;
+    } else {
+        j["point_mm"] = nullptr;
+        j["distance_mm"] = nullptr;
+        j["triangle"] = nullptr;
+    }
+    sendJson(res, j);
+}
+
+/// /api/locate
+void serveApiLocate(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    const RenderParams& rp = c.study->renderParams();
+    const auto defaultPx = c.defaultPx();
+    c.onlyGet();
+    Query q(req, {"x_mm", "y_mm", "z_mm", "px", "direction"});
+    const Vec3d p{q.number("x_mm"), q.number("y_mm"), q.number("z_mm")};
+    const int px = q.integer("px", defaultPx, 16, study.maxPx());
+    const std::string direction = q.choice("direction", rp.direction, {"right", "left"});
+    const LocateResult r = study.locate(p, px, direction);
+    sendJson(res, json{{"arc_mm", r.pose.arcMm},
+                       {"roll_deg", r.pose.rollDeg},
+                       {"direction", r.pose.direction},
+                       {"mode", r.pose.mode},
+                       {"view", r.view},
+                       {"x", r.x},
+                       {"y", r.y},
+                       {"px", px},
+                       {"centerline_index", r.centerlineIndex},
+                       {"world_frame", WORLD_FRAME}});
+}
+
+/// /api/slice
+void serveApiSlice(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    c.onlyGet();
+    Query q(req, {"plane", "x_mm", "y_mm", "z_mm", "window", "level"});
+    if (!study.hasCt())
+        throw HttpError(404, "this study has no CT (mask only): restart the viewer with --ct FILE for slices");
+    const std::string plane = q.choice("plane", "axial", {"axial", "coronal", "sagittal"});
+    const Vec3d p{q.number("x_mm"), q.number("y_mm"), q.number("z_mm")};
+    const double window = q.number("window", 1500, 1, 100000);
+    const double level = q.number("level", -300, -100000, 100000);
+    const json info = study.studyJson()["ct"];
+    const json& lo = info["bounds_mm"][0];
+    const json& hi = info["bounds_mm"][1];
+    const double coord[3] = {p.x, p.y, p.z};
+    const int axis = plane == "axial" ? 2 : plane == "coronal" ? 1 : 0;
+    const double slack = info["spacing_mm"][std::size_t(axis)].get<double>();
+    if (coord[axis] < lo[std::size_t(axis)].get<double>() - slack || coord[axis] > hi[std::size_t(axis)].get<double>() + slack)
+        throw HttpError(422, std::string(axis == 2 ? "z_mm" : axis == 1 ? "y_mm" : "x_mm") + ": " +
+                                 Query::shortNumber(coord[axis]) + " is outside the CT");
+    const SliceImage s = study.slice(plane, p, window, level);
+    const SliceGeometry& g = s.geometry;
+    auto v = [](const Vec3d& a) { return json::array({a.x, a.y, a.z}); };
+    res.set_header("X-Flyover-Slice",
+                   json{{"plane", g.plane},
+                        {"world_frame", WORLD_FRAME},
+                        {"width", g.width},
+                        {"height", g.height},
+                        {"origin_mm", v(g.originMm)},
+                        {"row_dir", v(g.rowDir)},
+                        {"col_dir", v(g.colDir)},
+                        {"pixel_mm", g.pixelMm},
+                        {"point_mm", v(p)},
+                        {"window", window},
+                        {"level", level},
+                        {"rule", "pixel (c, r) centre = origin_mm + c*pixel_mm*col_dir + r*pixel_mm*row_dir"}}
+                       .dump());
+    res.set_content(encodeGrayPng(g.width, g.height, s.gray), "image/png");
+}
+
+/// /api/overview
+void serveApiOverview(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    const RenderParams& rp = c.study->renderParams();
+    c.onlyGet();
+    Query q(req, {"marker_mm", "px"});
+    const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
+    double marker = -1;
+    if (q.has("marker_mm")) {
+        marker = q.number("marker_mm");
+        study.indexOfArc(marker);
+    }
+    res.set_content(encodePng(study.overview(px, marker)), "image/png");
+}
+
+/// /api/overview/pick
+void serveApiOverviewPick(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    const ViewStudy& study = *c.study;
+    const RenderParams& rp = c.study->renderParams();
+    c.onlyGet();
+    Query q(req, {"x", "y", "px"});
+    const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
+    const double x = q.number("x"), y = q.number("y");
+    if (x < 0 || x > px || y < 0 || y > px)
+        throw HttpError(422, "x, y: must lie in [0, px] = [0, " + std::to_string(px) + "]");
+    const auto r = study.overviewPick(px, x, y);
+    json j{{"hit", r.hit}, {"world_frame", WORLD_FRAME}, {"point_mm", nullptr}, {"arc_mm", nullptr}};
+    if (r.hit) {
+        j["point_mm"] = json::array({r.pointMm.x, r.pointMm.y, r.pointMm.z});
+        j["arc_mm"] = r.arcMm;
+    }
+    sendJson(res, j);
+}
+
+/// /api/bookmarks
+void serveApiBookmarks(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    auto& method = c.method;
+    const auto get = c.get;
+    if (get) {
+        Query q(req, {});
+        sendJson(res, json{{"bookmarks", c.bookmarks.list()}, {"world_frame", WORLD_FRAME}});
+    } else if (method == "POST") {
+        Query q(req, {});
+        const json body = parseBody(req);
+        static const std::set<std::string> fields = {"note", "arc_mm", "roll_deg", "direction", "mode",
+                                                     "clip_offset_fraction", "px"};
+        for (auto it = body.begin(); it != body.end(); ++it)
+            if (!fields.count(it.key())) throw HttpError(400, "body: unknown field '" + it.key().substr(0, 40) + "'");
+        if (!body.contains("arc_mm")) throw HttpError(400, "arc_mm: missing");
+        std::string note;
+        if (body.contains("note")) {
+            if (!body["note"].is_string()) throw HttpError(400, "note: must be a string");
+            note = body["note"].get<std::string>();
+            if (note.size() > 2000) throw HttpError(422, "note: longer than 2000 bytes");
+        }
+        const ViewPose pose = c.poseFromJson(body);
+        json b = c.poseSummary(pose);
+        b["note"] = note;
+        sendJson(res, c.bookmarks.add(b), 201);
+    } else if (method == "DELETE") {
+        Query q(req, {"id"});
+        if (!q.has("id")) throw HttpError(400, "id: missing");
+        if (!c.bookmarks.remove(q.text("id"))) throw HttpError(404, "no bookmark with id '" + q.text("id").substr(0, 40) + "'");
+        sendJson(res, json{{"deleted", q.text("id")}});
+    } else {
+        throw HttpError(405, method + " /api/bookmarks: GET, POST or DELETE");
+    }
+}
+
+/// /api/screenshot
+void serveApiScreenshot(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    auto& method = c.method;
+    const ViewStudy& study = *c.study;
+    if (method != "POST") throw HttpError(405, method + " /api/screenshot: only POST");
+    Query q(req, {});
+    const json body = parseBody(req);
+    static const std::set<std::string> fields = {"note", "arc_mm", "roll_deg", "direction", "mode",
+                                                 "clip_offset_fraction", "px"};
+    for (auto it = body.begin(); it != body.end(); ++it)
+        if (!fields.count(it.key())) throw HttpError(400, "body: unknown field '" + it.key().substr(0, 40) + "'");
+    const ViewPose pose = c.poseFromJson(body);
+    const PairRender pr = study.renderPair(pose);
+    const fs::path dir = fs::path(study.studyDir()) / "screenshots";
+    fs::create_directories(dir);
+    const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+    std::tm tm{};
+    gmtime_r(&now, &tm);
+    char stamp[32];
+    std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &tm);
+    std::string name;
+    for (unsigned k = 0;; ++k) {
+        name = "shot_" + std::string(stamp) + "_" + std::to_string(::getpid() % 100000) + "_" +
+               std::to_string(c.shotCounter++) ;
+        if (!fs::exists(dir / (name + ".png"))) break;
+        if (k > 1000) throw HttpError(500, "screenshots: no free file name");
+    }
+    json pj = pr.poseJson;
+    pj["schema"] = "flyover.screenshot/1";
+    pj["image"] = name + ".png";
+    pj["layout"] = "camera 0 left, camera 1 right";
+    if (body.contains("note") && body["note"].is_string()) pj["note"] = body["note"];
+    writePng((dir / (name + ".png")).string(), pr.image);
+    writeJson((dir / (name + ".json")).string(), pj);
+    sendJson(res,
+             json{{"file", "screenshots/" + name + ".png"},
+                  {"pose_file", "screenshots/" + name + ".json"},
+                  {"url", "/api/screenshots/" + name + ".png"},
+                  {"pose", pj}},
+             201);
+}
+
+/// /api/screenshots/
+void serveApiScreenshots(RouteCall& c)
+{
+    auto& req = c.req;
+    auto& res = c.res;
+    auto& path = c.path;
+    const ViewStudy& study = *c.study;
+    c.onlyGet();
+    Query q(req, {});
+    const std::string name = path.substr(17);
+    bool ok = name.size() > 9 && name.size() < 100 && name.rfind("shot_", 0) == 0;
+    for (char c : name) ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.');
+    const std::string ext = fs::path(name).extension().string();
+    ok = ok && (ext == ".png" || ext == ".json") && name.find("..") == std::string::npos;
+    const fs::path file = fs::path(study.studyDir()) / "screenshots" / name;
+    if (!ok || fs::is_symlink(file) || !fs::is_regular_file(file)) throw HttpError(404, "no such screenshot");
+    std::ifstream in(file, std::ios::binary);
+    std::string body((std::istreambuf_iterator<char>(in)), {});
+    res.set_header("Content-Disposition", "attachment; filename=\"" + name + "\"");
+    res.set_content(body, ext == ".png" ? "image/png" : "application/json");
+}
+
 } // namespace
 
 std::string defaultAssetDir()
@@ -375,299 +764,33 @@ void ViewServer::handle(const httplib::Request& req, httplib::Response& res)
 
 void ViewServer::route(const httplib::Request& req, httplib::Response& res)
 {
-    const std::string& path = req.path;
-    const std::string& method = req.method;
-    const bool get = method == "GET" || method == "HEAD";
-    auto onlyGet = [&] {
-        if (!get) throw HttpError(405, method + " " + path + ": only GET");
+    // The page, its assets and the status answer without a study; every other path is answered
+    // by the study of the latest revision (503 while none).
+    static const Route WITHOUT_STUDY[] = {
+        {"/", false, servePage},
+        {"/index.html", false, servePage},
+        {"/assets/", true, serveAssets},
+        {"/api/status", false, serveApiStatus},
     };
-    if (path == "/" || path == "/index.html") {
-        onlyGet();
-        Query q(req, {});
-        const auto it = mAssets.find("index.html");
-        if (it == mAssets.end())
-            throw HttpError(404, "the page is not installed: no index.html in " +
-                                     (mAssetDir.empty() ? std::string("(no asset folder)") : mAssetDir));
-        // The cookie lets <img src> and the page's assets load without the token in every URL.
-        if (req.has_param("token"))
-            res.set_header("Set-Cookie", "flyover_token=" + mToken + "; HttpOnly; SameSite=Strict; Path=/");
-        res.set_header("Content-Security-Policy",
-                       "default-src 'self'; img-src 'self' blob: data:; style-src 'self' 'unsafe-inline'; "
-                       "script-src 'self'; connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'");
-        res.set_content(it->second.body, it->second.mime);
-        return;
-    }
-    if (path.rfind("/assets/", 0) == 0) {
-        onlyGet();
-        Query q(req, {});
-        const auto it = mAssets.find(path.substr(8));
-        if (it == mAssets.end()) throw HttpError(404, "no such asset");
-        res.set_content(it->second.body, it->second.mime);
-        return;
-    }
-    if (path == "/api/status") {
-        onlyGet();
-        Query q(req, {});
-        sendJson(res, mLive.status());
-        return;
-    }
-
-    // Every other request is answered by the study of the latest revision (503 while none).
-    int revision = 0;
-    const std::shared_ptr<const ViewStudy> held = mLive.current(&revision);
-    const ViewStudy& study = *held;
-    const RenderParams& rp = study.renderParams();
-    const int defaultPx = std::min(rp.heightPx, study.maxPx());
-    const double arcMax = study.arcMaxMm();
-
-    // A pose from the query (pair, pick, screenshot share it).
-    auto poseFrom = [&](const Query& q) {
-        ViewPose pose;
-        pose.arcMm = q.number("arc_mm", 0.0);
-        pose.rollDeg = q.number("roll_deg", rp.rollDeg, -3600, 3600);
-        pose.direction = q.choice("direction", rp.direction, {"right", "left"});
-        pose.mode = q.choice("mode", "flyover", {"flyover", "flythrough"});
-        pose.clipOffsetFraction = q.has("clip_offset_fraction") ? q.number("clip_offset_fraction", 0.5, 0.0, 1.0) : -1.0;
-        pose.px = q.integer("px", defaultPx, 16, study.maxPx());
-        study.indexOfArc(pose.arcMm);  // 422 when off the path
-        return pose;
+    static const Route WITH_STUDY[] = {
+        {"/api/study", false, serveApiStudy},
+        {"/api/pair", false, serveApiPair},
+        {"/api/pick", false, serveApiPick},
+        {"/api/locate", false, serveApiLocate},
+        {"/api/slice", false, serveApiSlice},
+        {"/api/overview", false, serveApiOverview},
+        {"/api/overview/pick", false, serveApiOverviewPick},
+        {"/api/bookmarks", false, serveApiBookmarks},
+        {"/api/screenshot", false, serveApiScreenshot},
+        {"/api/screenshots/", true, serveApiScreenshots},
     };
-    auto poseFromJson = [&](const json& body) {
-        ViewPose pose;
-        pose.arcMm = jsonNumber(body, "arc_mm", 0.0, -1e9, 1e9);
-        pose.rollDeg = jsonNumber(body, "roll_deg", rp.rollDeg, -3600, 3600);
-        pose.direction = jsonChoice(body, "direction", rp.direction, {"right", "left"});
-        pose.mode = jsonChoice(body, "mode", "flyover", {"flyover", "flythrough"});
-        pose.clipOffsetFraction = jsonNumber(body, "clip_offset_fraction", -1.0, 0.0, 1.0);
-        if (body.contains("clip_offset_fraction") && body["clip_offset_fraction"].is_null()) pose.clipOffsetFraction = -1;
-        pose.px = int(jsonNumber(body, "px", defaultPx, 16, study.maxPx()));
-        study.indexOfArc(pose.arcMm);
-        return pose;
-    };
-    auto poseSummary = [&](const ViewPose& p) {
-        return json{{"arc_mm", p.arcMm},
-                    {"roll_deg", p.rollDeg},
-                    {"direction", p.direction},
-                    {"mode", p.mode},
-                    {"clip_offset_fraction", p.clipOffsetFraction < 0 ? rp.clipOffsetFraction : p.clipOffsetFraction}};
-    };
-
-    if (path == "/api/study") {
-        onlyGet();
-        Query q(req, {});
-        json j = study.studyJson();
-        j["revision"] = revision;
-        sendJson(res, j);
-        return;
-    }
-    if (path == "/api/pair") {
-        onlyGet();
-        Query q(req, {"arc_mm", "roll_deg", "direction", "mode", "clip_offset_fraction", "px", "format", "quality"});
-        const ViewPose pose = poseFrom(q);
-        const std::string format = q.choice("format", "jpeg", {"jpeg", "png"});
-        const int quality = q.integer("quality", 88, 1, 100);
-        const PairRender pr = study.renderPair(pose);
-        res.set_header("X-Flyover-Pose", pr.poseJson.dump());
-        if (format == "png") res.set_content(encodePng(pr.image), "image/png");
-        else res.set_content(encodeJpeg(pr.image, quality), "image/jpeg");
-        return;
-    }
-    if (path == "/api/pick") {
-        onlyGet();
-        Query q(req, {"arc_mm", "roll_deg", "direction", "mode", "clip_offset_fraction", "px", "view", "x", "y"});
-        const ViewPose pose = poseFrom(q);
-        const int view = q.integer("view", 0, 0, 1);
-        const double x = q.number("x"), y = q.number("y");
-        if (x < 0 || x > pose.px || y < 0 || y > pose.px)
-            throw HttpError(422, "x, y: must lie in [0, px] = [0, " + std::to_string(pose.px) + "]");
-        const PickResult r = study.pick(pose, view, x, y);
-        json j{{"hit", r.hit}, {"world_frame", WORLD_FRAME}, {"view", view}, {"x", x}, {"y", y}};
-        if (r.hit) {
-            j["point_mm"] = json::array({r.pointMm.x, r.pointMm.y, r.pointMm.z});
-            j["distance_mm"] = r.distanceMm;
-            j["triangle"] = r.triangle;
-        } else {
-            j["point_mm"] = nullptr;
-            j["distance_mm"] = nullptr;
-            j["triangle"] = nullptr;
-        }
-        sendJson(res, j);
-        return;
-    }
-    if (path == "/api/locate") {
-        onlyGet();
-        Query q(req, {"x_mm", "y_mm", "z_mm", "px", "direction"});
-        const Vec3d p{q.number("x_mm"), q.number("y_mm"), q.number("z_mm")};
-        const int px = q.integer("px", defaultPx, 16, study.maxPx());
-        const std::string direction = q.choice("direction", rp.direction, {"right", "left"});
-        const LocateResult r = study.locate(p, px, direction);
-        sendJson(res, json{{"arc_mm", r.pose.arcMm},
-                           {"roll_deg", r.pose.rollDeg},
-                           {"direction", r.pose.direction},
-                           {"mode", r.pose.mode},
-                           {"view", r.view},
-                           {"x", r.x},
-                           {"y", r.y},
-                           {"px", px},
-                           {"centerline_index", r.centerlineIndex},
-                           {"world_frame", WORLD_FRAME}});
-        return;
-    }
-    if (path == "/api/slice") {
-        onlyGet();
-        Query q(req, {"plane", "x_mm", "y_mm", "z_mm", "window", "level"});
-        if (!study.hasCt())
-            throw HttpError(404, "this study has no CT (mask only): restart the viewer with --ct FILE for slices");
-        const std::string plane = q.choice("plane", "axial", {"axial", "coronal", "sagittal"});
-        const Vec3d p{q.number("x_mm"), q.number("y_mm"), q.number("z_mm")};
-        const double window = q.number("window", 1500, 1, 100000);
-        const double level = q.number("level", -300, -100000, 100000);
-        const json info = study.studyJson()["ct"];
-        const json& lo = info["bounds_mm"][0];
-        const json& hi = info["bounds_mm"][1];
-        const double coord[3] = {p.x, p.y, p.z};
-        const int axis = plane == "axial" ? 2 : plane == "coronal" ? 1 : 0;
-        const double slack = info["spacing_mm"][std::size_t(axis)].get<double>();
-        if (coord[axis] < lo[std::size_t(axis)].get<double>() - slack || coord[axis] > hi[std::size_t(axis)].get<double>() + slack)
-            throw HttpError(422, std::string(axis == 2 ? "z_mm" : axis == 1 ? "y_mm" : "x_mm") + ": " +
-                                     Query::shortNumber(coord[axis]) + " is outside the CT");
-        const SliceImage s = study.slice(plane, p, window, level);
-        const SliceGeometry& g = s.geometry;
-        auto v = [](const Vec3d& a) { return json::array({a.x, a.y, a.z}); };
-        res.set_header("X-Flyover-Slice",
-                       json{{"plane", g.plane},
-                            {"world_frame", WORLD_FRAME},
-                            {"width", g.width},
-                            {"height", g.height},
-                            {"origin_mm", v(g.originMm)},
-                            {"row_dir", v(g.rowDir)},
-                            {"col_dir", v(g.colDir)},
-                            {"pixel_mm", g.pixelMm},
-                            {"point_mm", v(p)},
-                            {"window", window},
-                            {"level", level},
-                            {"rule", "pixel (c, r) centre = origin_mm + c*pixel_mm*col_dir + r*pixel_mm*row_dir"}}
-                           .dump());
-        res.set_content(encodeGrayPng(g.width, g.height, s.gray), "image/png");
-        return;
-    }
-    if (path == "/api/overview") {
-        onlyGet();
-        Query q(req, {"marker_mm", "px"});
-        const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
-        double marker = -1;
-        if (q.has("marker_mm")) {
-            marker = q.number("marker_mm");
-            study.indexOfArc(marker);
-        }
-        res.set_content(encodePng(study.overview(px, marker)), "image/png");
-        return;
-    }
-    if (path == "/api/overview/pick") {
-        onlyGet();
-        Query q(req, {"x", "y", "px"});
-        const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
-        const double x = q.number("x"), y = q.number("y");
-        if (x < 0 || x > px || y < 0 || y > px)
-            throw HttpError(422, "x, y: must lie in [0, px] = [0, " + std::to_string(px) + "]");
-        const auto r = study.overviewPick(px, x, y);
-        json j{{"hit", r.hit}, {"world_frame", WORLD_FRAME}, {"point_mm", nullptr}, {"arc_mm", nullptr}};
-        if (r.hit) {
-            j["point_mm"] = json::array({r.pointMm.x, r.pointMm.y, r.pointMm.z});
-            j["arc_mm"] = r.arcMm;
-        }
-        sendJson(res, j);
-        return;
-    }
-    if (path == "/api/bookmarks") {
-        if (get) {
-            Query q(req, {});
-            sendJson(res, json{{"bookmarks", mBookmarks->list()}, {"world_frame", WORLD_FRAME}});
-        } else if (method == "POST") {
-            Query q(req, {});
-            const json body = parseBody(req);
-            static const std::set<std::string> fields = {"note", "arc_mm", "roll_deg", "direction", "mode",
-                                                         "clip_offset_fraction", "px"};
-            for (auto it = body.begin(); it != body.end(); ++it)
-                if (!fields.count(it.key())) throw HttpError(400, "body: unknown field '" + it.key().substr(0, 40) + "'");
-            if (!body.contains("arc_mm")) throw HttpError(400, "arc_mm: missing");
-            std::string note;
-            if (body.contains("note")) {
-                if (!body["note"].is_string()) throw HttpError(400, "note: must be a string");
-                note = body["note"].get<std::string>();
-                if (note.size() > 2000) throw HttpError(422, "note: longer than 2000 bytes");
-            }
-            const ViewPose pose = poseFromJson(body);
-            json b = poseSummary(pose);
-            b["note"] = note;
-            sendJson(res, mBookmarks->add(b), 201);
-        } else if (method == "DELETE") {
-            Query q(req, {"id"});
-            if (!q.has("id")) throw HttpError(400, "id: missing");
-            if (!mBookmarks->remove(q.text("id"))) throw HttpError(404, "no bookmark with id '" + q.text("id").substr(0, 40) + "'");
-            sendJson(res, json{{"deleted", q.text("id")}});
-        } else {
-            throw HttpError(405, method + " /api/bookmarks: GET, POST or DELETE");
-        }
-        return;
-    }
-    if (path == "/api/screenshot") {
-        if (method != "POST") throw HttpError(405, method + " /api/screenshot: only POST");
-        Query q(req, {});
-        const json body = parseBody(req);
-        static const std::set<std::string> fields = {"note", "arc_mm", "roll_deg", "direction", "mode",
-                                                     "clip_offset_fraction", "px"};
-        for (auto it = body.begin(); it != body.end(); ++it)
-            if (!fields.count(it.key())) throw HttpError(400, "body: unknown field '" + it.key().substr(0, 40) + "'");
-        const ViewPose pose = poseFromJson(body);
-        const PairRender pr = study.renderPair(pose);
-        const fs::path dir = fs::path(study.studyDir()) / "screenshots";
-        fs::create_directories(dir);
-        const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-        std::tm tm{};
-        gmtime_r(&now, &tm);
-        char stamp[32];
-        std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &tm);
-        std::string name;
-        for (unsigned k = 0;; ++k) {
-            name = "shot_" + std::string(stamp) + "_" + std::to_string(::getpid() % 100000) + "_" +
-                   std::to_string(mShotCounter++) ;
-            if (!fs::exists(dir / (name + ".png"))) break;
-            if (k > 1000) throw HttpError(500, "screenshots: no free file name");
-        }
-        json pj = pr.poseJson;
-        pj["schema"] = "flyover.screenshot/1";
-        pj["image"] = name + ".png";
-        pj["layout"] = "camera 0 left, camera 1 right";
-        if (body.contains("note") && body["note"].is_string()) pj["note"] = body["note"];
-        writePng((dir / (name + ".png")).string(), pr.image);
-        writeJson((dir / (name + ".json")).string(), pj);
-        sendJson(res,
-                 json{{"file", "screenshots/" + name + ".png"},
-                      {"pose_file", "screenshots/" + name + ".json"},
-                      {"url", "/api/screenshots/" + name + ".png"},
-                      {"pose", pj}},
-                 201);
-        return;
-    }
-    if (path.rfind("/api/screenshots/", 0) == 0) {
-        onlyGet();
-        Query q(req, {});
-        const std::string name = path.substr(17);
-        bool ok = name.size() > 9 && name.size() < 100 && name.rfind("shot_", 0) == 0;
-        for (char c : name) ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.');
-        const std::string ext = fs::path(name).extension().string();
-        ok = ok && (ext == ".png" || ext == ".json") && name.find("..") == std::string::npos;
-        const fs::path file = fs::path(study.studyDir()) / "screenshots" / name;
-        if (!ok || fs::is_symlink(file) || !fs::is_regular_file(file)) throw HttpError(404, "no such screenshot");
-        std::ifstream in(file, std::ios::binary);
-        std::string body((std::istreambuf_iterator<char>(in)), {});
-        res.set_header("Content-Disposition", "attachment; filename=\"" + name + "\"");
-        res.set_content(body, ext == ".png" ? "image/png" : "application/json");
-        return;
-    }
-    (void)arcMax;
-    throw HttpError(404, "no such path: " + path.substr(0, 80));
+    RouteCall c{req, res, req.path, req.method, req.method == "GET" || req.method == "HEAD", mAssets, mAssetDir, mToken,
+                mLive, *mBookmarks, mShotCounter, nullptr};
+    if (const Route* r = findRoute(std::begin(WITHOUT_STUDY), std::end(WITHOUT_STUDY), c.path)) return r->handle(c);
+    c.held = mLive.current(&c.revision);
+    c.study = c.held.get();
+    if (const Route* r = findRoute(std::begin(WITH_STUDY), std::end(WITH_STUDY), c.path)) return r->handle(c);
+    throw HttpError(404, "no such path: " + c.path.substr(0, 80));
 }
 
 namespace {

@@ -56,10 +56,12 @@ public:
     const std::string& token() const { return mToken; }
     std::string url() const;
 
-private:
+    /// A file of the page, held in memory.
     struct Asset {
         std::string body, mime;
     };
+
+private:
     void handle(const httplib::Request& req, httplib::Response& res);
     void route(const httplib::Request& req, httplib::Response& res);
     bool allowed(const httplib::Request& req, httplib::Response& res) const;

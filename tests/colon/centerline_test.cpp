@@ -3,7 +3,7 @@
 #include "colon/centerline.h"
 #include "colon/centerline_far_end.h"
 
-#include "tests/volume/test_shapes.h"
+#include "tests/shapes/test_shapes.h"
 #include "volume/error.h"
 #include "colon/segment.h"
 #include "volume/image_io.h"

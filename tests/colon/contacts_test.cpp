@@ -4,7 +4,7 @@
 // cycle (a collapsed stretch, beads) are never cut.
 #include "colon/contacts.h"
 
-#include "tests/volume/test_shapes.h"
+#include "tests/shapes/test_shapes.h"
 #include "colon/centerline.h"
 #include "volume/error.h"
 

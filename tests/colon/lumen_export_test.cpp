@@ -5,7 +5,7 @@
 #include "pipeline/artifact_io.h"
 #include "colon/export.h"
 #include "colon/phantom_io.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "volume/error.h"
 #include "volume/image_io.h"
 #include "volume/ingest.h"

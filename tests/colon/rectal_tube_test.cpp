@@ -3,7 +3,7 @@
 // without a plausible colon refused.
 #include "colon/rectal_tube.h"
 
-#include "tests/volume/test_shapes.h"
+#include "tests/shapes/test_shapes.h"
 #include "volume/error.h"
 #include "colon/lumen_mask.h"
 #include "colon/segment.h"

@@ -1,7 +1,7 @@
 // Lumen segmentation against noisy HU phantoms with analytic ground truth (style.md §12).
 #include "colon/segment.h"
 
-#include "tests/volume/test_shapes.h"
+#include "tests/shapes/test_shapes.h"
 #include "colon/centerline.h"
 #include "volume/error.h"
 #include "colon/lumen_mask.h"

@@ -7,7 +7,7 @@
 #include "pipeline/artifact_io.h"
 #include "colon/phantom_io.h"
 #include "colon/uncut_lumen.h"
-#include "pipeline/stage_context.h"
+#include "colon/study_run.h"
 #include "surface/lumen_surface.h"
 #include "tests/pipeline/study_fixture.h"
 

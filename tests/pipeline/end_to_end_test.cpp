@@ -5,7 +5,7 @@
 #include "pipeline/artifact_io.h"
 #include "colon/phantom_io.h"
 #include "pipeline/run_log.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "render/ray_scene.h"
 #include "surface/extract_surface.h"
 

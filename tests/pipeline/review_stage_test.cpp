@@ -1,7 +1,7 @@
 // The render stage's review views (render.review): review/ frames and poses, and the fly-over
 // with review in coverage/coverage.json, on the small phantom study of the pipeline tests.
 #include "pipeline/artifact_io.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "tests/pipeline/study_fixture.h"
 
 #include <gtest/gtest.h>

@@ -4,7 +4,7 @@
 
 #include "colon/phantom.h"
 #include "colon/phantom_io.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>

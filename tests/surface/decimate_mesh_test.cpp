@@ -6,7 +6,7 @@
 #include "surface/extract_surface.h"
 #include "surface/mesh_checks.h"
 #include "surface/mesh_distance.h"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/LevelSetSphere.h>

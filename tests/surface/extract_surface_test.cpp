@@ -7,7 +7,7 @@
 
 #include "colon/phantom.h"
 #include "surface/mesh_checks.h"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 #include "volume/error.h"
 #include "volume/ingest.h"
 #include "colon/segment.h"

@@ -7,7 +7,7 @@
 #include "surface/lumen_surface.h"
 
 #include "colon/phantom.h"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 #include "volume/ingest.h"
 #include "colon/segment.h"
 

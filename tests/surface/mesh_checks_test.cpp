@@ -4,7 +4,7 @@
 #include "surface/mesh_checks.h"
 
 #include "surface/extract_surface.h"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 
 #include <openvdb/tools/LevelSetSphere.h>
 

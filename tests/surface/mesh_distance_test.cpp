@@ -4,7 +4,7 @@
 #include "surface/mesh_distance.h"
 
 #include "surface/extract_surface.h"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 #include "volume/error.h"
 
 #include <openvdb/tools/LevelSetSphere.h>

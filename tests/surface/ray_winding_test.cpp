@@ -6,7 +6,7 @@
 
 #include "surface/extract_surface.h"
 #include "surface/mesh_checks.h"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 
 #include <gtest/gtest.h>
 

@@ -6,7 +6,7 @@
 #include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
 #include "colon/phantom_io.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "view/view_server.h"
 
 #include <gtest/gtest.h>

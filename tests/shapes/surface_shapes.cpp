@@ -3,7 +3,7 @@
 // source location, so ignoring it around the includes silences only third-party code.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#include "surface_test_shapes.h"
+#include "tests/shapes/surface_shapes.h"
 
 #include <openvdb/tools/SignedFloodFill.h>
 

@@ -1,4 +1,4 @@
-/// @file surface_test_shapes.h
+/// @file surface_shapes.h
 /// @brief Analytic shapes for the surface tests (style.md §12): signed distance grids sampled
 ///        from closed-form distances (exact at voxel centres), their "staircase" versions
 ///        (a binary voxel mask as a level set: +-half a voxel), and a ray caster for heights.

@@ -1,4 +1,4 @@
-#include "tests/volume/test_shapes.h"
+#include "tests/shapes/test_shapes.h"
 
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>

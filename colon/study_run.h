@@ -1,11 +1,14 @@
-/// @file stage_context.h
-/// @brief What a stage body sees of a run (internal to pipeline/): the options, the study
-///        folder, and the objects earlier stages of the same run left in memory. Each stage
-///        body lives in its own stage_<name>.cpp and returns its report for the manifest; the
-///        render steps (frames, flythrough, overviews, video, coverage) share stage_render.cpp.
+/// @file study_run.h
+/// @brief What a colon stage body sees of a run: the options, the study folder, and the
+///        objects earlier stages of the same run left in memory. Each stage body lives in its
+///        own stage_<name>.cpp and returns its report for the manifest; the render steps
+///        (frames, flythrough, overviews, video, coverage) share stage_render.cpp.
 #pragma once
 
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
+#include "pipeline/ingest_to_vdb.h"
+#include "pipeline/json_io.h"
+#include "pipeline/stage_run.h"
 #include "surface/mesh_types.h"
 #include "volume/centerline_types.h"
 #include "volume/image_io.h"
@@ -33,8 +36,6 @@ namespace flyover {
 class RayScene;
 struct LumenSegmentation;
 struct UncutLumen;
-struct PartAnalysis;
-struct PartSurface;
 
 /// The surface as the render steps' scenes take it: flat arrays (x, y, z per vertex, three
 /// vertex indices per face) and the smooth-shading normals of the whole surface, from which the
@@ -82,8 +83,6 @@ struct StudyState {
     openvdb::FloatGrid::Ptr sdf;
     std::optional<Centerline> centerline;
     std::optional<TriMesh> mesh;
-    std::shared_ptr<PartAnalysis> part;          ///< flyover inspect: the voids stage's analysis
-    std::shared_ptr<PartSurface> partSurface;    ///< flyover inspect: the surfaces stage's mesh
     std::optional<RenderedPairs> framePairs;  ///< set by the frames step when it ran in this run
     /// The segmentation made from `hu` by the early node beside ingest's write of ct.vdb, for
     /// the segment stage (null: none made).
@@ -93,12 +92,17 @@ struct StudyState {
     std::shared_ptr<UncutLumen> uncutLumen;
 };
 
-class StudyRun {
-public:
-    explicit StudyRun(const RunOptions& o) : opt(o), dir(o.studyDir), start(std::chrono::steady_clock::now()) {}
-    ~StudyRun();
+/// The colon's parameters as the engine sees them, held by the run (base-from-member: the
+/// engine's StageRun refers to them).
+struct ColonParamsHolder {
+    explicit ColonParamsHolder(const PipelineParams& p) : paramSet(p) {}
+    ColonParamSet paramSet;
+};
 
-    std::string path(const std::string& name) const { return (dir / name).string(); }
+class StudyRun : private ColonParamsHolder, public StageRun {
+public:
+    explicit StudyRun(const RunOptions& o) : ColonParamsHolder(o.params), StageRun(o, paramSet), opt(o) {}
+    ~StudyRun() override;
 
     /// The lumen level set: from memory when segment ran in this run, else from lumen.vdb.
     /// Thread-safe (centerline and mesh ask for it at the same time).
@@ -123,39 +127,10 @@ public:
     /// beside the writing and hashing of surface.ply; a no-op without a mesh in memory).
     void prepareSurfaceArrays();
 
-    /// Mid-body hand-ons: a stage body puts into the graph a result it holds in run.state
-    /// before its artifacts are written, and the early nodes that read it start then (the
-    /// frames step also hands on its first pair, once out and the whole scene built after it,
-    /// which the write-behind's commits wait for).
-    /// This is the one thing an edge from the stage's node cannot say: that node ends only
-    /// with the body. runPipeline hands on, after the body, whatever a body did not (reused,
-    /// not wanted, failed), so each hand-on happens exactly once.
-    /// @param what a name of the stage table's hand-ons ("segment:uncut-lumen", say).
-    void handOn(const std::string& what) const
-    {
-        if (mHandOn) mHandOn(what);
-    }
-    /// How many early nodes of this run read `what` (the body keeps what it hands on only for them).
-    int earlyReaders(const std::string& what) const
-    {
-        const auto it = mEarlyReaders.find(what);
-        return it == mEarlyReaders.end() ? 0 : it->second;
-    }
-    /// Set by runPipeline when it builds the graph.
-    void setHandOns(std::function<void(const std::string&)> handOn, std::map<std::string, int> earlyReaders)
-    {
-        mHandOn = std::move(handOn);
-        mEarlyReaders = std::move(earlyReaders);
-    }
-
     const RunOptions& opt;
-    std::filesystem::path dir;
     StudyState state;
-    std::chrono::steady_clock::time_point start;  ///< when runPipeline started
 
 private:
-    std::function<void(const std::string&)> mHandOn;
-    std::map<std::string, int> mEarlyReaders;
     std::mutex mLoadMutex;
     tbb::collaborative_once_flag mRenderOnce;
     std::unique_ptr<RenderInputs> mRender;
@@ -164,14 +139,6 @@ private:
     double mReadCenterlineSeconds = 0;
 };
 
-inline nlohmann::json vec3Json(const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
-
-/// Reads run.opt.ctPath into an isotropic grid named `gridName`, writes it to ct.vdb and returns
-/// the ingest report (geometry, reader, warnings): the ingest of both `run` and `inspect`.
-/// `beforeWrite`, when given, is called with the grid before ct.vdb is written.
-nlohmann::json ingestToCtVdb(StudyRun& run, const IngestParams& params, const ImageReadOptions& options,
-                             const std::string& gridName, Progress* progress, openvdb::FloatGrid::Ptr& grid,
-                             const std::function<void(const openvdb::FloatGrid::Ptr&)>& beforeWrite = {});
 
 // Stage bodies: each writes its artifacts (atomically) and returns its report.
 nlohmann::json runIngest(StudyRun& run, Progress* progress);
@@ -209,12 +176,5 @@ nlohmann::json runFlythrough(StudyRun& run, Progress* progress);
 nlohmann::json runOverviews(StudyRun& run, Progress* progress);
 nlohmann::json runVideo(StudyRun& run, Progress* progress);
 nlohmann::json runCoverage(StudyRun& run, Progress* progress);
-
-// The stages of a part study (`flyover inspect`), in stage_inspect.cpp.
-nlohmann::json runPartIngest(StudyRun& run, Progress* progress);
-nlohmann::json runVoids(StudyRun& run, Progress* progress);
-nlohmann::json runPartSurfaces(StudyRun& run, Progress* progress);
-nlohmann::json runPartOverviews(StudyRun& run, Progress* progress);
-nlohmann::json runTurntable(StudyRun& run, Progress* progress);
 
 } // namespace flyover
