@@ -219,7 +219,7 @@ int ingest(const std::string& path, const std::string& vdbPath)
     uint64_t fileBytes = 0;
     if (!vdbPath.empty()) {
         const auto t1 = Clock::now();
-        openvdb::io::File file(vdbPath);  // as pipeline/artifact_io.cpp writes ct.vdb
+        openvdb::io::File file(vdbPath);  // as pipeline/vdb_io.cpp writes ct.vdb
         file.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK | (openvdb::io::Archive::hasBloscCompression()
                                                                      ? openvdb::io::COMPRESS_BLOSC
                                                                      : openvdb::io::COMPRESS_ZIP));

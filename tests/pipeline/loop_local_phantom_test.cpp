@@ -9,7 +9,7 @@
 #include "colon/phantom.h"
 #include "colon/phantom_io.h"
 #include "pipeline/artifact_io.h"
-#include "pipeline/study.h"
+#include "colon/colon_study.h"
 #include "render/loop_ownership.h"
 
 #include <gtest/gtest.h>
