@@ -24,19 +24,6 @@ using nlohmann::json;
 
 namespace {
 
-Vec3d vec(const json& a) { return {a.at(0).get<double>(), a.at(1).get<double>(), a.at(2).get<double>()}; }
-
-Camera cameraOf(const json& j)
-{
-    Camera c;
-    c.position = vec(j.at("position_mm"));
-    c.forward = vec(j.at("forward"));
-    c.up = vec(j.at("up"));
-    c.right = vec(j.at("right"));
-    c.fovDeg = j.at("fov_deg").get<double>();
-    c.nearMm = j.at("near_mm").get<double>();
-    return c;
-}
 
 void addTo(bench::ForeignPixels& sum, const bench::ForeignPixels& add)
 {
@@ -103,7 +90,7 @@ int main(int argc, char** argv)
             const double arc = f.at("arc_mm").get<double>();
             bench::ForeignPixels pt, pl;
             for (const json& c : f.at("cameras")) {
-                const Camera cam = cameraOf(c);
+                const Camera cam = bench::cameraOfJson(c);
                 const auto a = bench::foreignPixels(scene, cam, px, LoopWindow{}, reference, arc, limitMm);
                 const auto b = bench::foreignPixels(scene, cam, px, LoopWindow{&owners.arcMm, arc, reachMm}, reference,
                                                     arc, limitMm);

@@ -12,6 +12,7 @@
 #include "render/render_view.h"
 #include "volume/centerline_types.h"
 
+#include <nlohmann/json.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -21,6 +22,22 @@
 #include <vector>
 
 namespace flyover::bench {
+
+/// A camera as poses.json writes it (pipeline/camera_json.h's cameraJson).
+inline Camera cameraOfJson(const nlohmann::json& j)
+{
+    auto vec = [](const nlohmann::json& a) {
+        return Vec3d{a.at(0).get<double>(), a.at(1).get<double>(), a.at(2).get<double>()};
+    };
+    Camera c;
+    c.position = vec(j.at("position_mm"));
+    c.forward = vec(j.at("forward"));
+    c.up = vec(j.at("up"));
+    c.right = vec(j.at("right"));
+    c.fovDeg = j.at("fov_deg").get<double>();
+    c.nearMm = j.at("near_mm").get<double>();
+    return c;
+}
 
 /// Per scene triangle: the arc (mm, index * step of `cl`) of the centerline point its inward
 /// normal line runs through; NaN when the line meets none within 60 mm.

@@ -43,19 +43,24 @@ void recordEmbreeError(void* userPtr, RTCError code, const char* message)
 
 } // namespace
 
+namespace {
+
+/// OST's test: candidate i of a filter call hits a back face (the ray leaves its front side).
+bool backFace(const RTCFilterFunctionNArguments* args, unsigned int i)
+{
+    const unsigned int n = args->N;
+    const float d = RTCRayN_dir_x(args->ray, n, i) * RTCHitN_Ng_x(args->hit, n, i) +
+                    RTCRayN_dir_y(args->ray, n, i) * RTCHitN_Ng_y(args->hit, n, i) +
+                    RTCRayN_dir_z(args->ray, n, i) * RTCHitN_Ng_z(args->hit, n, i);
+    return d > 0.0f;
+}
+
+} // namespace
+
 void ostFilter(const RTCFilterFunctionNArguments* args)
 {
-    int* valid = args->valid;
-    RTCRayN* ray = args->ray;
-    RTCHitN* hit = args->hit;
-    const unsigned int n = args->N;
-    for (unsigned int i = 0; i < n; ++i) {
-        if (valid[i] != -1) continue;
-        const float d = RTCRayN_dir_x(ray, n, i) * RTCHitN_Ng_x(hit, n, i) +
-                        RTCRayN_dir_y(ray, n, i) * RTCHitN_Ng_y(hit, n, i) +
-                        RTCRayN_dir_z(ray, n, i) * RTCHitN_Ng_z(hit, n, i);
-        if (d > 0.0f) valid[i] = 0;
-    }
+    for (unsigned int i = 0; i < args->N; ++i)
+        if (args->valid[i] == -1 && backFace(args, i)) args->valid[i] = 0;
 }
 
 void loopOstFilter(const RTCFilterFunctionNArguments* args)
@@ -67,10 +72,7 @@ void loopOstFilter(const RTCFilterFunctionNArguments* args)
     const unsigned int n = args->N;
     for (unsigned int i = 0; i < n; ++i) {
         if (valid[i] != -1) continue;
-        const float d = RTCRayN_dir_x(ray, n, i) * RTCHitN_Ng_x(hit, n, i) +
-                        RTCRayN_dir_y(ray, n, i) * RTCHitN_Ng_y(hit, n, i) +
-                        RTCRayN_dir_z(ray, n, i) * RTCHitN_Ng_z(hit, n, i);
-        if (d > 0.0f) {
+        if (backFace(args, i)) {
             valid[i] = 0;
             continue;
         }

@@ -26,17 +26,6 @@ namespace {
 
 Vec3d vec(const json& a) { return {a.at(0).get<double>(), a.at(1).get<double>(), a.at(2).get<double>()}; }
 
-Camera cameraOf(const json& j)
-{
-    Camera c;
-    c.position = vec(j.at("position_mm"));
-    c.forward = vec(j.at("forward"));
-    c.up = vec(j.at("up"));
-    c.right = vec(j.at("right"));
-    c.fovDeg = j.at("fov_deg").get<double>();
-    c.nearMm = j.at("near_mm").get<double>();
-    return c;
-}
 
 /// The truth's centerline as a Centerline (1 mm steps, as the truth is sampled).
 Centerline truthCenterline(const Phantom& ph)
@@ -100,7 +89,7 @@ Shares runPacked(uint64_t seed, bool fromMask)
         const double arc = f.at("arc_mm").get<double>();
         const double truthArc = double(onTruth.nearest(vec(f.at("centerline_point_mm"))));
         for (const json& c : f.at("cameras")) {
-            const Camera cam = cameraOf(c);
+            const Camera cam = bench::cameraOfJson(c);
             const auto a = bench::foreignPixels(scene, cam, 96, LoopWindow{}, reference, truthArc, 80.0);
             const auto b = bench::foreignPixels(scene, cam, 96, LoopWindow{&owners, arc, 80.0}, reference, truthArc, 80.0);
             thesis.wall += a.wall;
