@@ -28,14 +28,13 @@ bool littleEndianHost()
 }
 
 
-/// The bytes OpenMesh's binary PLY writer makes of a triangle mesh without deleted elements
-/// (the header, x y z per vertex in index order, then per face the count 3 and the vertex
-/// indices in its face-vertex circulation order), built in memory and written at once instead
-/// of one stream write per value (the full phantom's 16.7 MB: ~4.8 M writes). Returns false
-/// for any other mesh (it then goes through OpenMesh).
-bool writeTrianglePly(const std::string& tmp, const TriMesh& mesh)
+/// A triangle mesh without deleted elements as a TrianglePly (false for any other mesh, which
+/// then goes through OpenMesh): the bytes OpenMesh's binary PLY writer makes of it (x y z per
+/// vertex in index order, then per face the count 3 and the vertex indices in its face-vertex
+/// circulation order), built in memory and written at once instead of one stream write per
+/// value (the full phantom's 16.7 MB: ~4.8 M writes).
+bool writeMeshPly(const std::string& tmp, const TriMesh& mesh)
 {
-    if (!littleEndianHost()) return false;
     const std::size_t nv = mesh.n_vertices(), nf = mesh.n_faces();
     if (mesh.has_vertex_status())
         for (std::size_t v = 0; v < nv; ++v)
@@ -43,39 +42,61 @@ bool writeTrianglePly(const std::string& tmp, const TriMesh& mesh)
     if (mesh.has_face_status())
         for (std::size_t f = 0; f < nf; ++f)
             if (mesh.status(OpenMesh::FaceHandle(int(f))).deleted()) return false;
-    const std::string header = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(nv) +
-                               "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
-                               std::to_string(nf) + "\nproperty list uchar int vertex_indices\nend_header\n";
-    std::vector<char> bytes(header.size() + nv * 12 + nf * 13);
-    char* out = bytes.data();
-    std::memcpy(out, header.data(), header.size());
-    out += header.size();
-    for (std::size_t v = 0; v < nv; ++v, out += 12) {
+    TrianglePly ply;
+    ply.vertices = nv;
+    ply.faces = nf;
+    ply.vertex = [&mesh](std::size_t v, float* xyz, uint8_t*) {
         const TriMesh::Point& p = mesh.point(OpenMesh::VertexHandle(int(v)));
-        const float xyz[3] = {p[0], p[1], p[2]};
-        std::memcpy(out, xyz, 12);
-    }
-    for (std::size_t f = 0; f < nf; ++f, out += 13) {
-        int32_t idx[3];
+        xyz[0] = p[0], xyz[1] = p[1], xyz[2] = p[2];
+    };
+    ply.face = [&mesh](std::size_t f, int32_t* idx) {
         int n = 0;
         for (auto it = mesh.cfv_iter(OpenMesh::FaceHandle(int(f))); it.is_valid(); ++it) {
-            if (n == 3) return false;  // not a triangle
+            if (n == 3) return false;
             idx[n++] = it->idx();
         }
-        if (n != 3) return false;
-        out[0] = char(3);
-        std::memcpy(out + 1, idx, sizeof idx);
-    }
-    writeFileBytes(tmp, bytes.data(), bytes.size());
-    return true;
+        return n == 3;
+    };
+    return writeTrianglePly(tmp, ply);
 }
 
 } // namespace
 
+bool writeTrianglePly(const std::string& file, const TrianglePly& ply)
+{
+    static_assert(sizeof(float) == 4 && sizeof(int32_t) == 4, "PLY needs 32-bit float and int");
+    if (!littleEndianHost()) throw std::runtime_error(file + ": the PLY writer assumes a little-endian machine");
+    std::string header = "ply\nformat binary_little_endian 1.0\n";
+    for (const std::string& c : ply.comments) header += "comment " + c + "\n";
+    header += "element vertex " + std::to_string(ply.vertices) + "\nproperty float x\nproperty float y\nproperty float z\n";
+    for (const std::string& name : ply.vertexUchars) header += "property uchar " + name + "\n";
+    header += "element face " + std::to_string(ply.faces) + "\nproperty list uchar int vertex_indices\nend_header\n";
+    const std::size_t uchars = ply.vertexUchars.size(), vertexBytes = 12 + uchars;
+    std::vector<char> bytes(header.size() + ply.vertices * vertexBytes + ply.faces * 13);
+    char* out = bytes.data();
+    std::memcpy(out, header.data(), header.size());
+    out += header.size();
+    std::vector<uint8_t> values(uchars);
+    for (std::size_t v = 0; v < ply.vertices; ++v, out += vertexBytes) {
+        float xyz[3];
+        ply.vertex(v, xyz, values.data());
+        std::memcpy(out, xyz, 12);
+        if (uchars) std::memcpy(out + 12, values.data(), uchars);
+    }
+    for (std::size_t f = 0; f < ply.faces; ++f, out += 13) {
+        int32_t idx[3];
+        if (!ply.face(f, idx)) return false;
+        out[0] = char(3);
+        std::memcpy(out + 1, idx, sizeof idx);
+    }
+    writeFileBytes(file, bytes.data(), bytes.size());
+    return true;
+}
+
 void writeMesh(const std::string& path, const TriMesh& mesh)
 {
     writeAtomically(path, [&](const std::string& tmp) {
-        if (writeTrianglePly(tmp, mesh)) return;
+        if (littleEndianHost() && writeMeshPly(tmp, mesh)) return;
         OpenMesh::IO::Options opt = OpenMesh::IO::Options::Binary;
         if (!OpenMesh::IO::write_mesh(mesh, tmp, opt))
             throw InputError(path + ": OpenMesh could not write the mesh");

@@ -5,10 +5,29 @@
 #include "surface/mesh_types.h"
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 namespace flyover {
+
+/// A binary little-endian triangle PLY: float x y z and optional uchar properties per vertex,
+/// faces as `list uchar int vertex_indices` of 3 (the layout of OpenMesh's binary writer when
+/// there are no comments and no properties).
+struct TrianglePly {
+    std::size_t vertices = 0, faces = 0;
+    std::vector<std::string> comments;      ///< one `comment` line each, after the format line
+    std::vector<std::string> vertexUchars;  ///< names of the per-vertex uchar properties after x y z
+    /// Vertex v's position and its vertexUchars.size() uchar values.
+    std::function<void(std::size_t v, float* xyz, uint8_t* uchars)> vertex;
+    /// Face f's three vertex indices; false when it is not a triangle.
+    std::function<bool(std::size_t f, int32_t* idx)> face;
+};
+
+/// Writes `ply` into `file` in one write (built in memory; not atomic: wrap it in
+/// writeAtomically). @return false, writing nothing, when a face is not a triangle.
+/// @throw std::runtime_error on a big-endian host or a failed write.
+bool writeTrianglePly(const std::string& file, const TrianglePly& ply);
 
 /// Binary PLY, the bytes of OpenMesh's writer: a triangle mesh without deleted elements is
 /// laid out in memory and written at once (the mesh stage's surface.ply is on the way to the
