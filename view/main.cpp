@@ -9,6 +9,7 @@
 #include "colon/phantom_io.h"
 #include "colon/colon_study.h"
 #include "colon/params.h"
+#include "colon/report.h"
 #include "inspect/inspect_study.h"
 #include "pipeline/stage_command.h"
 #include "pipeline/study.h"
@@ -402,6 +403,31 @@ struct ViewCommand {
     }
 };
 
+/// `flyover report`: the exam's C-RADS report (colon/report.h).
+struct ReportCommand {
+    CLI::App* reportCmd = nullptr;
+    std::string reportStudy;
+
+    void define(CLI::App& app)
+    {
+        reportCmd = app.add_subcommand("report", "write DIR/report/ (report.json, report.html): the C-RADS category from "
+                                                 "the accepted findings (before any review: a draft from the "
+                                                 "candidates of 6 mm or more) and the exam's coverage");
+        reportCmd->add_option("--study", reportStudy, "study folder (after flyover run with its coverage and polyps "
+                                                      "stages)")
+            ->required();
+    }
+
+    int execute(RunLog& runLog, const Log& log)
+    {
+        const auto report = writeReport(reportStudy);
+        log("report " + (fs::path(reportStudy) / "report" / "report.html").string() + ": " +
+            report["c_rads"].get<std::string>() + (report["draft"].get<bool>() ? " (draft: no finding reviewed yet)" : "") +
+            ", " + std::to_string(report["findings"].size()) + " finding(s)");
+        return 0;
+    }
+};
+
 /// `flyover stage`: one stage, for workflow engines (pipeline/stage_command.h for the exit codes).
 struct StageCommand {
     CLI::App* stageCmd = nullptr;
@@ -493,6 +519,8 @@ int main(int argc, char** argv)
     stage.define(app);
     ParamsCommand params;
     params.define(app);
+    ReportCommand report;
+    report.define(app);
 
     try {
         app.parse(argc, argv);
@@ -531,6 +559,7 @@ int main(int argc, char** argv)
         if (*exportCommand.exportCmd) return exportCommand.execute(runLog, log);
         if (*view.viewCmd) return view.execute(runLog, log);
         if (*stage.stageCmd) return stage.execute(runLog, log);
+        if (*report.reportCmd) return report.execute(runLog, log);
         if (*status.cleanCmd) return status.runClean(runLog, log);
     } catch (const std::exception& e) {
         // 1 bad input, 2 bad parameter, 3 busy study, 4 upstream not ready, 75 retry (stage_command.h)

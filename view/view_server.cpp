@@ -1,6 +1,8 @@
 #include "view/view_server.h"
 
 #include "pipeline/artifact_io.h"
+#include "view/findings_routes.h"
+#include "view/http_request.h"
 #include "view/image_codec.h"
 #include "volume/error.h"
 #include "volume/image.h"
@@ -32,15 +34,9 @@ namespace flyover {
 
 namespace {
 
-constexpr std::size_t MAX_BODY_BYTES = 64 * 1024;
+using namespace http;
 constexpr std::size_t MAX_ASSET_BYTES = 16u << 20;
 constexpr std::size_t MAX_ASSETS = 512;
-
-/// An HTTP error with its status; the message becomes {"error": message}.
-struct HttpError : std::runtime_error {
-    HttpError(int s, const std::string& m) : std::runtime_error(m), status(s) {}
-    int status;
-};
 
 std::string randomToken()
 {
@@ -94,123 +90,6 @@ std::string cookieValue(const std::string& header, const std::string& name)
     return "";
 }
 
-/// Strict query parameters: only the names an endpoint knows (plus token and a cache-busting
-/// "_"), each at most once, numbers finite and in range.
-class Query {
-public:
-    Query(const httplib::Request& req, std::set<std::string> known) : mReq(req)
-    {
-        known.insert("token");
-        known.insert("_");
-        for (const auto& kv : req.params) {
-            if (!known.count(kv.first))
-                throw HttpError(400, "unknown parameter '" + kv.first.substr(0, 40) + "'");
-            if (req.params.count(kv.first) > 1) throw HttpError(400, kv.first + ": given more than once");
-        }
-    }
-    bool has(const std::string& name) const { return mReq.has_param(name.c_str()); }
-    std::string text(const std::string& name) const { return mReq.get_param_value(name.c_str()); }
-
-    double number(const std::string& name) const
-    {
-        if (!has(name)) throw HttpError(400, name + ": missing");
-        return parseNumber(name, text(name));
-    }
-    double number(const std::string& name, double fallback) const { return has(name) ? number(name) : fallback; }
-    double number(const std::string& name, double fallback, double lo, double hi) const
-    {
-        const double v = number(name, fallback);
-        if (v < lo || v > hi)
-            throw HttpError(422, name + ": " + shortNumber(v) + " is outside [" + shortNumber(lo) + ", " + shortNumber(hi) + "]");
-        return v;
-    }
-    int integer(const std::string& name, int fallback, int lo, int hi) const
-    {
-        const double v = number(name, fallback);
-        if (v != std::floor(v)) throw HttpError(400, name + ": must be an integer");
-        if (v < lo || v > hi)
-            throw HttpError(422, name + ": " + shortNumber(v) + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
-        return int(v);
-    }
-    std::string choice(const std::string& name, const std::string& fallback, const std::set<std::string>& options) const
-    {
-        if (!has(name)) return fallback;
-        const std::string v = text(name);
-        if (!options.count(v)) {
-            std::string list;
-            for (const auto& o : options) list += (list.empty() ? "" : "|") + o;
-            throw HttpError(400, name + ": must be " + list);
-        }
-        return v;
-    }
-
-    static double parseNumber(const std::string& name, const std::string& s)
-    {
-        if (s.empty() || s.size() > 64) throw HttpError(400, name + ": not a number");
-        char* end = nullptr;
-        errno = 0;
-        const double v = std::strtod(s.c_str(), &end);
-        if (end != s.c_str() + s.size() || errno == ERANGE || !std::isfinite(v))
-            throw HttpError(400, name + ": '" + s.substr(0, 24) + "' is not a finite number");
-        return v;
-    }
-    static std::string shortNumber(double v)
-    {
-        std::ostringstream o;
-        o << v;
-        return o.str();
-    }
-
-private:
-    const httplib::Request& mReq;
-};
-
-double jsonNumber(const json& body, const std::string& name, double fallback, double lo, double hi)
-{
-    if (!body.contains(name) || body[name].is_null()) return fallback;
-    if (!body[name].is_number()) throw HttpError(400, name + ": must be a number");
-    const double v = body[name].get<double>();
-    if (!std::isfinite(v)) throw HttpError(400, name + ": must be finite");
-    if (v < lo || v > hi)
-        throw HttpError(422, name + ": " + Query::shortNumber(v) + " is outside [" + Query::shortNumber(lo) + ", " +
-                                 Query::shortNumber(hi) + "]");
-    return v;
-}
-
-std::string jsonChoice(const json& body, const std::string& name, const std::string& fallback,
-                       const std::set<std::string>& options)
-{
-    if (!body.contains(name) || body[name].is_null()) return fallback;
-    if (!body[name].is_string() || !options.count(body[name].get<std::string>())) {
-        std::string list;
-        for (const auto& o : options) list += (list.empty() ? "" : "|") + o;
-        throw HttpError(400, name + ": must be " + list);
-    }
-    return body[name].get<std::string>();
-}
-
-json parseBody(const httplib::Request& req)
-{
-    if (req.body.size() > MAX_BODY_BYTES) throw HttpError(413, "request body larger than 64 KiB");
-    json body = json::parse(req.body, nullptr, false);
-    if (body.is_discarded() || !body.is_object()) throw HttpError(400, "body: must be a JSON object");
-    return body;
-}
-
-void sendJson(httplib::Response& res, const json& j, int status = 200)
-{
-    res.status = status;
-    // Request text echoed in a message may be any bytes: replace invalid UTF-8, never throw.
-    res.set_content(j.dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
-}
-
-std::string oneLine(std::string s)
-{
-    for (char& c : s)
-        if (c == '\n' || c == '\r') c = ' ';
-    return s.substr(0, 400);
-}
-
 std::string exeDir()
 {
     std::error_code ec;
@@ -232,6 +111,7 @@ struct RouteCall {
     const std::string& token;
     LiveStudy& live;
     BookmarkStore& bookmarks;
+    FindingStore& findings;
     std::atomic<unsigned>& shotCounter;
     std::shared_ptr<const ViewStudy> held;
     const ViewStudy* study = nullptr;
@@ -540,6 +420,9 @@ void serveApiBookmarks(RouteCall& c)
     }
 }
 
+/// /api/findings, /api/findings/... (view/findings_routes.h)
+void serveApiFindings(RouteCall& c) { serveFindings(c.req, c.res, c.findings, *c.study); }
+
 /// /api/screenshot
 void serveApiScreenshot(RouteCall& c)
 {
@@ -631,6 +514,7 @@ ViewServer::ViewServer(LiveStudy& study, const ViewServerOptions& options)
     if (mToken.empty()) mToken = randomToken();
     if (mPort < 0 || mPort > 65535) throw ParameterError("--port: must be 0..65535");
     mBookmarks = std::make_unique<BookmarkStore>((fs::path(mLive.studyDir()) / "bookmarks.json").string());
+    mFindings = std::make_unique<FindingStore>(mLive.studyDir());
 
     // The page's files, read once: requests are answered from this map only.
     mAssetDir = options.assetDir.empty() ? defaultAssetDir() : options.assetDir;
@@ -781,11 +665,13 @@ void ViewServer::route(const httplib::Request& req, httplib::Response& res)
         {"/api/overview", false, serveApiOverview},
         {"/api/overview/pick", false, serveApiOverviewPick},
         {"/api/bookmarks", false, serveApiBookmarks},
+        {"/api/findings", false, serveApiFindings},
+        {"/api/findings/", true, serveApiFindings},
         {"/api/screenshot", false, serveApiScreenshot},
         {"/api/screenshots/", true, serveApiScreenshots},
     };
     RouteCall c{req, res, req.path, req.method, req.method == "GET" || req.method == "HEAD", mAssets, mAssetDir, mToken,
-                mLive, *mBookmarks, mShotCounter, nullptr};
+                mLive, *mBookmarks, *mFindings, mShotCounter, nullptr};
     if (const Route* r = findRoute(std::begin(WITHOUT_STUDY), std::end(WITHOUT_STUDY), c.path)) return r->handle(c);
     c.held = mLive.current(&c.revision);
     c.study = c.held.get();

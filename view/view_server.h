@@ -8,6 +8,7 @@
 #pragma once
 
 #include "view/bookmarks.h"
+#include "view/finding_store.h"
 #include "view/live_study.h"
 #include "view/view_study.h"
 
@@ -69,6 +70,7 @@ private:
     LiveStudy& mLive;
     std::unique_ptr<httplib::Server> mServer;
     std::unique_ptr<BookmarkStore> mBookmarks;
+    std::unique_ptr<FindingStore> mFindings;
     std::map<std::string, Asset> mAssets;  ///< "index.html", "app.js", "sub/x.png" -> content
     std::string mAssetDir;
     std::string mToken;

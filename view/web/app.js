@@ -17,6 +17,8 @@
 
 'use strict';
 
+import { findingsPanel } from './findings.js';
+
 const $ = (sel) => document.querySelector(sel);
 
 // ---------------------------------------------------------------- token and requests
@@ -248,6 +250,7 @@ function drawOverlay() {
     ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); ctx.stroke();
     ctx.setLineDash([]);
   }
+  findings.draw(ctx, h, viewGap(), S.shown);
 }
 
 /** The view and pixel (in a view of the shown px) under a mouse event, or null. */
@@ -302,6 +305,7 @@ async function onViewClick(ev) {
         const d = norm(sub(S.picks[1].point, S.picks[0].point));
         out.dataset.distanceMm = String(fmt(d, 3));
         out.textContent = `distance ${d.toFixed(1)} mm`;
+        findings.measured(d);
       } else {
         out.dataset.distanceMm = '';
         out.textContent = 'first point picked: click the second one';
@@ -309,6 +313,7 @@ async function onViewClick(ev) {
     } else {
       S.picks = [mark];
     }
+    findings.picked(point);
     drawOverlay();
     setCursor(point);
   } catch (e) { reportError(e); }
@@ -717,6 +722,21 @@ function nextMissed() {
   flyToMissed(ahead || regions[0]);
 }
 
+// ---------------------------------------------------------------- candidates and findings
+
+const findings = findingsPanel({ apiJson, flyToPoint, setStatus, reportError, redraw: () => drawOverlay() });
+
+/** The CT slices as large as the fly-over views: under them, two a row. */
+function setCtLarge(on) {
+  const ct = $('#ct');
+  ct.classList.toggle('large', on);
+  if (on) $('#left').insertBefore(ct, $('#transport'));
+  else $('#right').insertBefore(ct, $('#missed-panel'));
+  $('#ct-large').dataset.active = String(on);
+  $('#ct-large').textContent = on ? 'CT small' : 'CT large';
+  for (const plane of PLANES) drawCrosshair(plane);
+}
+
 // ---------------------------------------------------------------- bookmarks
 
 async function loadBookmarks() {
@@ -830,6 +850,7 @@ function bind() {
   $('#screenshot').addEventListener('click', screenshot);
   $('#bookmark-form').addEventListener('submit', (e) => { e.preventDefault(); saveBookmark(); });
   $('#next-missed').addEventListener('click', nextMissed);
+  $('#ct-large').addEventListener('click', () => setCtLarge(!$('#ct').classList.contains('large')));
   $('#window').addEventListener('change', (e) => setWindowLevel(Number(e.target.value), S.level));
   $('#level').addEventListener('change', (e) => setWindowLevel(S.window, Number(e.target.value)));
   $('#wl-preset').addEventListener('change', (e) => {
@@ -850,7 +871,7 @@ function bind() {
     try { await flyToPoint(p); } catch (err) { reportError(err); }
   });
   // Enter in a value field applies it and hands the keys back to the shortcuts.
-  for (const id of ['#arc-input', '#roll', '#clip', '#goto', '#ct-point', '#window', '#level']) {
+  for (const id of ['#arc-input', '#roll', '#clip', '#goto', '#ct-point', '#window', '#level', '#finding-size']) {
     $(id).addEventListener('keydown', (e) => { if (e.key === 'Enter') e.target.blur(); });
   }
   window.addEventListener('resize', () => { for (const plane of PLANES) drawCrosshair(plane); });
@@ -881,6 +902,10 @@ function bind() {
     else if (k === 'n' || k === 'N') nextMissed();
     else if (k === 'b' || k === 'B') saveBookmark();
     else if (k === 's' || k === 'S') screenshot();
+    else if (k === '.') findings.next();
+    else if (k === ',') findings.previous();
+    else if (k === 'a' || k === 'A') findings.accept();
+    else if (k === 'x' || k === 'X') findings.reject();
     else if (k === 'Escape') { S.marker = null; S.picks = []; drawOverlay(); }
     else handled = false;
     if (handled) ev.preventDefault();
@@ -1071,6 +1096,7 @@ async function start() {
   document.body.dataset.ready = 'true';
   setStatus(`Study: ${studySummary(study)}`, 'loading');
   loadBookmarks();
+  findings.load();
   setTimeout(pollLive, LIVE_POLL_MS);
 }
 

@@ -8,7 +8,9 @@
 // fly-through, saves a bookmark and finds it after a reload, takes a screenshot, clicks a truth
 // polyp in a fly-over view and checks where the CT crosshair lands, clicks a polyp centre in a
 // CT slice and checks that the fly-over shows it, measures, jumps from the overview and to the
-// next missed region. Every check says what it expected and what it saw.
+// next missed region, walks the polyp candidates (accept with an edited size, reject), adds a
+// finding by hand at a picked point and finds them all after a reload, and shows the CT slices
+// as large as the views. Every check says what it expected and what it saw.
 //
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium; CTest's SKIP_RETURN_CODE).
 
@@ -48,6 +50,26 @@ function worldToSlice(m, p) {
 
 const truth = JSON.parse(fs.readFileSync(args.truth, 'utf8'));
 const viewer = new Viewer(args.flyover, args.study);
+
+// The candidates the page lists: the polyps stage's when the study has them, else the truth's
+// largest polyps written as polyps/candidates.json (flyover.polyps/1). findings.json starts empty.
+const candFile = path.join(args.study, 'polyps', 'candidates.json');
+const findingsFile = path.join(args.study, 'findings.json');
+function candidatesFixture() {
+  if (fs.existsSync(candFile)) return;
+  const cl = JSON.parse(fs.readFileSync(path.join(args.study, 'centerline.json'), 'utf8'));
+  const seg = (arc) => (cl.segment || [])[Math.max(0, Math.min(cl.point_count - 1, Math.round(arc / cl.step_mm)))] || 'sigmoid';
+  const list = (truth.polyps || []).filter((p) => p.arc_mm > 30).sort((a, b) => b.radius_mm - a.radius_mm).slice(0, 3)
+    .map((p, i) => ({
+      id: `c${i + 1}`, centroid_mm: p.center_mm, size_mm: Number((2 * p.radius_mm).toFixed(1)), height_mm: p.radius_mm,
+      volume_mm3: 2.1 * p.radius_mm ** 3, morphology: 'sessile', arc_mm: p.arc_mm, segment: seg(p.arc_mm),
+      score: Number((0.9 - 0.1 * i).toFixed(2)), pose: null,
+    }));
+  fs.mkdirSync(path.dirname(candFile), { recursive: true });
+  fs.writeFileSync(candFile, JSON.stringify({ schema: 'flyover.polyps/1', world_frame: 'LPS', candidates: list }, null, 1));
+}
+candidatesFixture();
+fs.rmSync(findingsFile, { force: true });
 
 // ---------------------------------------------------------------- the test
 
@@ -256,6 +278,8 @@ async function run() {
     const expected = dist(e0.point_mm, e1.point_mm);
     check(Math.abs(measured - expected) < 0.5, 'measured distance against /api/pick of the same two pixels',
       `${expected.toFixed(2)} mm`, `${measured.toFixed(2)} mm`);
+    const sizeField = Number(await page.inputValue('#finding-size'));
+    check(Math.abs(sizeField - measured) <= 0.051, 'finding size field after measuring', `${measured.toFixed(1)} mm`, sizeField);
     log(`measure: ${measured.toFixed(2)} mm (API ${expected.toFixed(2)} mm)`);
   } else {
     log('measure: skipped (a measuring pixel missed the surface)');
@@ -364,6 +388,8 @@ async function run() {
     }
   }
   if (target) {
+    // the panels below the overview (candidates, bookmarks) may have scrolled it out of sight
+    await page.locator('#overview').scrollIntoViewIfNeeded();
     const ob = await page.locator('#overview').boundingBox();
     await page.mouse.click(ob.x + ((target.x + 0.5) / ovPx) * ob.width, ob.y + ((target.y + 0.5) / ovPx) * ob.height);
     const jumped = await waitFrame('jump from the overview', (d) => !near(d.arcMm, 123, 0.5) && d.loading === 'false');
@@ -393,6 +419,8 @@ async function run() {
     check(await page.isDisabled('#next-missed'), 'next missed region button with no regions', 'disabled', 'enabled');
   }
 
+  await findingsSteps(page, waitFrame, study);
+
   // ---- shortcuts listed on the page
   const shortcuts = await page.textContent('#shortcuts');
   for (const k of ['Space', 'play', 'roll', 'measure', 'missed', 'bookmark', 'screenshot']) {
@@ -420,6 +448,94 @@ async function run() {
   log(`${pairRequests} /api/pair requests, never more than ${pairMaxInFlight} in flight`);
   const errs = pageErrors.filter((e) => !/favicon/.test(e));
   check(errs.length === 0, 'errors in the page console', 'none', errs.join(' | '));
+}
+
+/** Candidates: the list, next, accept with an edited size, reject; a finding by hand at a
+ *  pick; all of it in findings.json and after a reload; the CT slices as large as the views. */
+async function findingsSteps(page, waitFrame, study) {
+  const cands = JSON.parse(fs.readFileSync(candFile, 'utf8')).candidates.slice().sort((a, b) => b.score - a.score);
+  check(cands.length >= 2, 'candidates in polyps/candidates.json', '>= 2', cands.length);
+  await page.waitForFunction((n) => document.querySelectorAll('#candidate-list li').length === n, cands.length, { timeout: 10000 })
+    .catch(() => {});
+  const rows = await page.$$eval('#candidate-list li', (lis) => lis.map((li) => ({ id: li.dataset.id, text: li.textContent })));
+  check(rows.length === cands.length, 'candidate list entries', cands.length, rows.length);
+  const c1 = cands[0];
+  const c2 = cands[1];
+  check(rows[0].id === c1.id && rows[0].text.includes(Number(c1.size_mm).toFixed(1)) && rows[0].text.includes(Number(c1.score).toFixed(2))
+    && rows[0].text.includes(c1.segment.replace(/_/g, ' ')), 'first candidate row (best score: id, size, segment, score)',
+  `${c1.id} ${c1.size_mm} mm ${c1.segment} ${c1.score}`, rows[0].text);
+  const markBefore = (await page.$eval('#views', (v) => v.dataset.markerKey)) || '';
+  await page.click('#candidate-next');
+  await waitFrame(`fly to candidate ${c1.id}`, (d) => d.markerKey && d.markerKey !== markBefore && d.key === d.markerKey && d.loading === 'false');
+  check(await page.getAttribute('#candidate-current', 'data-id') === c1.id, 'current candidate after Next', c1.id,
+    await page.getAttribute('#candidate-current', 'data-id'));
+  check(Number(await page.inputValue('#finding-size')) === Number(Number(c1.size_mm).toFixed(1)), 'size field of the candidate',
+    c1.size_mm, await page.inputValue('#finding-size'));
+  const ringPixels = await page.$eval('#pair-overlay', (c) => {
+    const img = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < img.length; i += 4) if (img[i + 3] > 200 && img[i] < 120 && img[i + 1] > 170 && img[i + 2] > 220) n += 1;
+    return n;
+  });
+  check(ringPixels > 20, `candidate ${c1.id} marked in the views (cyan ring)`, '> 20 pixels', ringPixels);
+
+  await page.fill('#finding-size', '11.5');
+  await page.click('#candidate-accept');
+  await page.waitForSelector(`#candidate-list li[data-id="${c1.id}"][data-status="accepted"]`, { timeout: 10000 });
+  await page.click('#candidate-next');
+  await waitFrame(`fly to candidate ${c2.id}`, (d) => JSON.parse(d.locate || '{}') && d.key === d.markerKey && d.loading === 'false');
+  await page.click('#candidate-reject');
+  await page.waitForSelector(`#candidate-list li[data-id="${c2.id}"][data-status="rejected"]`, { timeout: 10000 });
+  let saved = JSON.parse(fs.readFileSync(findingsFile, 'utf8'));
+  const f1 = saved.findings.find((f) => f.candidate_id === c1.id);
+  const f2 = saved.findings.find((f) => f.candidate_id === c2.id);
+  check(saved.schema === 'flyover.findings/1' && f1 && f1.status === 'accepted' && f1.size_mm === 11.5,
+    `findings.json: ${c1.id} accepted with the edited size`, 'accepted, 11.5 mm', JSON.stringify(f1));
+  check(f2 && f2.status === 'rejected' && f2.size_mm === c2.size_mm, `findings.json: ${c2.id} rejected`, `rejected, ${c2.size_mm} mm`,
+    JSON.stringify(f2));
+
+  // a finding by hand at a wall point picked on the left view
+  const box = await page.locator('#pair').boundingBox();
+  let point = null;
+  for (const [fx, fy] of [[0.25, 0.5], [0.2, 0.35], [0.3, 0.65], [0.15, 0.5], [0.35, 0.4]]) {
+    const before = await page.getAttribute('#pick-info', 'data-point-mm');
+    await page.mouse.click(box.x + box.width * fx, box.y + box.height * fy);
+    await page.waitForFunction((b) => document.querySelector('#pick-info').dataset.pointMm !== b
+      || document.querySelector('#pick-info').dataset.hit === 'false', before, { timeout: 10000 }).catch(() => {});
+    const p = await page.getAttribute('#pick-info', 'data-point-mm');
+    if (p) { point = JSON.parse(p); break; }
+  }
+  check(!!point, 'a wall point picked on the left view', 'a hit', 'no hit at five pixels');
+  check(!(await page.isDisabled('#finding-add')), 'add-by-hand button after a pick', 'enabled', 'disabled');
+  await page.fill('#finding-size', '7');
+  await page.selectOption('#finding-morphology', 'flat');
+  await page.click('#finding-add');
+  await page.waitForSelector('#finding-list li[data-source="hand"]', { timeout: 10000 });
+  saved = JSON.parse(fs.readFileSync(findingsFile, 'utf8'));
+  const hand = saved.findings.find((f) => f.source === 'hand');
+  check(hand && hand.status === 'accepted' && hand.size_mm === 7 && hand.morphology === 'flat'
+    && dist(hand.position_mm, point) < 1e-6 && typeof hand.segment === 'string' && hand.arc_mm >= 0,
+  'findings.json: the hand finding at the picked point', `accepted 7 mm flat at ${fmtP(point)}`, JSON.stringify(hand));
+
+  // all of it after a reload
+  await page.reload();
+  await page.waitForSelector('body[data-ready="true"]', { timeout: 30000 });
+  await page.waitForFunction(() => document.querySelectorAll('#finding-list li').length === 3, null, { timeout: 10000 }).catch(() => {});
+  check(await page.locator('#finding-list li').count() === 3, 'findings listed after a reload', 3, await page.locator('#finding-list li').count());
+  check(await page.getAttribute(`#candidate-list li[data-id="${c1.id}"]`, 'data-status') === 'accepted',
+    `candidate ${c1.id} after a reload`, 'accepted', await page.getAttribute(`#candidate-list li[data-id="${c1.id}"]`, 'data-status'));
+  log(`candidates: ${cands.length} listed; ${c1.id} accepted at 11.5 mm, ${c2.id} rejected, a 7 mm finding by hand at ${fmtP(point)}`);
+
+  // the CT slices as large as the fly-over views
+  if (study.has_ct) {
+    await page.waitForFunction(() => Number(document.querySelector('#views').dataset.frames || 0) >= 1, null, { timeout: 60000 });
+    await page.click('#ct-large');
+    const pair = await page.locator('#pair').boundingBox();
+    const slice = await page.locator('.slice[data-plane="axial"] .slice-box').boundingBox();
+    check(Math.abs(slice.width - pair.width / 2) < pair.width * 0.05, 'axial slice width with CT large', `about ${(pair.width / 2).toFixed(0)} px (a view)`,
+      slice.width.toFixed(0));
+    await page.click('#ct-large');
+  }
 }
 
 function clampPx(v, px) { return Math.min(Number(px) - 1, Math.max(0, v)); }

@@ -1,0 +1,64 @@
+/// @file finding_store.h
+/// @brief The viewer's findings: the polyps stage's candidates (polyps/candidates.json, read
+///        again whenever the file changes) and the reader's findings.json (flyover.findings/1),
+///        rewritten atomically under a mutex on every change, as bookmarks are. A findings.json
+///        that cannot be read is never overwritten: the store reports it and refuses changes.
+#pragma once
+
+#include "colon/findings.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace flyover {
+
+/// What the store refuses: the message names the field or the file (the route says 4xx).
+struct FindingRefused : std::runtime_error {
+    FindingRefused(int s, const std::string& m) : std::runtime_error(m), status(s) {}
+    int status;
+};
+
+class FindingStore {
+public:
+    explicit FindingStore(const std::string& studyDir);
+
+    /// {"candidates": [candidate + "finding" (id or null), "status"], "findings": [...],
+    ///  "candidates_file": bool, "error": "" or why findings.json or candidates.json is unusable}.
+    nlohmann::json list();
+
+    /// Accepts or rejects a candidate (a new finding, or its existing one updated).
+    /// `sizeMm` < 0: keep (new: the candidate's). @return {finding, created}.
+    nlohmann::json review(const std::string& candidateId, const std::string& status, double sizeMm,
+                          const std::optional<std::string>& note);
+    /// Edits a finding: size (>= 0), status, note. @throw FindingRefused 404 for an unknown id.
+    nlohmann::json edit(const std::string& id, double sizeMm, const std::optional<std::string>& status,
+                        const std::optional<std::string>& note);
+    /// A finding added by hand at a picked point (arc and segment from the path), accepted.
+    nlohmann::json addByHand(const Vec3d& positionMm, double arcMm, const std::string& segment, double sizeMm,
+                             const std::string& morphology, const std::string& note);
+    /// @return false when no finding has that id.
+    bool remove(const std::string& id);
+
+private:
+    void refreshCandidates();
+    void refuseWhenBroken() const;
+    void save(const std::vector<Finding>& next);
+    std::string nextId() const;
+
+    std::filesystem::path mFindingsPath, mCandidatesPath;
+    std::mutex mMutex;
+    std::vector<Finding> mFindings;
+    std::string mFindingsError;
+    std::vector<PolypCandidate> mCandidates;
+    std::string mCandidatesError;
+    std::filesystem::file_time_type mCandidatesTime{};
+    std::uintmax_t mCandidatesSize = 0;
+    bool mHaveCandidates = false;
+};
+
+} // namespace flyover
