@@ -65,6 +65,12 @@ std::vector<StageSpec> colonStages()
          {"coverage", "review", "review_target", "coverage_px", "coverage_step_mm", "flythrough_fov_deg", FLYOVER_CAMERA,
           FLYOVER_IMAGE},
          {"frames"}, false, false, 1},
+        // Polyp candidates: from the level set and the path; their pairs from the render
+        // steps' scene (after the frames, which build it), keyed by the render parameters
+        // those pairs take.
+        {"polyps", {"centerline", "mesh"}, {"lumen.vdb", "surface.ply", "centerline.json"}, {"polyps"},
+         colonBody<runPolyps>, "polyps", {}, {"frames"}, false, false, 0, {"ct.vdb"},
+         {"render.fov_deg", "render.roll_deg", "render.direction", "render.clip_offset_fraction", "render.clip_offset_mm", "render.loop_reach_mm", "render.width_px", "render.height_px", "render.supersample", "render.ost", "render.smooth_shading", "render.depth_cue", "render.depth_cue_mm"}},
     };
 }
 

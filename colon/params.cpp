@@ -92,6 +92,22 @@ template <typename V> void visit(RenderParams& p, V&& v)
     v("review_target", p.reviewTarget, "review until fly-over plus review sees this fraction of the wall (0..1]");
 }
 
+template <typename V> void visit(PolypParams& p, V&& v)
+{
+    v("enabled", p.enabled, "look for polyp candidates (false: polyps/candidates.json lists none)");
+    v("shape_index_seed", p.shapeIndexSeed, "a candidate starts where the wall is this cap-like (shape index 0..1, 1 = cap)");
+    v("shape_index_grow", p.shapeIndexGrow, "and grows over the wall this cap-like or more");
+    v("curvedness_min_per_mm", p.curvednessMinPerMm, "its start bends at least this much (1/mm)");
+    v("curvedness_max_per_mm", p.curvednessMaxPerMm, "and at most this much (1/mm; sharper is noise)");
+    v("min_size_mm", p.minSizeMm, "candidates are at least this wide (mm)");
+    v("min_height_mm", p.minHeightMm, "and rise at least this far above the surrounding wall (mm)");
+    v("max_elongation", p.maxElongation, "longest / shortest extent along the wall at most this (folds are longer)");
+    v("min_cap_fraction", p.minCapFraction, "the cap covers at least this share of the footprint's disc (0..1)");
+    v("max_candidates", p.maxCandidates, "keep the best this many by score");
+    v("images", p.images, "an OST pair and, with a CT, axial, coronal and sagittal crops per candidate");
+    v("crop_mm", p.cropMm, "side of the CT crops (mm)");
+}
+
 template <typename F> void visitStage(PipelineParams& p, const std::string& stage, F&& f)
 {
     if (stage == "ingest") return f(p.ingest);
@@ -99,6 +115,7 @@ template <typename F> void visitStage(PipelineParams& p, const std::string& stag
     if (stage == "centerline") return f(p.centerline);
     if (stage == "mesh") return f(p.mesh);
     if (stage == "render") return f(p.render);
+    if (stage == "polyps") return f(p.polyps);
     std::string known;
     for (const auto& s : stageNames()) known += (known.empty() ? "" : ", ") + s;
     throw ParameterError("unknown stage '" + stage + "' (stages: " + known + ")");
@@ -158,7 +175,7 @@ template <typename P> void paramsFromJson(P& p, const json& j, const std::string
 
 const std::vector<std::string>& stageNames()
 {
-    static const std::vector<std::string> names{"ingest", "segment", "centerline", "mesh", "render"};
+    static const std::vector<std::string> names{"ingest", "segment", "centerline", "mesh", "polyps", "render"};
     return names;
 }
 
@@ -177,6 +194,7 @@ int stageVersion(const std::string& stage)
     if (stage == "centerline") return CenterlineParams::VERSION;
     if (stage == "mesh") return MeshParams::VERSION;
     if (stage == "render") return RenderParams::VERSION;
+    if (stage == "polyps") return PolypParams::VERSION;
     throw ParameterError("unknown stage '" + stage + "'");
 }
 
@@ -261,6 +279,7 @@ void validateParams(const PipelineParams& p)
     require(p.render.coveragePx >= 8 && p.render.coveragePx <= 4096, "render.coverage_px", "must be in [8, 4096]");
     require(p.render.coverageStepMm > 0, "render.coverage_step_mm", "must be > 0");
     require(p.render.loopReachMm >= 0 && p.render.loopReachMm <= 1e6, "render.loop_reach_mm", "must be in 0..1e6 mm");
+    validatePolypParams(p.polyps);
     require(p.render.reviewTarget > 0 && p.render.reviewTarget <= 1, "render.review_target", "must be in (0, 1]");
 }
 

@@ -10,6 +10,7 @@
 #include "surface/extract_surface.h"
 #include "colon/centerline.h"
 #include "volume/ingest.h"
+#include "colon/polyp_detect.h"
 #include "colon/segment.h"
 
 #include <nlohmann/json.hpp>
@@ -67,6 +68,7 @@ struct PipelineParams {
     CenterlineParams centerline;
     MeshParams mesh;
     RenderParams render;
+    PolypParams polyps;
 };
 
 /// Names of the stages, in pipeline order.

@@ -176,5 +176,7 @@ nlohmann::json runFlythrough(StudyRun& run, Progress* progress);
 nlohmann::json runOverviews(StudyRun& run, Progress* progress);
 nlohmann::json runVideo(StudyRun& run, Progress* progress);
 nlohmann::json runCoverage(StudyRun& run, Progress* progress);
+/// Polyp candidates in polyps/ (stage_polyps.cpp): after the frames, beside the render steps.
+nlohmann::json runPolyps(StudyRun& run, Progress* progress);
 
 } // namespace flyover

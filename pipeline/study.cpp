@@ -43,9 +43,12 @@ const std::string& paramStageOf(const StageSpec& spec) { return spec.paramStage.
 json stageParams(const StageSpec& spec, const ParamSet& params)
 {
     const json all = params.sectionJson(paramStageOf(spec));
-    if (spec.paramNames.empty()) return all;
-    json subset = json::object();
+    json subset = spec.paramNames.empty() ? all : json::object();
     for (const auto& n : spec.paramNames) subset[n] = all.at(n);
+    for (const auto& n : spec.otherParams) {
+        const auto dot = n.find('.');
+        subset[n] = params.sectionJson(n.substr(0, dot)).at(n.substr(dot + 1));
+    }
     return subset;
 }
 
@@ -79,10 +82,10 @@ std::string inputDigest(const std::string& ctPath) { return artifactDigest(ctPat
 /// stage that takes it also reads the mask ("mask", its content digest), and without a CT only it.
 std::vector<std::string> stageInputs(const StageSpec& spec, bool hasCt, bool hasMask)
 {
-    if (!spec.takesMask || !hasMask) return spec.inputs;
-    if (!hasCt) return {"mask"};
+    if (spec.takesMask && hasMask && !hasCt) return {"mask"};
     std::vector<std::string> in = spec.inputs;
-    in.push_back("mask");
+    if (spec.takesMask && hasMask) in.push_back("mask");
+    if (hasCt) in.insert(in.end(), spec.inputsWithCt.begin(), spec.inputsWithCt.end());
     return in;
 }
 

@@ -74,6 +74,10 @@ struct StageSpec {
     /// Of the stages ready at once, those of higher priority start first (TBB flow graph node
     /// priority; order only; 0 = none).
     unsigned priority = 0;
+    /// Artifacts read as well when the study has a CT (its key then covers them).
+    std::vector<std::string> inputsWithCt = {};
+    /// Parameters of other sections the stage depends on as well ("section.name").
+    std::vector<std::string> otherParams = {};
 };
 
 /// Work that starts ahead of the stage it feeds, as soon as a result it reads is in memory: a

@@ -185,7 +185,7 @@ struct RunCommand {
         runCmd->add_option("--config", configPath, "JSON file {\"stage\": {\"param\": value}} (see 'flyover params')");
         runCmd->add_option("--set", assignments, "stage.param=value (repeatable; see 'flyover params')");
         runCmd->add_option("--until", run.untilStage, "run only this stage and what it needs (ingest, segment, centerline, mesh, frames, flythrough, "
-                                            "overviews, video, coverage; render = all five render steps)");
+                                            "overviews, video, coverage, polyps; render = all five render steps)");
         runCmd->add_option("--force", run.forceStage, "recompute this stage and everything downstream");
         runCmd->add_flag("--wait", run.waitForLock, "wait for another run on the same study instead of refusing");
         runCmd->add_option("--cache-max-gb", run.cacheMaxGb, "cap on the study's cache; least recently used results are evicted")

@@ -546,53 +546,15 @@ ViewStudy::OverviewPick ViewStudy::overviewPick(int px, double x, double y) cons
 SliceImage ViewStudy::slice(const std::string& plane, const Vec3d& q, double window, double level) const
 {
     if (!hasCt()) throw InputError("slice: this study has no CT (a mask-only study); start the viewer with --ct FILE");
-    if (!(window > 0) || !std::isfinite(window)) throw ParameterError("window: must be a finite number > 0");
-    if (!std::isfinite(level)) throw ParameterError("level: must be a finite number");
     const openvdb::FloatGrid::ConstPtr grid = ctGrid();
-    SliceImage out;
-    SliceGeometry& g = out.geometry;
-    g.plane = plane;
     const double spacing = std::min({mCtSpacing[0], mCtSpacing[1], mCtSpacing[2]});
-    // Radiological display (see README "Viewer"): axial: patient's right on the image's left,
-    // anterior up; coronal: superior up, right on the left; sagittal: superior up, anterior left.
-    Vec3d colDir, rowDir, origin;
-    double colExtent = 0, rowExtent = 0;
-    if (plane == "axial") {
-        colDir = {1, 0, 0}, rowDir = {0, 1, 0};
-        origin = {mCtMin.x, mCtMin.y, q.z};
-        colExtent = mCtMax.x - mCtMin.x, rowExtent = mCtMax.y - mCtMin.y;
-    } else if (plane == "coronal") {
-        colDir = {1, 0, 0}, rowDir = {0, 0, -1};
-        origin = {mCtMin.x, q.y, mCtMax.z};
-        colExtent = mCtMax.x - mCtMin.x, rowExtent = mCtMax.z - mCtMin.z;
-    } else if (plane == "sagittal") {
-        colDir = {0, 1, 0}, rowDir = {0, 0, -1};
-        origin = {q.x, mCtMin.y, mCtMax.z};
-        colExtent = mCtMax.y - mCtMin.y, rowExtent = mCtMax.z - mCtMin.z;
-    } else {
-        throw ParameterError("plane: must be axial, coronal or sagittal");
-    }
-    // At most 1024 pixels a side: a coarser pixel for larger scans.
+    // The whole CT's extent in the plane, at most 1024 pixels a side: a coarser pixel for
+    // larger scans.
+    const Vec3d extent = mCtMax - mCtMin;
+    const double colExtent = plane == "sagittal" ? extent.y : extent.x;
+    const double rowExtent = plane == "axial" ? extent.y : extent.z;
     const double pixel = std::max(spacing, std::max(colExtent, rowExtent) / 1023.0);
-    g.pixelMm = pixel;
-    g.colDir = colDir;
-    g.rowDir = rowDir;
-    g.originMm = origin;
-    g.width = int(std::floor(colExtent / pixel)) + 1;
-    g.height = int(std::floor(rowExtent / pixel)) + 1;
-    out.gray.assign(std::size_t(g.width) * std::size_t(g.height), 0);
-    const double lo = level - 0.5 * window;
-    tbb::parallel_for(0, g.height, [&](int r) {
-        openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
-            grid->getConstAccessor(), grid->transform());
-        for (int c = 0; c < g.width; ++c) {
-            const Vec3d w = origin + colDir * (c * pixel) + rowDir * (r * pixel);
-            const double hu = sampler.wsSample(openvdb::Vec3d(w.x, w.y, w.z));
-            const double v = std::clamp((hu - lo) / window, 0.0, 1.0);
-            out.gray[std::size_t(r) * std::size_t(g.width) + std::size_t(c)] = uint8_t(std::lround(v * 255.0));
-        }
-    });
-    return out;
+    return sampleSlice(*grid, sliceGeometry(plane, q, mCtMin, mCtMax, pixel), window, level);
 }
 
 } // namespace flyover

@@ -13,6 +13,7 @@
 #include "render/ray_scene.h"
 #include "render/render_view.h"
 #include "volume/centerline_types.h"
+#include "volume/ct_slice.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
@@ -58,20 +59,6 @@ struct LocateResult {
     int view = 0;
     double x = 0, y = 0;    ///< image coordinates in that view (pixel i spans [i, i+1))
     std::size_t centerlineIndex = 0;
-};
-
-/// The pixel <-> LPS mapping of a CT slice image: pixel (c, r) has its centre at
-/// originMm + c * pixelMm * colDir + r * pixelMm * rowDir.
-struct SliceGeometry {
-    std::string plane;
-    Vec3d originMm, rowDir, colDir;
-    double pixelMm = 1;
-    int width = 0, height = 0;
-};
-
-struct SliceImage {
-    SliceGeometry geometry;
-    std::vector<uint8_t> gray;  ///< width x height, top row first
 };
 
 class ViewStudy {

@@ -44,7 +44,7 @@ TEST_F(StudyTest, StageCommandRunsStagesOneByOneWithReceipts)
 {
     const std::string study = studyDir("stages");
     const std::string args = " --study " + study + " --ct " + ctPath() + QUICK;
-    for (const char* stage : {"ingest", "segment", "centerline", "mesh", "render"}) {
+    for (const char* stage : {"ingest", "segment", "centerline", "mesh", "render", "polyps"}) {
         const CliResult r = runFlyover(std::string("-q stage ") + stage + args);
         ASSERT_EQ(r.exitCode, 0) << stage << ": " << r.err;
         const auto rec = receipt(study, stage);
