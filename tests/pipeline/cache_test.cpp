@@ -226,11 +226,14 @@ TEST_F(StudyTest, UntilAndForceSelectStages)
     m = computedStages(runPipeline(o));
     EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", false}, {"centerline", false},
                                               {"mesh", false}, {"frames", false}, {"flythrough", false},
-                                              {"overviews", false}, {"video", true}, {"coverage", false}}))
+                                              {"overviews", false}, {"video", true}, {"coverage", false},
+                                              {"polyps", false}}))
         << describe(m);
     o.forceStage = "render";
     m = computedStages(runPipeline(o));
-    EXPECT_EQ(m, withRenderSteps({{"ingest", false}, {"segment", false}, {"centerline", false}, {"mesh", false}}, true))
+    EXPECT_EQ(m, withRenderSteps({{"ingest", false}, {"segment", false}, {"centerline", false}, {"mesh", false},
+                                  {"polyps", false}},
+                                 true))
         << describe(m);
     o.forceStage = "nonsense";
     EXPECT_THROW(runPipeline(o), ParameterError);

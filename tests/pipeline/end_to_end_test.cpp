@@ -77,8 +77,8 @@ TEST(EndToEnd, SmallPhantomMeetsFoundationTargets)
     for (const char* a : {"ct.vdb", "lumen.vdb", "centerline.json", "surface.ply", "overview.png",
                           "frames/pair_0000.png", "frames/poses.json", "manifest.json"})
         EXPECT_TRUE(fs::exists(dir / "study" / a)) << a << " missing";
-    // ingest, segment, centerline, mesh and the five render steps
-    ASSERT_EQ(manifest["stages"].size(), 9u);
+    // ingest, segment, centerline, mesh, the five render steps and polyps
+    ASSERT_EQ(manifest["stages"].size(), 10u);
     for (const auto& s : manifest["stages"]) {
         EXPECT_TRUE(s.contains("parameters")) << s["stage"];
         EXPECT_GE(s["wall_seconds"].get<double>(), 0.0) << s["stage"];

@@ -64,10 +64,13 @@ protected:
 /// The render steps, each its own stage of the graph, in pipeline order.
 inline const std::vector<std::string> RENDER_STEPS{"frames", "flythrough", "overviews", "video", "coverage"};
 
-/// `stages` plus every render step, each computed (true) or reused (false) as `render`.
+/// `stages` plus every render step, each computed (true) or reused (false) as `render`, and
+/// the polyps stage (beside the render steps, on the same inputs and more) as `render` unless
+/// `stages` names it.
 inline std::map<std::string, bool> withRenderSteps(std::map<std::string, bool> stages, bool render)
 {
     for (const auto& s : RENDER_STEPS) stages[s] = render;
+    stages.emplace("polyps", render);
     return stages;
 }
 
