@@ -70,7 +70,7 @@ std::vector<StageSpec> colonStages()
         // those pairs take.
         {"polyps", {"centerline", "mesh"}, {"lumen.vdb", "surface.ply", "centerline.json"}, {"polyps"},
          colonBody<runPolyps>, "polyps", {}, {"frames"}, false, false, 0, {"ct.vdb"},
-         {"render.fov_deg", "render.roll_deg", "render.direction", "render.clip_offset_fraction", "render.clip_offset_mm", "render.loop_reach_mm", "render.width_px", "render.height_px", "render.supersample", "render.ost", "render.smooth_shading", "render.depth_cue", "render.depth_cue_mm"}},
+         {"render.fov_deg", "render.direction", "render.clip_offset_fraction", "render.clip_offset_mm", "render.loop_reach_mm", "render.width_px", "render.height_px", "render.supersample", "render.ost", "render.smooth_shading", "render.depth_cue", "render.depth_cue_mm"}},
     };
 }
 

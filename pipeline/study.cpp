@@ -473,13 +473,22 @@ nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
             commitErrors[name] = std::current_exception();
         }
     };
+    std::map<std::string, continue_node<continue_msg>*> commitOf;
     for (const auto& spec : specs) {
         if (!spec.writeBehind) continue;
         commitNodes.push_back(std::make_unique<continue_node<continue_msg>>(
             g, [&commit, name = spec.name](const continue_msg&) { commit(name); }));
         make_edge(*nodes[spec.name], *commitNodes.back());
         if (!commitHandOn.empty()) make_edge(*handOns.at(commitHandOn), *commitNodes.back());
+        commitOf[spec.name] = commitNodes.back().get();
     }
+    // A stage that reads an artifact of the CT from its file (inputsWithCt) starts after the
+    // commit of the write-behind stage that writes it: the file is then in place.
+    for (const auto& spec : specs)
+        for (const auto& a : spec.inputsWithCt)
+            for (const auto& w : specs)
+                if (commitOf.count(w.name) && std::find(w.outputs.begin(), w.outputs.end(), a) != w.outputs.end())
+                    make_edge(*commitOf.at(w.name), *nodes[spec.name]);
 
     std::exception_ptr failure;
     for (const auto& spec : specs)

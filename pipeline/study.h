@@ -74,7 +74,8 @@ struct StageSpec {
     /// Of the stages ready at once, those of higher priority start first (TBB flow graph node
     /// priority; order only; 0 = none).
     unsigned priority = 0;
-    /// Artifacts read as well when the study has a CT (its key then covers them).
+    /// Artifacts read as well when the study has a CT (its key then covers them), from their
+    /// files: the stage starts after the commit of a write-behind stage that writes them.
     std::vector<std::string> inputsWithCt = {};
     /// Parameters of other sections the stage depends on as well ("section.name").
     std::vector<std::string> otherParams = {};

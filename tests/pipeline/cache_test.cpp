@@ -76,12 +76,13 @@ TEST_F(StudyTest, ParameterChangesRecomputeExactlyWhatDependsOnThem)
     runPipeline(o);
 
     // The roll moves the fly-over cameras: frames, video and coverage; not the fly-through
-    // pairs nor the overviews.
+    // pairs, the overviews nor the polyps' pairs (turned to face each candidate).
     o.params.render.rollDeg = 30;
     auto m = computedStages(runPipeline(o));
     EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", false}, {"centerline", false},
                                               {"mesh", false}, {"frames", true}, {"flythrough", false},
-                                              {"overviews", false}, {"video", true}, {"coverage", true}}))
+                                              {"overviews", false}, {"video", true}, {"coverage", true},
+                                              {"polyps", false}}))
         << "render.roll_deg changed: " << describe(m);
 
     o.params.segment.surfaceIsoHu = -450;

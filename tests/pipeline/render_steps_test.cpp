@@ -216,7 +216,8 @@ TEST_F(StudyTest, VideoFpsRecomputesTheVideoOnly)
     const auto m = computedStages(second);
     EXPECT_EQ(m, (std::map<std::string, bool>{{"ingest", false}, {"segment", false}, {"centerline", false},
                                               {"mesh", false}, {"frames", false}, {"flythrough", false},
-                                              {"overviews", false}, {"video", true}, {"coverage", false}}))
+                                              {"overviews", false}, {"video", true}, {"coverage", false},
+                                              {"polyps", false}}))
         << "render.video_fps changed: only the video may be recomputed";
     EXPECT_EQ(readJson(o.studyDir + "/video/poses.json").at("fps"), 12);
     EXPECT_EQ(videoReport().value("frames_from_frame_pairs", std::size_t(1)), 0u)
@@ -387,7 +388,7 @@ TEST_F(StudyTest, VideoStartsFirstAfterTheFramesAndIsTheSameOnAnyNumberOfThreads
         if (e.at("event") == "stage_finished" && e.value("stage", "") == "frames") framesDone = true;
         if (framesDone && e.at("event") == "stage_started") started.push_back(e.at("stage"));
     }
-    ASSERT_EQ(started.size(), 4u) << out.str();
+    ASSERT_EQ(started.size(), 5u) << "flythrough, overviews, video, coverage and polyps: " << out.str();
     EXPECT_EQ(started[0], "video") << "the render steps after the frames started in this order: " << started[0]
                                    << ", " << started[1] << ", " << started[2] << ", " << started[3];
     EXPECT_EQ(started[1], "coverage");

@@ -491,7 +491,9 @@ async function findingsSteps(page, waitFrame, study) {
   const f2 = saved.findings.find((f) => f.candidate_id === c2.id);
   check(saved.schema === 'flyover.findings/1' && f1 && f1.status === 'accepted' && f1.size_mm === 11.5,
     `findings.json: ${c1.id} accepted with the edited size`, 'accepted, 11.5 mm', JSON.stringify(f1));
-  check(f2 && f2.status === 'rejected' && f2.size_mm === c2.size_mm, `findings.json: ${c2.id} rejected`, `rejected, ${c2.size_mm} mm`,
+  // The size field shows the candidate's size to 0.1 mm, and the review takes the field's size.
+  const c2Shown = Number(Number(c2.size_mm).toFixed(1));
+  check(f2 && f2.status === 'rejected' && f2.size_mm === c2Shown, `findings.json: ${c2.id} rejected`, `rejected, ${c2Shown} mm`,
     JSON.stringify(f2));
 
   // a finding by hand at a wall point picked on the left view
