@@ -10,16 +10,15 @@ namespace flyover {
 namespace {
 
 constexpr double PI = 3.14159265358979323846;
-constexpr std::array<double, 3> MARKER_COLOUR = {40, 230, 120};
 
-/// Blends the marker colour into pixel (x, y) with weight a in [0, 1].
-void blend(RgbImage& image, int x, int y, double a)
+/// Blends `colour` into pixel (x, y) with weight a in [0, 1].
+void blend(RgbImage& image, int x, int y, double a, const std::array<uint8_t, 3>& colour)
 {
     if (x < 0 || y < 0 || x >= image.width || y >= image.height || !(a > 0)) return;
     a = std::min(a, 1.0);
     uint8_t* p = &image.rgb[(std::size_t(y) * std::size_t(image.width) + std::size_t(x)) * 3];
     for (int c = 0; c < 3; ++c)
-        p[c] = uint8_t(std::lround(p[c] * (1.0 - a) + MARKER_COLOUR[std::size_t(c)] * a));
+        p[c] = uint8_t(std::lround(p[c] * (1.0 - a) + double(colour[std::size_t(c)]) * a));
 }
 
 } // namespace
@@ -64,8 +63,8 @@ void drawMarker(RgbImage& image, const Camera& camera, const OverviewMarker& mar
             const double r = std::hypot(x + 0.5 - cx, y + 0.5 - cy);
             // Anti-aliased by coverage of a 1-pixel ramp at each edge.
             const double ring = std::clamp(halfWidthPx + 0.5 - std::fabs(r - ringPx), 0.0, 1.0);
-            const double disc = std::clamp(dotPx + 0.5 - r, 0.0, 1.0);
-            blend(image, x, y, std::max(ring, disc));
+            const double disc = marker.centreDot ? std::clamp(dotPx + 0.5 - r, 0.0, 1.0) : 0.0;
+            blend(image, x, y, std::max(ring, disc), marker.colour);
         }
 }
 

@@ -8,6 +8,7 @@
 #include "render/render_view.h"
 
 #include <array>
+#include <cstdint>
 
 namespace flyover {
 
@@ -26,10 +27,12 @@ const std::array<CanonicalView, 6>& canonicalViews();
 struct OverviewMarker {
     Vec3d positionMm;        ///< the centerline point (LPS mm)
     double radiusMm = 10.0;  ///< ring radius: the lumen radius D(p) shows the lumen's extent
+    std::array<uint8_t, 3> colour{40, 230, 120};  ///< RGB of ring and dot
+    bool centreDot = true;   ///< false: the ring alone (a finding, beside the position marker)
 };
 
-/// Draws the marker over `image` (rendered from `camera`): a ring of the projected radius and a
-/// dot at the projected point, always on top (the point lies inside the lumen, behind the
+/// Draws the marker over `image` (rendered from `camera`): a ring of the projected radius (at
+/// least 4 pixels) and, with `centreDot`, a dot at the projected point, always on top (the point lies inside the lumen, behind the
 /// transparent near wall). Parts outside the image are clipped; a point behind the camera is
 /// not drawn. @throw ParameterError for an image whose buffer does not match its size.
 void drawMarker(RgbImage& image, const Camera& camera, const OverviewMarker& marker);

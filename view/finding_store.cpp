@@ -69,6 +69,22 @@ json FindingStore::list()
                 {"error", error}};
 }
 
+std::vector<FindingMark> FindingStore::marks()
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    refreshCandidates();
+    std::vector<FindingMark> out;
+    for (const PolypCandidate& c : mCandidates) {
+        const auto it = std::find_if(mFindings.begin(), mFindings.end(),
+                                     [&](const Finding& f) { return f.source == "candidate" && f.candidateId == c.id; });
+        if (it == mFindings.end()) out.push_back({c.centroidMm, c.sizeMm, "unreviewed"});
+        else if (it->status == "accepted") out.push_back({c.centroidMm, it->sizeMm, "accepted"});
+    }
+    for (const Finding& f : mFindings)
+        if (f.source == "hand" && f.status == "accepted") out.push_back({f.positionMm, f.sizeMm, "hand"});
+    return out;
+}
+
 std::string FindingStore::nextId() const
 {
     unsigned long long next = 1;

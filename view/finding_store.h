@@ -23,6 +23,13 @@ struct FindingRefused : std::runtime_error {
     int status;
 };
 
+/// A candidate or finding to mark on an image: where, how big, and what the reader made of it.
+struct FindingMark {
+    Vec3d positionMm;
+    double sizeMm = 0;
+    std::string kind;  ///< "unreviewed" or "accepted" (a candidate), "hand" (a finding by hand)
+};
+
 class FindingStore {
 public:
     explicit FindingStore(const std::string& studyDir);
@@ -30,6 +37,10 @@ public:
     /// {"candidates": [candidate + "finding" (id or null), "status"], "findings": [...],
     ///  "candidates_file": bool, "error": "" or why findings.json or candidates.json is unusable}.
     nlohmann::json list();
+
+    /// What to mark: every candidate not rejected (at its centroid, with the finding's edited
+    /// size once accepted) and every accepted finding added by hand.
+    std::vector<FindingMark> marks();
 
     /// Accepts or rejects a candidate (a new finding, or its existing one updated).
     /// `sizeMm` < 0: keep (new: the candidate's). @return {finding, created}.

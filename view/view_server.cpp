@@ -1,6 +1,7 @@
 #include "view/view_server.h"
 
 #include "pipeline/artifact_io.h"
+#include "view/finding_store.h"
 #include "view/findings_routes.h"
 #include "view/http_request.h"
 #include "view/image_codec.h"
@@ -350,14 +351,22 @@ void serveApiOverview(RouteCall& c)
     const ViewStudy& study = *c.study;
     const RenderParams& rp = c.study->renderParams();
     c.onlyGet();
-    Query q(req, {"marker_mm", "px"});
+    Query q(req, {"marker_mm", "px", "findings"});
     const int px = q.integer("px", std::min(rp.overviewPx, study.maxPx()), 16, study.maxPx());
     double marker = -1;
     if (q.has("marker_mm")) {
         marker = q.number("marker_mm");
         study.indexOfArc(marker);
     }
-    res.set_content(encodePng(study.overview(px, marker)), "image/png");
+    std::vector<OverviewMarker> marks;
+    if (q.integer("findings", 0, 0, 1) == 1) {
+        // The page's colours (view/web/findings.js); the ring a little wider than the finding.
+        static const std::map<std::string, std::array<uint8_t, 3>> colours = {
+            {"unreviewed", {74, 209, 255}}, {"accepted", {107, 214, 139}}, {"hand", {255, 159, 67}}};
+        for (const FindingMark& m : c.findings.marks())
+            marks.push_back(OverviewMarker{m.positionMm, 0.5 * m.sizeMm + 3.0, colours.at(m.kind), false});
+    }
+    res.set_content(encodePng(study.overview(px, marker, marks)), "image/png");
 }
 
 /// /api/overview/pick

@@ -497,7 +497,7 @@ Camera ViewStudy::overviewCamera() const
     return flyover::overviewCamera(scene().boundsMin(), scene().boundsMax(), anterior.viewDir, anterior.up, 30.0);
 }
 
-RgbImage ViewStudy::overview(int px, double markerArcMm) const
+RgbImage ViewStudy::overview(int px, double markerArcMm, const std::vector<OverviewMarker>& marks) const
 {
     std::shared_ptr<const RgbImage> base;
     {
@@ -520,6 +520,7 @@ RgbImage ViewStudy::overview(int px, double markerArcMm) const
         mOverviewCache[px] = base;
     }
     RgbImage image = *base;
+    for (const OverviewMarker& m : marks) drawMarker(image, cam, m);
     if (markerArcMm >= 0) {
         const CenterlinePoint& p = mCenterline.points[indexOfArc(markerArcMm)];
         drawMarker(image, cam, OverviewMarker{p.positionMm, std::max(p.radiusMm, 1.0)});

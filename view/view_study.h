@@ -10,6 +10,7 @@
 
 #include "colon/params.h"
 #include "render/camera.h"
+#include "render/overview.h"
 #include "render/ray_scene.h"
 #include "render/render_view.h"
 #include "volume/centerline_types.h"
@@ -111,8 +112,9 @@ public:
     /// one of the two views; px = image size for x, y.
     LocateResult locate(const Vec3d& pointMm, int px, const std::string& direction) const;
 
-    /// The anterior OST overview of the whole colon at px x px, with the marker at arcMm (< 0: none).
-    RgbImage overview(int px, double markerArcMm) const;
+    /// The anterior OST overview of the whole colon at px x px, with the marker at arcMm (< 0: none)
+    /// and `marks` (findings) drawn over it.
+    RgbImage overview(int px, double markerArcMm, const std::vector<OverviewMarker>& marks = {}) const;
     Camera overviewCamera() const;
     /// The overview pixel's hit and its nearest centerline point.
     struct OverviewPick {

@@ -173,3 +173,64 @@ TEST(ViewFindings, SurviveARerunOfThePipeline)
     EXPECT_DOUBLE_EQ(back[0].sizeMm, 8.0);
     fs::remove(file);
 }
+
+namespace {
+
+/// Pixels within 14 of `rgb` on every channel in the square of half-side `reach` around (cx, cy).
+int colourNear(const RgbImage& img, const std::array<int, 3>& rgb, double cx, double cy, double reach)
+{
+    int n = 0;
+    for (int y = std::max(0, int(cy - reach)); y < std::min(img.height, int(cy + reach) + 1); ++y)
+        for (int x = std::max(0, int(cx - reach)); x < std::min(img.width, int(cx + reach) + 1); ++x) {
+            const uint8_t* p = &img.rgb[(std::size_t(y) * std::size_t(img.width) + std::size_t(x)) * 3];
+            if (std::abs(p[0] - rgb[0]) <= 14 && std::abs(p[1] - rgb[1]) <= 14 && std::abs(p[2] - rgb[2]) <= 14) ++n;
+        }
+    return n;
+}
+
+} // namespace
+
+TEST(ViewFindings, TheOverviewRingsCandidatesAndFindingsByStatus)
+{
+    const std::string dir = studyWithCandidates("overview_marks");
+    RunningServer s(dir);
+    auto c = s.client();
+    const int px = 400;
+    auto get = [&](const std::string& q) {
+        auto r = c->Get(("/api/overview?px=" + std::to_string(px) + q).c_str());
+        EXPECT_TRUE(r && r->status == 200) << q << " -> " << (r ? r->body : "no answer");
+        return r && r->status == 200 ? decodePng(r->body) : RgbImage{};
+    };
+    const Camera cam = s.study().overviewCamera();
+    auto at = [&](const Vec3d& p) {
+        const Vec3d v = p - cam.position;
+        const double z = dot(v, cam.forward), t = std::tan(0.5 * cam.fovDeg * 3.14159265358979 / 180.0);
+        return std::array<double, 2>{(dot(v, cam.right) / z / t + 1) * 0.5 * px, (1 - dot(v, cam.up) / z / t) * 0.5 * px};
+    };
+    const auto& truth = sharedStudy().truth;
+    const auto p1 = at(truth.polyps[0].centerMm), p2 = at(truth.polyps[1].centerMm);
+    const std::array<int, 3> cyan{74, 209, 255}, green{107, 214, 139}, orange{255, 159, 67};
+    const double reach = 30;
+
+    const RgbImage plain = get(""), marked = get("&findings=1");
+    ASSERT_EQ(marked.width, px);
+    EXPECT_EQ(colourNear(plain, cyan, p1[0], p1[1], reach), 0) << "without findings=1 the overview is unmarked";
+    EXPECT_GT(colourNear(marked, cyan, p1[0], p1[1], reach), 10) << "candidate c1 ringed cyan at its projection";
+    EXPECT_GT(colourNear(marked, cyan, p2[0], p2[1], reach), 10) << "candidate c2 ringed cyan at its projection";
+
+    post(*c, s, "/api/findings/review", R"({"candidate_id":"c1","status":"accepted","size_mm":11.5})", 201);
+    post(*c, s, "/api/findings/review", R"({"candidate_id":"c2","status":"rejected"})", 201);
+    const Vec3d hp = s.study().centerline().points[s.study().centerline().points.size() / 2].positionMm;
+    post(*c, s, "/api/findings/hand", json{{"position_mm", vec3Json(hp)}, {"size_mm", 8}, {"morphology", "sessile"}}.dump(), 201);
+    const RgbImage reviewed = get("&findings=1");
+    EXPECT_GT(colourNear(reviewed, green, p1[0], p1[1], reach), 10) << "accepted c1 ringed green";
+    EXPECT_EQ(colourNear(reviewed, cyan, p1[0], p1[1], reach), 0) << "accepted c1 no longer cyan";
+    EXPECT_EQ(colourNear(reviewed, cyan, p2[0], p2[1], reach), 0) << "rejected c2 not ringed";
+    const auto h = at(hp);
+    EXPECT_GT(colourNear(reviewed, orange, h[0], h[1], reach), colourNear(plain, orange, h[0], h[1], reach) + 10)
+        << "the hand finding ringed orange";
+
+    auto bad = c->Get("/api/overview?findings=2");
+    ASSERT_TRUE(bad);
+    EXPECT_EQ(bad->status, 422) << bad->body;
+}

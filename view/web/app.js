@@ -495,7 +495,7 @@ async function maybeOverview(force = false) {
   overviewForced = false;
   overviewAt = now;
   try {
-    const res = await api('/api/overview', { marker_mm: arc, px: overviewPx });
+    const res = await api('/api/overview', { marker_mm: arc, px: overviewPx, findings: 1 });
     const url = URL.createObjectURL(await res.blob());
     await new Promise((ok) => { overviewImg.onload = ok; overviewImg.onerror = ok; overviewImg.src = url; });
     if (overviewUrl) URL.revokeObjectURL(overviewUrl);
@@ -724,7 +724,7 @@ function nextMissed() {
 
 // ---------------------------------------------------------------- candidates and findings
 
-const findings = findingsPanel({ apiJson, flyToPoint, setStatus, reportError, redraw: () => drawOverlay() });
+const findings = findingsPanel({ apiJson, flyToPoint, setStatus, reportError, redraw: () => drawOverlay(), marksChanged: () => maybeOverview(true) });
 
 /** The CT slices as large as the fly-over views: under them, two a row. */
 function setCtLarge(on) {

@@ -5,7 +5,8 @@
 // the size field (filled from the candidate, or by the two-click measure). A finding is added by
 // hand at the last picked wall point. Candidates and findings are marked in the fly-over views
 // where their point projects into a view's cameras (from the pose the server sends with the
-// pair), coloured by status. Everything goes through /api/findings (docs/viewer.md).
+// pair) and on the overview (drawn by the server, /api/overview?findings=1), coloured by status.
+// Everything goes through /api/findings (docs/viewer.md).
 
 'use strict';
 
@@ -110,6 +111,9 @@ export function findingsPanel(app) {
       F.error = r.error || '';
       F.current = curId ? F.candidates.findIndex((c) => c.id === curId) : -1;
       render();
+      // The overview marks them too (server-drawn): ask for a new one when what it marks changed.
+      const marks = JSON.stringify([F.candidates.map((c) => [c.id, c.status]), F.findings.map((f) => [f.id, f.status, f.size_mm])]);
+      if (marks !== F.marks) { F.marks = marks; if (app.marksChanged) app.marksChanged(); }
     } catch (e) { app.reportError(e); }
   }
 

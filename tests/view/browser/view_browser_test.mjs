@@ -450,6 +450,34 @@ async function run() {
   check(errs.length === 0, 'errors in the page console', 'none', errs.join(' | '));
 }
 
+/** Pixels of the overview image within 14 of `rgb` on every channel (the server draws findings' rings). */
+async function overviewColour(page, rgb) {
+  return page.$eval('#overview', (img, c) => {
+    if (!img.naturalWidth) return 0;
+    const cv = document.createElement('canvas');
+    cv.width = img.naturalWidth; cv.height = img.naturalHeight;
+    const ctx = cv.getContext('2d');
+    ctx.drawImage(img, 0, 0);
+    const d = ctx.getImageData(0, 0, cv.width, cv.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) {
+      if (Math.abs(d[i] - c[0]) <= 14 && Math.abs(d[i + 1] - c[1]) <= 14 && Math.abs(d[i + 2] - c[2]) <= 14) n += 1;
+    }
+    return n;
+  }, rgb);
+}
+
+/** Waits until `pred(count)` holds for the overview's pixels of `rgb`; @return the last count. */
+async function waitOverviewColour(page, rgb, pred, what) {
+  let n = -1;
+  for (let t = 0; t < 100; t += 1) {
+    n = await overviewColour(page, rgb);
+    if (pred(n)) return n;
+    await page.waitForTimeout(200);
+  }
+  throw new CheckFailed(`${what}: overview pixels of rgb(${rgb}) gave ${n} after 20 s`);
+}
+
 /** Candidates: the list, next, accept with an edited size, reject; a finding by hand at a
  *  pick; all of it in findings.json and after a reload; the CT slices as large as the views. */
 async function findingsSteps(page, waitFrame, study) {
@@ -464,6 +492,10 @@ async function findingsSteps(page, waitFrame, study) {
   check(rows[0].id === c1.id && rows[0].text.includes(Number(c1.size_mm).toFixed(1)) && rows[0].text.includes(Number(c1.score).toFixed(2))
     && rows[0].text.includes(c1.segment.replace(/_/g, ' ')), 'first candidate row (best score: id, size, segment, score)',
   `${c1.id} ${c1.size_mm} mm ${c1.segment} ${c1.score}`, rows[0].text);
+  // the overview marks the candidates (cyan rings, drawn by the server)
+  const CYAN = [74, 209, 255], GREEN = [107, 214, 139], ORANGE = [255, 159, 67];
+  const cyanBefore = await waitOverviewColour(page, CYAN, (n) => n > 20, 'candidates ringed on the overview');
+  const greenBefore = await overviewColour(page, GREEN);
   const markBefore = (await page.$eval('#views', (v) => v.dataset.markerKey)) || '';
   await page.click('#candidate-next');
   await waitFrame(`fly to candidate ${c1.id}`, (d) => d.markerKey && d.markerKey !== markBefore && d.key === d.markerKey && d.loading === 'false');
@@ -482,10 +514,15 @@ async function findingsSteps(page, waitFrame, study) {
   await page.fill('#finding-size', '11.5');
   await page.click('#candidate-accept');
   await page.waitForSelector(`#candidate-list li[data-id="${c1.id}"][data-status="accepted"]`, { timeout: 10000 });
+  const green = await waitOverviewColour(page, GREEN, (n) => n > greenBefore + 10, `accepted ${c1.id} ringed green on the overview`);
+  const cyanAccepted = await overviewColour(page, CYAN);
+  check(cyanAccepted < cyanBefore, `cyan rings on the overview after accepting ${c1.id}`, `< ${cyanBefore}`, cyanAccepted);
   await page.click('#candidate-next');
   await waitFrame(`fly to candidate ${c2.id}`, (d) => JSON.parse(d.locate || '{}') && d.key === d.markerKey && d.loading === 'false');
   await page.click('#candidate-reject');
   await page.waitForSelector(`#candidate-list li[data-id="${c2.id}"][data-status="rejected"]`, { timeout: 10000 });
+  const cyanRejected = await waitOverviewColour(page, CYAN, (n) => n < cyanAccepted, `rejected ${c2.id} no longer ringed on the overview`);
+  log(`overview: candidate rings ${cyanBefore} cyan px; accepted ${green} green px, cyan ${cyanAccepted}; after a reject cyan ${cyanRejected}`);
   let saved = JSON.parse(fs.readFileSync(findingsFile, 'utf8'));
   const f1 = saved.findings.find((f) => f.candidate_id === c1.id);
   const f2 = saved.findings.find((f) => f.candidate_id === c2.id);
@@ -509,10 +546,12 @@ async function findingsSteps(page, waitFrame, study) {
   }
   check(!!point, 'a wall point picked on the left view', 'a hit', 'no hit at five pixels');
   check(!(await page.isDisabled('#finding-add')), 'add-by-hand button after a pick', 'enabled', 'disabled');
+  const orangeBefore = await overviewColour(page, ORANGE);
   await page.fill('#finding-size', '7');
   await page.selectOption('#finding-morphology', 'flat');
   await page.click('#finding-add');
   await page.waitForSelector('#finding-list li[data-source="hand"]', { timeout: 10000 });
+  await waitOverviewColour(page, ORANGE, (n) => n > orangeBefore + 10, 'the hand finding ringed orange on the overview');
   saved = JSON.parse(fs.readFileSync(findingsFile, 'utf8'));
   const hand = saved.findings.find((f) => f.source === 'hand');
   check(hand && hand.status === 'accepted' && hand.size_mm === 7 && hand.morphology === 'flat'
