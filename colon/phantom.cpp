@@ -543,6 +543,11 @@ Phantom makePhantom(const PhantomParams& params)
     options.voxelMm = geometry.spacingMm;
     options.rectalTube = params.rectalTube;
     options.wideRectum = params.wideRectum;
+    if (params.polypDiametersMm)
+        for (double d : *params.polypDiametersMm)
+            if (!(d >= 2.0 && d <= 30.0))
+                throw ParameterError("phantom polyp diameters: each must lie in [2, 30] mm, got " + std::to_string(d));
+    options.polypDiametersMm = params.polypDiametersMm;
     PhantomAnatomy anatomy = buildPhantomAnatomy(params.seed, options);
     if (params.collapse)
         addCollapses(anatomy, params.seed);

@@ -270,35 +270,45 @@ bool isBetweenFolds(const PhantomAnatomy& a, double arcMm, double radiusMm)
 
 /// 6-10 polyps of radius 3-12 mm (one of 3 mm, one of at least 10 mm), centred on the
 /// lumen wall, radius <= half the local lumen radius, >= 40 mm apart in arc length and
-/// >= 60 mm from the ends; at least three sit between two folds.
-void buildPolyps(PhantomAnatomy& a, std::mt19937_64& rng)
+/// >= 60 mm from the ends; at least three sit between two folds. Given diameters: those,
+/// by the same placement rules, none required between folds.
+void buildPolyps(PhantomAnatomy& a, std::mt19937_64& rng, const std::optional<std::vector<double>>& diametersMm)
 {
     constexpr double END_MARGIN_MM = 60.0, MIN_ARC_GAP_MM = 40.0;
-    const int count = 6 + int(rng() % 5);
-    const auto n = std::size_t(count);
-    std::vector<double> radii(n);
-    for (int k = 0; k < count; ++k)  // stratified over [3, 12] mm
-        radii[std::size_t(k)] = 3.0 + 9.0 * (k + uniform01(rng)) / count;
-    radii.front() = 3.0;
-    radii.back() = std::max(radii.back(), 10.0);
-    for (double& r : radii)
-        r = std::round(r * 10.0) / 10.0;
+    std::vector<double> radii;
+    std::vector<int> order;
+    std::vector<bool> designated;
+    if (diametersMm) {
+        for (double d : *diametersMm) radii.push_back(0.5 * d);
+        for (std::size_t k = 0; k < radii.size(); ++k) order.push_back(int(k));
+        designated.assign(radii.size(), false);
+    } else {
+        const int count = 6 + int(rng() % 5);
+        const auto n = std::size_t(count);
+        radii.resize(n);
+        for (int k = 0; k < count; ++k)  // stratified over [3, 12] mm
+            radii[std::size_t(k)] = 3.0 + 9.0 * (k + uniform01(rng)) / count;
+        radii.front() = 3.0;
+        radii.back() = std::max(radii.back(), 10.0);
+        for (double& r : radii)
+            r = std::round(r * 10.0) / 10.0;
 
-    // Between-fold polyps are chosen among those of radius <= 9 mm, which fit in any gap.
-    std::vector<int> order(n);
-    for (int k = 0; k < count; ++k)
-        order[std::size_t(k)] = k;
-    std::shuffle(order.begin(), order.end(), rng);
-    std::vector<bool> designated(n, false);
-    const int wanted = 3 + int(rng() % 2);
-    int chosen = 0;
-    for (int k : order)
-        if (chosen < wanted && radii[std::size_t(k)] <= 9.0) {
-            designated[std::size_t(k)] = true;
-            ++chosen;
-        }
-    if (chosen < 3)
-        throw std::logic_error("phantom anatomy: too few small polyps to place between folds");
+        // Between-fold polyps are chosen among those of radius <= 9 mm, which fit in any gap.
+        order.resize(n);
+        for (int k = 0; k < count; ++k)
+            order[std::size_t(k)] = k;
+        std::shuffle(order.begin(), order.end(), rng);
+        designated.assign(n, false);
+        const int wanted = 3 + int(rng() % 2);
+        int chosen = 0;
+        for (int k : order)
+            if (chosen < wanted && radii[std::size_t(k)] <= 9.0) {
+                designated[std::size_t(k)] = true;
+                ++chosen;
+            }
+        if (chosen < 3)
+            throw std::logic_error("phantom anatomy: too few small polyps to place between folds");
+    }
 
     // Largest first: they have the fewest admissible places.
     std::sort(order.begin(), order.end(),
@@ -722,7 +732,7 @@ PhantomAnatomy buildPhantomAnatomy(uint64_t seed, const AnatomyOptions& options)
     checkAnatomy(a);
 
     std::mt19937_64 rng(splitmix64(seed ^ 0x9E1F0C5EEDull));
-    buildPolyps(a, rng);
+    buildPolyps(a, rng, options.polypDiametersMm);
     buildGasPockets(a, rng);
     return a;
 }

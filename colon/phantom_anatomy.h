@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <string>
+#include <optional>
 #include <vector>
 
 namespace flyover::phantom {
@@ -126,6 +127,9 @@ struct AnatomyOptions {
     /// The rectum the widest lumen (radius 30 mm from 20 to 60 mm above the anal end, easing
     /// back to the colon's own by 100 mm), as in a well-distended real colon.
     bool wideRectum = false;
+    /// The polyps' diameters (mm), placed by the default rules but none required between
+    /// folds; unset: the default 6-10 of 6-24 mm. Empty: no polyps.
+    std::optional<std::vector<double>> polypDiametersMm;
 };
 
 /// With all options off this is buildPhantomAnatomy(seed), bit for bit. Contacts are drawn

@@ -24,7 +24,7 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
     const bool anyNew = params.touching > 0 || params.redundant || params.rectalTube;
     const bool stored = params.orientation != "LPS";
     if (anyNew || params.fluid || params.collapse || params.stricture || params.prone || stored || params.ilealReflux ||
-        params.wideRectum) {
+        params.wideRectum || params.polypDiametersMm) {
         double lengthMm = 0;
         for (std::size_t i = 1; i < t.centerlineMm.size(); ++i) lengthMm += distance(t.centerlineMm[i - 1], t.centerlineMm[i]);
         out["variants"] = json{{"touching", params.touching}, {"redundant", params.redundant},
@@ -33,6 +33,7 @@ void addVariantTruth(json& out, const Phantom& ph, const PhantomParams& params)
         if (params.prone) out["variants"]["prone"] = true;
         if (params.ilealReflux) out["variants"]["ileal_reflux"] = true;
         if (params.wideRectum) out["variants"]["wide_rectum"] = true;
+        if (params.polypDiametersMm) out["variants"]["polyp_diameters_mm"] = *params.polypDiametersMm;
         if (stored) out["variants"]["orientation"] = params.orientation;
         out["centerline"]["length_mm"] = lengthMm;
     }

@@ -846,3 +846,25 @@ TEST(PhantomVariants, NoColonLeavesBodyLungsAndGas)
     for (std::size_t i = 0; i < smallAnatomy().centerlineMm.size(); i += 50)
         EXPECT_GT(sampleNearest(ph.ct, smallAnatomy().centerlineMm[i]), -200) << "arc " << i << " mm";
 }
+
+TEST(PhantomPolyps, GivenDiametersArePlacedAndBadOnesRefused)
+{
+    PhantomParams p;
+    p.polypDiametersMm = std::vector<double>{12.0, 7.0};
+    const Phantom ph = makePhantom(p);
+    ASSERT_EQ(ph.truth.polyps.size(), 2u);
+    std::vector<double> d;
+    for (const auto& q : ph.truth.polyps) d.push_back(2 * q.radiusMm);
+    std::sort(d.begin(), d.end());
+    EXPECT_DOUBLE_EQ(d[0], 7.0);
+    EXPECT_DOUBLE_EQ(d[1], 12.0);
+    p.polypDiametersMm = std::vector<double>{};
+    EXPECT_TRUE(makePhantom(p).truth.polyps.empty());
+    p.polypDiametersMm = std::vector<double>{40.0};
+    try {
+        makePhantom(p);
+        ADD_FAILURE() << "a 40 mm polyp was accepted";
+    } catch (const ParameterError& e) {
+        EXPECT_NE(std::string(e.what()).find("polyp diameters"), std::string::npos) << e.what();
+    }
+}
