@@ -5,7 +5,7 @@
 # A function is counted from its opening brace alone on a line in column 0 to the closing brace
 # in column 0 (the layout clang-format gives this tree); lambdas and local classes count toward
 # the function around them. --check: exit 1 when a file is over MAX_FILE lines, except those
-# listed in scripts/long_files_allowed.txt (each with why it is still long).
+# listed in scripts/long_files_allowed.txt, if it exists (each with why it is still long).
 set -euo pipefail
 check=0
 [ "${1:-}" = --check ] && { check=1; shift; }
