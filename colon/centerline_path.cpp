@@ -156,22 +156,6 @@ std::vector<Vec3d> gaussianSmooth(const std::vector<Vec3d>& pts, double sigmaSam
     return out;
 }
 
-/// The sdf at a world position by trilinear interpolation (mm). One probe per thread.
-class SdfProbe {
-public:
-    explicit SdfProbe(const openvdb::FloatGrid& grid) : mAcc(grid.tree()), mXf(grid.transform()) {}
-    double operator()(const Vec3d& worldMm)
-    {
-        float v = 0.0f;
-        openvdb::tools::BoxSampler::sample(
-            mAcc, mXf.worldToIndex(openvdb::Vec3d(worldMm.x, worldMm.y, worldMm.z)), v);
-        return static_cast<double>(v);
-    }
-
-private:
-    openvdb::tree::ValueAccessor<const openvdb::FloatTree> mAcc;
-    const openvdb::math::Transform& mXf;
-};
 
 /// Distance from `origin` (inside the lumen) along the unit vector `dir` to the first zero
 /// crossing of the sdf; -1 when there is none within maxMm. Sphere tracing: a step of 90% of

@@ -13,25 +13,32 @@
 
 namespace flyover::centerline_path {
 
-/// D = -sdf at a world position by triquadratic interpolation (27 voxels). Trilinear
-/// interpolation of a distance field takes its extrema at voxel centres, which would snap a
-/// ridge search back onto the voxel grid and bias D low on the axis; the quadratic stencil
-/// follows the ridge between voxels. One probe per thread (it owns a tree accessor).
-class DepthProbe {
+/// The sdf (Sign 1) or D = -sdf (Sign -1) at a world position, sampled by `Sampler`. One probe
+/// per thread (it owns a tree accessor).
+template <typename Sampler, int Sign>
+class GridProbe {
 public:
-    explicit DepthProbe(const openvdb::FloatGrid& grid) : mAcc(grid.tree()), mXf(grid.transform()) {}
+    explicit GridProbe(const openvdb::FloatGrid& grid) : mAcc(grid.tree()), mXf(grid.transform()) {}
     double operator()(const Vec3d& worldMm)
     {
         float v = 0.0f;
-        openvdb::tools::QuadraticSampler::sample(
-            mAcc, mXf.worldToIndex(openvdb::Vec3d(worldMm.x, worldMm.y, worldMm.z)), v);
-        return -static_cast<double>(v);
+        Sampler::sample(mAcc, mXf.worldToIndex(openvdb::Vec3d(worldMm.x, worldMm.y, worldMm.z)), v);
+        if constexpr (Sign < 0) return -static_cast<double>(v);
+        else return static_cast<double>(v);
     }
 
 private:
     openvdb::tree::ValueAccessor<const openvdb::FloatTree> mAcc;
     const openvdb::math::Transform& mXf;
 };
+
+/// D = -sdf at a world position by triquadratic interpolation (27 voxels). Trilinear
+/// interpolation of a distance field takes its extrema at voxel centres, which would snap a
+/// ridge search back onto the voxel grid and bias D low on the axis; the quadratic stencil
+/// follows the ridge between voxels.
+using DepthProbe = GridProbe<openvdb::tools::QuadraticSampler, -1>;
+/// The sdf by trilinear interpolation (mm).
+using SdfProbe = GridProbe<openvdb::tools::BoxSampler, 1>;
 
 Vec3d toVec(const openvdb::Vec3d& v);
 /// Arc length at each vertex of a polyline.
