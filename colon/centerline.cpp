@@ -222,6 +222,616 @@ struct PiecePath {
     const char* searchedOn = "";  ///< CenterlinePieceInfo::routeSearchedOn
 };
 
+PieceEnds endsOf(const std::vector<Vec3d>& p, double voxelMm)
+{
+    return {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
+}
+
+/// Step 2's pieces that the path takes: the largest and those large enough beside it, largest
+/// first (ties: lower label, i.e. first in slot order); `bySize` is every piece in that order.
+struct UsedPieces {
+    std::vector<std::int32_t> bySize, used;
+};
+
+UsedPieces usedPieces(const Pieces& pieces, double voxelMl, const CenterlineParams& params)
+{
+    UsedPieces u;
+    u.bySize.resize(pieces.size.size());
+    for (std::size_t i = 0; i < u.bySize.size(); ++i) u.bySize[i] = static_cast<std::int32_t>(i);
+    std::stable_sort(u.bySize.begin(), u.bySize.end(),
+                     [&](std::int32_t a, std::int32_t b) { return pieces.size[a] > pieces.size[b]; });
+    for (std::size_t r = 0; r < u.bySize.size(); ++r)
+        if (r == 0 ||
+            pieceLargeEnough(double(pieces.size[u.bySize[r]]), double(pieces.size[u.bySize[0]]), voxelMl, params))
+            u.used.push_back(u.bySize[r]);
+    return u;
+}
+
+/// The lowest lumen voxel of the pieces used and, with rectumMm, the lumen voxel nearest to it
+/// (the seed): its piece's path runs from the end of the tube nearest to the seed to the voxel
+/// farthest from that end along the lumen (the cecum). Without rectumMm each piece runs between
+/// its farthest pair, and the lowest end in world z is the rectum (step 4).
+struct RectumSeeds {
+    Slot rectumSeed = NO_SLOT, lowestSlot = NO_SLOT;
+};
+
+RectumSeeds rectumSeeds(const LumenIndex& index, const openvdb::math::Transform& xf, const Pieces& pieces,
+                        const std::vector<std::int32_t>& used, const CenterlineParams& params)
+{
+    RectumSeeds r;
+    std::vector<std::uint8_t> isUsed(pieces.size.size(), 0);
+    for (std::int32_t l : used) isUsed[l] = 1;
+    double best = std::numeric_limits<double>::infinity(), lowest = best;
+    for (Slot s = 0; s < index.slotCount(); ++s) {
+        if (!index.isLumen(s) || !isUsed[pieces.label[s]]) continue;
+        const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
+        if (w.z < lowest) {
+            lowest = w.z;
+            r.lowestSlot = s;
+        }
+        if (params.rectumMm && distance(w, *params.rectumMm) < best) {
+            best = distance(w, *params.rectumMm);
+            r.rectumSeed = s;
+        }
+    }
+    return r;
+}
+
+/// Step 3: per piece, ends, the minimal path through the core, refinement. A step of length l
+/// between voxels u and v costs l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid
+/// rule for the integral of D^-p along the step, symmetric in u and v (the same path either
+/// way). Near the wall D is small and the cost explodes, so the path keeps to the ridge of D,
+/// the medial axis; on a bend the ridge stays optimal because any sideways shift lowers D
+/// linearly while it shortens the path only at second order. eps = half a voxel: the distance
+/// is not resolved below that, and it bounds the cost of voxels at the wall.
+class PieceTracer {
+public:
+    PieceTracer(const LumenIndex& index, const SlotBits& holes, const Pieces& pieces, const openvdb::FloatGrid& grid,
+                const CenterlineParams& params, double fineMm, Progress* progress);
+
+    /// One piece's path; from the end of the tube nearest to `seed` when one is given. `from`:
+    /// start there instead (with `plugged`, the piece's holes plus voxels that end the search
+    /// there: the far end is then the farthest voxel reached without crossing them).
+    PiecePath trace(std::int32_t label, Slot seed, Slot from = NO_SLOT, const SlotBits* plugged = nullptr);
+
+    /// No voxel of the piece reached yet (before a search that must not find ends left over
+    /// from an earlier one: one that stops at a plug).
+    void unreached(std::int32_t label);
+
+    /// stepsFrom over `holes` into the tracer's steps; steps() reads them.
+    Slot stepsFrom(const SlotBits& holes, Slot source)
+    {
+        return flyover::stepsFrom(mIndex, holes, source, mSteps, mProgress);
+    }
+    const std::vector<std::int32_t>& steps() const { return mSteps; }
+
+private:
+    double medial(Slot u, Slot v, int k) const
+    {
+        return mStepMm[k] * 0.5 * (double(mWeight[u]) + double(mWeight[v]));
+    }
+    /// A two-voxel step, taken only where the inscribed balls of its ends overlap.
+    double medialCoarse(Slot u, Slot v, int k) const
+    {
+        const double len = 2.0 * mStepMm[k];
+        if (!(double(mIndex.depthMm[u]) + double(mIndex.depthMm[v]) > len))
+            return std::numeric_limits<double>::infinity();
+        return len * 0.5 * (double(mWeight[u]) + double(mWeight[v]));
+    }
+    /// A two-voxel step through the voxel between, at the two steps' cost.
+    double medialThrough(Slot u, Slot v, int k) const
+    {
+        const Slot m = mIndex.stepSlot(u, k);
+        if (m == NO_SLOT || !mIndex.isLumen(m)) return std::numeric_limits<double>::infinity();
+        return medial(u, m, k) + medial(m, v, k);
+    }
+    static bool isEven(Slot s)
+    {
+        const int off = static_cast<int>(s % LEAF_VOXELS);
+        return (off & ((1 << (2 * LEAF_LOG2)) | (1 << LEAF_LOG2) | 1)) == 0;
+    }
+    bool searchCorridors(Slot a, Slot b, std::vector<Slot>& route);
+
+    const LumenIndex& mIndex;
+    const SlotBits& mHoles;
+    const Pieces& mPieces;
+    const openvdb::FloatGrid& mGrid;
+    const CenterlineParams& mParams;
+    const double mVoxelMm, mFineMm;
+    Progress* mProgress;
+    std::vector<float> mWeight;
+    std::vector<std::uint8_t> mCore, mCoarse;
+    std::array<double, 26> mStepMm{};
+    double mMinEdge = 0, mMaxEdge = 0;
+    std::vector<std::int32_t> mSteps;
+    std::vector<Slot> mPieceSlots;
+    RouteWorkspace mRouteWork;
+};
+
+PieceTracer::PieceTracer(const LumenIndex& index, const SlotBits& holes, const Pieces& pieces,
+                         const openvdb::FloatGrid& grid, const CenterlineParams& params, double fineMm,
+                         Progress* progress)
+    : mIndex(index), mHoles(holes), mPieces(pieces), mGrid(grid), mParams(params),
+      mVoxelMm(grid.transform().voxelSize()[0]), mFineMm(fineMm), mProgress(progress),
+      mWeight(index.slotCount(), 0.0f), mCore(index.slotCount(), 0), mCoarse(index.slotCount(), 0),
+      mSteps(index.slotCount(), -1)
+{
+    const double eps = 0.5 * mVoxelMm;
+    // The core: voxels at least half as deep as the deepest voxel nearby (within one to two
+    // leaves). The minimal path runs along the ridge of D, deep inside the core, so leaving out
+    // the outer shell does not change it, while it quarters the search.
+    const std::vector<float> nearby = nearbyMaxDepth(index);
+    const float coreMarginMm = static_cast<float>(3.0 * mVoxelMm);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s) {
+            const float d = index.depthMm[s];
+            if (d < 0.0f) continue;
+            mWeight[s] = static_cast<float>(std::pow(std::max<double>(d, eps), -params.wallPenalty));
+            const float m = nearby[s / LEAF_VOXELS];
+            mCore[s] = d >= std::min(0.5f * m, m - coreMarginMm);
+        }
+    });
+    float minWeight = std::numeric_limits<float>::max(), maxWeight = 0.0f;
+    for (std::size_t s = 0; s < index.slotCount(); ++s)
+        if (index.depthMm[s] >= 0.0f) {
+            minWeight = std::min(minWeight, mWeight[s]);
+            maxWeight = std::max(maxWeight, mWeight[s]);
+        }
+    for (int k = 0; k < 26; ++k) mStepMm[k] = STEPS[k].lengthVoxels * mVoxelMm;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s)
+            mCoarse[s] = mCore[s] && isEven(static_cast<Slot>(s));
+    });
+    mMinEdge = mVoxelMm * double(minWeight);
+    mMaxEdge = std::sqrt(3.0) * mVoxelMm * double(maxWeight);
+}
+
+void PieceTracer::unreached(std::int32_t label)
+{
+    for (Slot s = 0; s < mIndex.slotCount(); ++s)
+        if (mPieces.label[s] == label) mSteps[s] = -1;
+}
+
+// Where a narrowing splits a piece's core, the minimal route leaves the core only in the
+// narrowing and at the piece's ends (the cap walls it starts and ends on). So the route is
+// searched on the core plus corridors through those places: the piece's voxels within
+// corridorMm (in steps, at least three) of where a route over the piece's voxels of even
+// coordinates (an eighth of them; each two-voxel step through the voxel between, at the two
+// steps' cost) runs outside the core, and of the two ends (the route over the core's voxels
+// alone was found not to exist). False when that lattice's route does not exist either (a
+// passage the lattice misses): the whole piece is then searched. On gca-colon-00020 (10.5 M
+// voxels, the core split near the far end) the lattice's route adds 13.7 k voxels to the core,
+// and the route found is the whole piece's, voxel for voxel. `mCore` and `mCoarse` are left as
+// they were (a piece traced again from a seed searches its corridors again).
+bool PieceTracer::searchCorridors(Slot a, Slot b, std::vector<Slot>& route)
+{
+    const auto through = [this](Slot u, Slot v, int k) { return medialThrough(u, v, k); };
+    const auto step = [this](Slot u, Slot v, int k) { return medial(u, v, k); };
+    Slot ends[2] = {NO_SLOT, NO_SLOT};
+    std::vector<std::uint8_t>& even = mCoarse;  // the core's even voxels, restored below
+    for (Slot s : mPieceSlots) {
+        even[s] = isEven(s);
+        if (!even[s] || mSteps[s] < 0) continue;
+        if (ends[0] == NO_SLOT || mSteps[s] < mSteps[ends[0]]) ends[0] = s;
+        if (ends[1] == NO_SLOT || mSteps[s] > mSteps[ends[1]]) ends[1] = s;
+    }
+    std::vector<Slot> lattice;
+    const bool found = ends[0] != NO_SLOT && ends[0] != ends[1] &&
+                       shortestRoute<2>(mIndex, even, ends[0], ends[1], through, 2.0 * mMinEdge, 2.0 * mMaxEdge,
+                                        mRouteWork, lattice, mProgress);
+    for (Slot s : mPieceSlots) even[s] = mCore[s] && isEven(s);
+    if (!found) return false;
+    std::vector<Slot> queue{a, b};
+    for (std::size_t i = 0; i < lattice.size(); ++i) {
+        const Slot r = lattice[i];
+        if (!mCore[r]) queue.push_back(r);
+        if (i + 1 == lattice.size()) break;
+        const Coord d = mIndex.coord(lattice[i + 1]) - mIndex.coord(r);
+        const Slot m = mIndex.stepSlot(r, lumen_index::stepIndex(d[0] / 2, d[1] / 2, d[2] / 2));
+        if (m != NO_SLOT && !mCore[m]) queue.push_back(m);
+    }
+    // Breadth-first from those voxels, corridorMm / voxelMm steps deep and at least three (on the
+    // small phantom's 2.5 mm voxels, two steps round a stricture gave another route than the
+    // whole piece's near the cecum's cap).
+    const int depthSteps = std::max(3, static_cast<int>(std::ceil(mParams.corridorMm / mVoxelMm)));
+    breadthFirst(mIndex, mHoles, queue, depthSteps, [](Slot, std::int32_t) {}, mProgress);
+    std::vector<Slot> added;
+    for (Slot s : queue)
+        if (!mCore[s]) {
+            mCore[s] = 1;
+            added.push_back(s);
+        }
+    const bool routed = shortestRoute<1>(mIndex, mCore, a, b, step, mMinEdge, mMaxEdge, mRouteWork, route, mProgress);
+    for (Slot s : added) mCore[s] = 0;
+    return routed;
+}
+
+PiecePath PieceTracer::trace(std::int32_t label, Slot seed, Slot from, const SlotBits* plugged)
+{
+    const auto step = [this](Slot u, Slot v, int k) { return medial(u, v, k); };
+    const auto coarseStep = [this](Slot u, Slot v, int k) { return medialCoarse(u, v, k); };
+    // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches the
+    // other end last. Both lie on the wall of the blind ends; the path runs between the core
+    // voxels nearest to them in steps.
+    Slot a = mPieces.lastReached[label];
+    if (from != NO_SLOT) {
+        a = from;
+    } else if (seed != NO_SLOT) {
+        a = tubeEndNearSeed(mIndex, mHoles, seed, mSteps, mVoxelMm, mProgress);
+    }
+    if (plugged) unreached(label);  // voxels past the plug are not reached: no end may lie there
+    const Slot b = stepsFrom(plugged ? *plugged : mHoles, a);
+    // The search runs on the coarsest set that connects the ends: the core's voxels of even
+    // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the whole
+    // piece (a stricture, or a piece next to a much deeper one, can break the core: on a 2.4 m
+    // real colon, a narrowing 1.6 mm deep between stretches 10 mm deep). The path's precision
+    // does not matter, the refinement moves it to the sections' centroids.
+    Slot ends[2][2] = {{NO_SLOT, NO_SLOT}, {NO_SLOT, NO_SLOT}};  // [coarse, core][near, far]
+    mPieceSlots.clear();
+    for (Slot s = 0; s < mIndex.slotCount(); ++s) {
+        if (mPieces.label[s] != label) continue;
+        mPieceSlots.push_back(s);
+        if (!mCore[s] || mSteps[s] < 0) continue;
+        for (int level = 0; level < 2; ++level) {
+            if (level == 0 && !isEven(s)) continue;
+            Slot* e = ends[level];
+            if (e[0] == NO_SLOT || mSteps[s] < mSteps[e[0]]) e[0] = s;
+            if (e[1] == NO_SLOT || mSteps[s] > mSteps[e[1]]) e[1] = s;
+        }
+    }
+    // The coarse lattice holds an eighth of the core: its search is short, from one end.
+    const route_search::RouteOptions coarseSearch{false};
+    std::vector<Slot> route;
+    const bool coarseRoute = ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
+                             shortestRoute<2>(mIndex, mCoarse, ends[0][0], ends[0][1], coarseStep, 2.0 * mMinEdge,
+                                              2.0 * mMaxEdge, mRouteWork, route, mProgress, coarseSearch);
+    const bool coreRoute = coarseRoute || (ends[1][0] != NO_SLOT &&
+                                           shortestRoute<1>(mIndex, mCore, ends[1][0], ends[1][1], step, mMinEdge,
+                                                            mMaxEdge, mRouteWork, route, mProgress));
+    const char* searchedOn = coarseRoute ? "coarse core" : "core";
+    if (!coreRoute && mParams.corridorMm > 0 && searchCorridors(a, b, route)) {
+        searchedOn = "core and corridors";
+    } else if (!coreRoute) {
+        for (Slot s : mPieceSlots) mCore[s] = 1;
+        if (!shortestRoute<1>(mIndex, mCore, a, b, step, mMinEdge, mMaxEdge, mRouteWork, route, mProgress))
+            route.assign(1, a);  // cannot happen: a and b lie in one piece
+        searchedOn = "whole piece";
+    }
+    std::vector<Vec3d> raw;
+    const openvdb::math::Transform& xf = mGrid.transform();
+    for (Slot s : route) raw.push_back(toVec(xf.indexToWorld(mIndex.coord(s))));
+    PiecePath path;
+    path.label = label;
+    path.pointsMm = refinePath(raw, mGrid, mVoxelMm, mFineMm, mParams);
+    path.searchedOn = searchedOn;
+    return path;
+}
+
+/// The traced pieces, their ends and the travel order being built (steps 4 to 5).
+struct TracedPieces {
+    std::vector<PiecePath> paths;
+    std::vector<PieceEnds> ends;
+    int first = 0;
+    bool firstReversed = false;
+    bool reseeded = false;
+
+    void set(std::size_t i, PiecePath path, double voxelMm)
+    {
+        ends[i] = endsOf(path.pointsMm, voxelMm);
+        paths[i] = std::move(path);
+    }
+};
+
+/// Step 4: the rectum end, the lowest piece end in world z (LPS: +z is superior), or the end
+/// nearest to rectumMm; its piece comes first, entered there. Every piece is first traced
+/// between its own farthest pair, whatever the hint, so that the path from one end and the path
+/// from the other are the same curve (a piece with cycles or branches has several tips, and the
+/// tip farthest from the hint's end need not be the one the other direction starts from). Only
+/// a hint that lies at none of these ends re-traces its piece from there; without a hint, so
+/// does a lowest end far above the lowest lumen voxel (the farthest pair of its piece missed the
+/// rectum: a shortcut left through an uncut contact, a branch).
+void chooseRectumEnd(TracedPieces& t, PieceTracer& tracer, const LumenIndex& index, const Pieces& pieces,
+                     const openvdb::math::Transform& xf, const RectumSeeds& seeds, DepthProbe& depthAt,
+                     const CenterlineParams& params, double voxelMm)
+{
+    double best = std::numeric_limits<double>::infinity();
+    auto score = [&](const Vec3d& e) { return params.rectumMm ? distance(e, *params.rectumMm) : e.z; };
+    for (std::size_t i = 0; i < t.ends.size(); ++i)
+        for (bool back : {false, true}) {
+            const double sc = score(back ? t.ends[i].backMm : t.ends[i].frontMm);
+            if (sc < best) {
+                best = sc;
+                t.first = static_cast<int>(i);
+                t.firstReversed = back;
+            }
+        }
+    // Re-trace the piece of `seed` from the end of the tube nearest to it, and start there.
+    auto retraceFrom = [&](Slot seed) {
+        const std::int32_t label = pieces.label[seed];
+        for (std::size_t i = 0; i < t.paths.size(); ++i)
+            if (t.paths[i].label == label) {
+                t.set(i, tracer.trace(label, seed), voxelMm);
+                t.first = static_cast<int>(i);
+                t.firstReversed = false;
+            }
+        t.reseeded = true;
+    };
+    const Vec3d lowestMm = toVec(xf.indexToWorld(index.coord(seeds.lowestSlot)));
+    const Vec3d start = t.firstReversed ? t.ends[t.first].backMm : t.ends[t.first].frontMm;
+    if (params.rectumMm) {
+        // The hint at an end: the lumen voxel nearest to it (on the cap wall for a hint outside
+        // the lumen, such as the anus) within two depths of the end (the path stops where the
+        // depth in the cap falls to 60% of the lumen radius, that far from the cap wall).
+        const Vec3d seedMm = toVec(xf.indexToWorld(index.coord(seeds.rectumSeed)));
+        const double reach = std::max(2.0 * std::max(0.0, depthAt(start)), 3.0 * voxelMm);
+        if (distance(start, seedMm) > reach) retraceFrom(seeds.rectumSeed);
+    } else if (start.z - lowestMm.z > LOWEST_END_SLACK_MM) {
+        retraceFrom(seeds.lowestSlot);
+    }
+}
+
+/// The far end's left-out branch: what the path leaves out there, kept for coverage.
+struct FarEnd {
+    std::optional<CenterlineFarBranch> branch;
+    std::vector<Vec3d> leftOutMm;
+};
+
+/// Every 2 mm of `pts` from index `from` on, and its last point.
+std::vector<Vec3d> axisFrom(const std::vector<Vec3d>& pts, std::size_t from)
+{
+    std::vector<Vec3d> axis;
+    for (std::size_t i = from; i < pts.size(); ++i)
+        if (axis.empty() || distance(axis.back(), pts[i]) >= 2.0) axis.push_back(pts[i]);
+    if (!axis.empty() && axis.back() != pts.back()) axis.push_back(pts.back());
+    return axis;
+}
+
+/// Step 4b (centerline_far_end.h): when the last piece's path ends in a narrow tube off a wide
+/// lumen (the terminal ileum off the cecum), the tube is plugged past its mouth and the farthest
+/// voxel from the piece's near end is searched again. When that lies well beyond the mouth
+/// (FAR_SAC_DEPTHS wide depths, in steps), the wide lumen has an end of its own that the path
+/// skipped (the cecum below the valve): the piece is traced to it. Else (a narrow cecum, no wide
+/// end beyond its mouth) the path stays.
+FarEnd traceBelowIleum(TracedPieces& t, const PieceChain& chain, PieceTracer& tracer, const LumenIndex& index,
+                       const Pieces& pieces, const SlotBits& holes, const openvdb::math::Transform& xf,
+                       DepthProbe& depthAt, double voxelMm, double fineMm)
+{
+    FarEnd far;
+    const std::size_t lastPos = chain.order.size() - 1;
+    const std::size_t last = std::size_t(chain.order[lastPos]);
+    const bool reversed = chain.reversed[lastPos];
+    std::vector<Vec3d> pts = t.paths[last].pointsMm;
+    if (reversed) std::reverse(pts.begin(), pts.end());
+    const auto narrow = narrowFarEnd(pts, [&](const Vec3d& p) { return depthAt(p); });
+    if (!narrow) return far;
+    const std::int32_t label = t.paths[last].label;
+    const Vec3d mouth = pts[narrow->mouthIndex];
+    Slot nearSlot = NO_SLOT, mouthSlot = NO_SLOT, farSlot = NO_SLOT;
+    double nearMm = std::numeric_limits<double>::infinity(), mouthMm = nearMm, farMm = nearMm;
+    SlotBits plugged = holes;
+    for (Slot s = 0; s < index.slotCount(); ++s) {
+        if (pieces.label[s] != label) continue;
+        const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
+        const auto nearest = [&](const Vec3d& p, Slot& slot, double& best) {
+            const double d = distance(w, p);
+            if (d < best) {
+                best = d;
+                slot = s;
+            }
+        };
+        nearest(pts.front(), nearSlot, nearMm);
+        nearest(mouth, mouthSlot, mouthMm);
+        nearest(pts.back(), farSlot, farMm);
+        if (distance(w, narrow->plugMm) <= narrow->plugRadiusMm) plugged.set(s);
+    }
+    if (plugged.test(nearSlot) || plugged.test(mouthSlot)) return far;
+    tracer.unreached(label);
+    const Slot end = tracer.stepsFrom(plugged, nearSlot);
+    const std::vector<std::int32_t>& steps = tracer.steps();
+    const double beyondMm = double(steps[end] - steps[mouthSlot]) * voxelMm;
+    if (steps[farSlot] >= 0 || beyondMm < FAR_SAC_DEPTHS * narrow->wideDepthMm) return far;
+    PiecePath traced = tracer.trace(label, NO_SLOT, nearSlot, &plugged);
+    // The tube's axis past the plug's centre.
+    std::size_t plug = pts.size();
+    for (std::size_t i = 0; i < pts.size() && plug == pts.size(); ++i)
+        if (distance(pts[i], narrow->plugMm) < 0.5 * fineMm) plug = i;
+    far.leftOutMm = axisFrom(pts, plug);
+    CenterlineFarBranch info;
+    info.mouthMm = mouth;
+    info.endMm = pts.back();
+    info.lengthMm = narrow->lengthMm;
+    info.depthMm = narrow->narrowDepthMm;
+    info.wideDepthMm = narrow->wideDepthMm;
+    info.wideEndBeyondMouthMm = beyondMm;
+    far.branch = info;
+    if (reversed) std::reverse(traced.pointsMm.begin(), traced.pointsMm.end());
+    t.set(last, std::move(traced), voxelMm);
+    return far;
+}
+
+/// Step 4c: a thin tube at the far end with no wide end beyond: the appendix (or a thread of
+/// ileum) off the cecum's end, at most APPENDIX_DEPTH_FRACTION as deep as the colon before it,
+/// is no colon to fly: the path ends at its mouth, continued into the cecum's cap, and the
+/// tube's axis is kept for coverage as the ileum's is.
+FarEnd stopAtAppendix(TracedPieces& t, const PieceChain& chain, DepthProbe& depthAt, double voxelMm, double fineMm)
+{
+    FarEnd far;
+    const std::size_t lastPos = chain.order.size() - 1;
+    const std::size_t last = std::size_t(chain.order[lastPos]);
+    const bool reversed = chain.reversed[lastPos];
+    std::vector<Vec3d> pts = t.paths[last].pointsMm;
+    if (reversed) std::reverse(pts.begin(), pts.end());
+    const auto mouth = thinFarEnd(pts, depthAt, fineMm);
+    if (!mouth) return far;
+    CenterlineFarBranch info;
+    info.mouthMm = pts[mouth->index];
+    info.endMm = pts.back();
+    info.lengthMm = mouth->lengthMm;
+    info.depthMm = mouth->thinDepthMm;
+    info.wideDepthMm = mouth->wideDepthMm;
+    far.branch = info;
+    far.leftOutMm = axisFrom(pts, mouth->index);
+    pts.resize(mouth->index + 1);
+    extendEnd(pts, depthAt, fineMm);
+    if (reversed) std::reverse(pts.begin(), pts.end());
+    t.ends[last] = endsOf(pts, voxelMm);
+    t.paths[last].pointsMm = std::move(pts);
+    return far;
+}
+
+/// Step 5: one polyline, the pieces in chain order and bridges between them.
+struct ChainedPath {
+    struct Bridge {
+        double startArc, endArc, startDepth, endDepth;
+    };
+    std::vector<Vec3d> pointsMm;
+    std::vector<Bridge> bridges;
+    std::vector<CenterlineBridgeInfo> info;
+};
+
+ChainedPath chainPieces(const TracedPieces& t, const PieceChain& chain, DepthProbe& depthAt, double fineMm)
+{
+    ChainedPath c;
+    for (std::size_t k = 0; k < chain.order.size(); ++k) {
+        std::vector<Vec3d> pts = t.paths[chain.order[k]].pointsMm;
+        if (chain.reversed[k]) std::reverse(pts.begin(), pts.end());
+        if (k > 0) {
+            const Vec3d exit = c.pointsMm.back();
+            const PieceEnds& from = t.ends[chain.order[k - 1]];
+            const PieceEnds& to = t.ends[chain.order[k]];
+            const Vec3d exitOut = chain.reversed[k - 1] ? from.frontOut : from.backOut;
+            const Vec3d entryOut = chain.reversed[k] ? to.backOut : to.frontOut;
+            const std::vector<Vec3d> curve = bridgeCurve(exit, exitOut, pts.front(), entryOut, fineMm);
+            ChainedPath::Bridge b;
+            b.startArc = arcLengths(c.pointsMm).back();
+            b.startDepth = std::max(0.0, depthAt(exit));
+            b.endDepth = std::max(0.0, depthAt(pts.front()));
+            c.pointsMm.insert(c.pointsMm.end(), curve.begin() + 1, curve.end() - 1);
+            const double bridgeLength = arcLengths(curve).back();
+            b.endArc = b.startArc + bridgeLength;
+            c.bridges.push_back(b);
+            CenterlineBridgeInfo info;
+            info.fromPiece = chain.order[k - 1];
+            info.toPiece = chain.order[k];
+            info.gapMm = distance(exit, pts.front());
+            info.lengthMm = bridgeLength;
+            c.info.push_back(info);
+        }
+        c.pointsMm.insert(c.pointsMm.end(), pts.begin(), pts.end());
+    }
+    return c;
+}
+
+/// Uniform arc-length resampling at stepMm from the rectum end; the remainder (< stepMm) at the
+/// cecum end is dropped so that every step is exactly stepMm. Radii: D at the point; on a bridge
+/// (no lumen to measure) linear in arc length between D at its two ends.
+Centerline resampleChain(const ChainedPath& c, double stepMm, DepthProbe& depthAt)
+{
+    Centerline cl;
+    cl.stepMm = stepMm;
+    const std::vector<Vec3d>& pts = c.pointsMm;
+    const std::vector<double> s = arcLengths(pts);
+    if (pts.size() < 2 || !(s.back() > 0)) {
+        CenterlinePoint p;
+        p.positionMm = pts.front();
+        p.radiusMm = std::max(0.0, depthAt(p.positionMm));
+        cl.points.push_back(p);
+    } else {
+        const std::size_t count = static_cast<std::size_t>(std::floor(s.back() / stepMm + 1e-9)) + 1;
+        cl.points.resize(count);
+        std::size_t hint = 0, bridge = 0;
+        for (std::size_t i = 0; i < count; ++i) {
+            const double arc = double(i) * stepMm;
+            CenterlinePoint& p = cl.points[i];
+            p.positionMm = pointAt(pts, s, arc, hint);
+            while (bridge < c.bridges.size() && c.bridges[bridge].endArc <= arc) ++bridge;
+            if (bridge < c.bridges.size() && c.bridges[bridge].startArc < arc) {
+                const ChainedPath::Bridge& b = c.bridges[bridge];
+                const double t = (arc - b.startArc) / std::max(b.endArc - b.startArc, 1e-9);
+                p.bridged = true;
+                p.radiusMm = b.startDepth + (b.endDepth - b.startDepth) * t;
+            } else {
+                p.radiusMm = std::max(0.0, depthAt(p.positionMm));
+            }
+        }
+    }
+    computeTangentsAndNormals(cl);
+    return cl;
+}
+
+/// Stretches of the path closer to the wall than nearWallMm outside bridges.
+std::vector<CenterlineNearWall> nearWallStretches(const Centerline& cl, const CenterlineParams& params)
+{
+    std::vector<CenterlineNearWall> nearWall;
+    for (std::size_t i = 0; i < cl.points.size(); ++i) {
+        const CenterlinePoint& p = cl.points[i];
+        if (p.bridged || !(p.radiusMm < params.nearWallMm)) continue;
+        const double arc = double(i) * params.stepMm;
+        if (!nearWall.empty() && nearWall.back().toArcMm + 1.5 * params.stepMm >= arc) {
+            CenterlineNearWall& w = nearWall.back();
+            w.toArcMm = arc;
+            if (p.radiusMm < w.minRadiusMm) {
+                w.minRadiusMm = p.radiusMm;
+                w.positionMm = p.positionMm;
+            }
+        } else {
+            nearWall.push_back({arc, arc, p.radiusMm, p.positionMm});
+        }
+    }
+    return nearWall;
+}
+
+/// The turns between consecutive steps and the normal's steps, into the report.
+void reportTurns(const Centerline& cl, CenterlineReport& report)
+{
+    auto degrees = [](const Vec3d& a, const Vec3d& b) {
+        const double la = length(a), lb = length(b);
+        if (la == 0 || lb == 0) return 0.0;
+        return std::acos(std::clamp(dot(a, b) / (la * lb), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+    };
+    const auto& cp = cl.points;
+    for (std::size_t i = 1; i < cp.size(); ++i) {
+        if (i + 1 < cp.size()) {
+            const double t = degrees(cp[i].positionMm - cp[i - 1].positionMm, cp[i + 1].positionMm - cp[i].positionMm);
+            report.maxTurnDeg = std::max(report.maxTurnDeg, t);
+            report.turnsOver30 += t > 30.0;
+        }
+        const double nrm = degrees(cp[i - 1].normal, cp[i].normal);
+        report.maxNormalStepDeg = std::max(report.maxNormalStepDeg, nrm);
+        report.normalStepsOver15 += nrm > 15.0;
+    }
+}
+
+/// Every piece (by size, as UsedPieces::bySize) with what the path made of it; bridges name
+/// pieces by that order.
+void reportPieces(const TracedPieces& t, const PieceChain& chain, const Pieces& pieces,
+                  const std::vector<std::int32_t>& bySize, double voxelMl, CenterlineReport& report)
+{
+    std::vector<int> infoOf(pieces.size.size(), -1);
+    for (std::size_t r = 0; r < bySize.size(); ++r) {
+        CenterlinePieceInfo info;
+        info.volumeMl = double(pieces.size[bySize[r]]) * voxelMl;
+        infoOf[bySize[r]] = static_cast<int>(r);
+        report.pieces.push_back(info);
+    }
+    for (std::size_t k = 0; k < chain.order.size(); ++k) {
+        const PiecePath& path = t.paths[chain.order[k]];
+        CenterlinePieceInfo& info = report.pieces[infoOf[path.label]];
+        info.used = true;
+        info.chainIndex = static_cast<int>(k);
+        info.pathLengthMm = arcLengths(path.pointsMm).back();
+        info.routeSearchedOn = path.searchedOn;
+        info.entryMm = chain.reversed[k] ? path.pointsMm.back() : path.pointsMm.front();
+        info.exitMm = chain.reversed[k] ? path.pointsMm.front() : path.pointsMm.back();
+    }
+    for (CenterlineBridgeInfo& b : report.bridges) {
+        b.fromPiece = infoOf[t.paths[b.fromPiece].label];
+        b.toPiece = infoOf[t.paths[b.toPiece].label];
+    }
+}
+
 } // namespace
 
 Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const CenterlineParams& params,
@@ -247,538 +857,57 @@ Centerline extractCenterline(const openvdb::FloatGrid& sdfGrid, const Centerline
         throw InputError("extractCenterline: the lumen is empty (no active sdf voxel below 0)");
     reportProgress(progress, 0.1, "lumen pieces");
 
-    // 2. Pieces, largest first (ties: lower label, i.e. first in slot order).
+    // 2. Pieces, and those the path takes.
     const SlotBits holes = holeBits(index);
     const Pieces pieces = labelPieces(index, holes, progress);
-    std::vector<std::int32_t> bySize(pieces.size.size());
-    for (std::size_t i = 0; i < bySize.size(); ++i) bySize[i] = static_cast<std::int32_t>(i);
-    std::stable_sort(bySize.begin(), bySize.end(),
-                     [&](std::int32_t a, std::int32_t b) { return pieces.size[a] > pieces.size[b]; });
-    std::vector<std::int32_t> used;
-    for (std::size_t r = 0; r < bySize.size(); ++r)
-        if (r == 0 || pieceLargeEnough(double(pieces.size[bySize[r]]), double(pieces.size[bySize[0]]), voxelMl, params))
-            used.push_back(bySize[r]);
+    const UsedPieces use = usedPieces(pieces, voxelMl, params);
+    const RectumSeeds seeds = rectumSeeds(index, xf, pieces, use.used, params);
 
-    // With rectumMm: the lumen voxel nearest to it over the pieces used (the seed); its piece's
-    // path runs from the end of the tube nearest to the seed (the voxel farthest from the
-    // seed's farthest voxel) to the voxel farthest from that end along the lumen (the cecum).
-    // Without: each piece's farthest pair, and the lowest end in world z is the rectum (step 4).
-    // The lowest lumen voxel is reported either way.
-    Slot rectumSeed = NO_SLOT, lowestSlot = NO_SLOT;
-    {
-        std::vector<std::uint8_t> isUsed(pieces.size.size(), 0);
-        for (std::int32_t l : used) isUsed[l] = 1;
-        double best = std::numeric_limits<double>::infinity(), lowest = best;
-        for (Slot s = 0; s < index.slotCount(); ++s) {
-            if (!index.isLumen(s) || !isUsed[pieces.label[s]]) continue;
-            const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
-            if (w.z < lowest) {
-                lowest = w.z;
-                lowestSlot = s;
-            }
-            if (params.rectumMm && distance(w, *params.rectumMm) < best) {
-                best = distance(w, *params.rectumMm);
-                rectumSeed = s;
-            }
-        }
-    }
-
-    // 3. Per piece: ends, minimal path through the core, refinement. A step of length l
-    // between voxels u and v costs l * (w(u) + w(v)) / 2 with w = max(D, eps)^-p: the trapezoid
-    // rule for the integral of D^-p along the step, symmetric in u and v (the same path either
-    // way). Near the wall D is small and the cost explodes, so the path keeps to the ridge of
-    // D, the medial axis; on a bend the ridge stays optimal because any sideways shift lowers
-    // D linearly while it shortens the path only at second order. eps = half a voxel: the
-    // distance is not resolved below that, and it bounds the cost of voxels at the wall.
-    const double eps = 0.5 * voxelMm;
-    std::vector<float> weight(index.slotCount(), 0.0f);
-    std::vector<std::uint8_t> core(index.slotCount(), 0);
-    {
-        // The core: voxels at least half as deep as the deepest voxel nearby (within one to
-        // two leaves). The minimal path runs along the ridge of D, deep inside the core, so
-        // leaving out the outer shell does not change it, while it quarters the search.
-        const std::vector<float> nearby = nearbyMaxDepth(index);
-        const float coreMarginMm = static_cast<float>(3.0 * voxelMm);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                const float d = index.depthMm[s];
-                if (d < 0.0f) continue;
-                weight[s] = static_cast<float>(std::pow(std::max<double>(d, eps), -params.wallPenalty));
-                const float m = nearby[s / LEAF_VOXELS];
-                core[s] = d >= std::min(0.5f * m, m - coreMarginMm);
-            }
-        });
-    }
-    float minWeight = std::numeric_limits<float>::max(), maxWeight = 0.0f;
-    for (std::size_t s = 0; s < index.slotCount(); ++s)
-        if (index.depthMm[s] >= 0.0f) {
-            minWeight = std::min(minWeight, weight[s]);
-            maxWeight = std::max(maxWeight, weight[s]);
-        }
-    const std::array<double, 26> stepMm = [&] {
-        std::array<double, 26> a{};
-        for (int k = 0; k < 26; ++k) a[k] = STEPS[k].lengthVoxels * voxelMm;
-        return a;
-    }();
-    auto medial = [&](Slot u, Slot v, int k) {
-        return stepMm[k] * 0.5 * (double(weight[u]) + double(weight[v]));
-    };
-    auto medialCoarse = [&](Slot u, Slot v, int k) {
-        const double len = 2.0 * stepMm[k];
-        if (!(double(index.depthMm[u]) + double(index.depthMm[v]) > len))
-            return std::numeric_limits<double>::infinity();
-        return len * 0.5 * (double(weight[u]) + double(weight[v]));
-    };
-    auto isEven = [](Slot s) {
-        const int off = static_cast<int>(s % LEAF_VOXELS);
-        return (off & ((1 << (2 * LEAF_LOG2)) | (1 << LEAF_LOG2) | 1)) == 0;
-    };
-    std::vector<std::uint8_t> coarse(index.slotCount(), 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, index.slotCount(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t s = r.begin(); s != r.end(); ++s)
-            coarse[s] = core[s] && isEven(static_cast<Slot>(s));
-    });
-    const double minEdge = voxelMm * double(minWeight), maxEdge = std::sqrt(3.0) * voxelMm * double(maxWeight);
-
-    // Sampling of the paths before the final resampling: a quarter voxel, at most 0.5 mm, and
-    // independent of stepMm: the refinement (trimming, sections, smoothing) works on these
-    // samples, and on a coarse grid (3 mm voxels) a spacing that followed the output step moved
-    // the path by up to 15 mm between --step-mm 1 and 2 (the path from the other
-    // end, asked with another step, was another curve). Linear interpolation between samples
-    // this close is exact to well under a micrometre on colon bends.
+    // 3. Per piece, the minimal path and its refinement. Sampling of the paths before the final
+    // resampling: a quarter voxel, at most 0.5 mm, and independent of stepMm: the refinement
+    // (trimming, sections, smoothing) works on these samples, and on a coarse grid (3 mm voxels)
+    // a spacing that followed the output step moved the path by up to 15 mm between --step-mm 1
+    // and 2. Linear interpolation between samples this close is exact to well under a
+    // micrometre on colon bends.
     const double fineMm = std::min(0.25 * voxelMm, 0.5);
-    std::vector<std::int32_t> steps(index.slotCount(), -1);
-    std::vector<Slot> pieceSlots;
-    RouteWorkspace routeWork;
-    // The coarse lattice holds an eighth of the core: its search is short, from one end.
-    const route_search::RouteOptions coarseSearch{false};
-    std::vector<PiecePath> paths;
-    // Where a narrowing splits a piece's core, the minimal route leaves the core only in the
-    // narrowing and at the piece's ends (the cap walls it starts and ends on). So the route is
-    // searched on the core plus corridors through those places: the piece's voxels within
-    // corridorMm (in steps, at least three) of where a route over the piece's voxels of even coordinates (an
-    // eighth of them; each two-voxel step through the voxel between, at the two steps' cost)
-    // runs outside the core, and of the two ends (the route over the core's voxels alone was
-    // found not to exist). False when that lattice's route does not exist either (a passage the
-    // lattice misses): the whole piece is then searched. On gca-colon-00020 (10.5 M
-    // voxels, the core split near the far end) the lattice's route adds 13.7 k voxels to the
-    // core, and the route found is the whole piece's, voxel for voxel. `core` and `coarse` are
-    // left as they were (a piece traced again from a seed searches its corridors again).
-    auto medialThrough = [&](Slot u, Slot v, int k) {
-        const Slot m = index.stepSlot(u, k);
-        if (m == NO_SLOT || !index.isLumen(m)) return std::numeric_limits<double>::infinity();
-        return medial(u, m, k) + medial(m, v, k);
-    };
-    auto searchCorridors = [&](Slot a, Slot b, std::vector<Slot>& route) {
-        Slot ends[2] = {NO_SLOT, NO_SLOT};
-        std::vector<std::uint8_t>& even = coarse;  // the core's even voxels, restored below
-        for (Slot s : pieceSlots) {
-            even[s] = isEven(s);
-            if (!even[s] || steps[s] < 0) continue;
-            if (ends[0] == NO_SLOT || steps[s] < steps[ends[0]]) ends[0] = s;
-            if (ends[1] == NO_SLOT || steps[s] > steps[ends[1]]) ends[1] = s;
-        }
-        std::vector<Slot> lattice;
-        const bool found = ends[0] != NO_SLOT && ends[0] != ends[1] &&
-                           shortestRoute<2>(index, even, ends[0], ends[1], medialThrough, 2.0 * minEdge,
-                                            2.0 * maxEdge, routeWork, lattice, progress);
-        for (Slot s : pieceSlots) even[s] = core[s] && isEven(s);
-        if (!found) return false;
-        std::vector<Slot> queue{a, b};
-        for (std::size_t i = 0; i < lattice.size(); ++i) {
-            const Slot r = lattice[i];
-            if (!core[r]) queue.push_back(r);
-            if (i + 1 == lattice.size()) break;
-            const Coord d = index.coord(lattice[i + 1]) - index.coord(r);
-            const Slot m = index.stepSlot(r, lumen_index::stepIndex(d[0] / 2, d[1] / 2, d[2] / 2));
-            if (m != NO_SLOT && !core[m]) queue.push_back(m);
-        }
-        // Breadth-first from those voxels, corridorMm / voxelMm steps deep and at least three (on
-        // the small phantom's 2.5 mm voxels, two steps round a stricture gave another route than
-        // the whole piece's near the cecum's cap).
-        const int depthSteps = std::max(3, static_cast<int>(std::ceil(params.corridorMm / voxelMm)));
-        breadthFirst(index, holes, queue, depthSteps, [](Slot, std::int32_t) {}, progress);
-        std::vector<Slot> added;
-        for (Slot s : queue)
-            if (!core[s]) {
-                core[s] = 1;
-                added.push_back(s);
-            }
-        const bool routed = shortestRoute<1>(index, core, a, b, medial, minEdge, maxEdge, routeWork, route, progress);
-        for (Slot s : added) core[s] = 0;
-        return routed;
-    };
-    // No voxel of the piece reached yet (before a search that must not find ends left over from
-    // an earlier one: one that stops at a plug).
-    auto unreached = [&](std::int32_t label) {
-        for (Slot s = 0; s < index.slotCount(); ++s)
-            if (pieces.label[s] == label) steps[s] = -1;
-    };
-    // One piece's path; from the end of the tube nearest to `seed` when one is given.
-    // `from`: start there instead (with `plugged`, the piece's holes plus voxels that end
-    // the search there: the far end is then the farthest voxel reached without crossing them).
-    auto tracePiece = [&](std::int32_t label, Slot seed, Slot from = NO_SLOT, const SlotBits* plugged = nullptr) {
-        // Geodesic farthest ends: a search from the labelling's last voxel (one end) reaches
-        // the other end last. Both lie on the wall of the blind ends; the path runs between
-        // the core voxels nearest to them in steps.
-        Slot a = pieces.lastReached[label];
-        if (from != NO_SLOT) {
-            a = from;
-        } else if (seed != NO_SLOT) {
-            a = tubeEndNearSeed(index, holes, seed, steps, voxelMm, progress);
-        }
-        if (plugged) unreached(label);  // voxels past the plug are not reached: no end may lie there
-        const Slot b = stepsFrom(index, plugged ? *plugged : holes, a, steps, progress);
-        // The search runs on the coarsest set that connects the ends: the core's voxels of even
-        // coordinates (an eighth of them) joined by two-voxel steps, then the core, then the
-        // whole piece (a stricture, or a piece next to a much deeper one, can break the core:
-        // on a 2.4 m real colon, a narrowing 1.6 mm deep between stretches 10 mm deep; a
-        // cheaper set for that case was tried and lost accuracy, see the README). A two-voxel
-        // step is taken only where the inscribed balls of its ends overlap, so it never crosses
-        // a wall; the path's precision does not matter, the refinement below moves it to the
-        // sections' centroids.
-        Slot ends[2][2] = {{NO_SLOT, NO_SLOT}, {NO_SLOT, NO_SLOT}};  // [coarse, core][near, far]
-        pieceSlots.clear();
-        for (Slot s = 0; s < index.slotCount(); ++s) {
-            if (pieces.label[s] != label) continue;
-            pieceSlots.push_back(s);
-            if (!core[s] || steps[s] < 0) continue;
-            for (int level = 0; level < 2; ++level) {
-                if (level == 0 && !isEven(s)) continue;
-                Slot* e = ends[level];
-                if (e[0] == NO_SLOT || steps[s] < steps[e[0]]) e[0] = s;
-                if (e[1] == NO_SLOT || steps[s] > steps[e[1]]) e[1] = s;
-            }
-        }
-        std::vector<Slot> route;
-        const bool coarseRoute =
-            ends[0][0] != NO_SLOT && ends[0][0] != ends[0][1] &&
-            shortestRoute<2>(index, coarse, ends[0][0], ends[0][1], medialCoarse, 2.0 * minEdge, 2.0 * maxEdge,
-                             routeWork, route, progress, coarseSearch);
-        const bool coreRoute = coarseRoute || (ends[1][0] != NO_SLOT &&
-                                               shortestRoute<1>(index, core, ends[1][0], ends[1][1], medial,
-                                                                minEdge, maxEdge, routeWork, route, progress));
-        const char* searchedOn = coarseRoute ? "coarse core" : "core";
-        if (!coreRoute && params.corridorMm > 0 && searchCorridors(a, b, route)) {
-            searchedOn = "core and corridors";
-        } else if (!coreRoute) {
-            for (Slot s : pieceSlots) core[s] = 1;
-            if (!shortestRoute<1>(index, core, a, b, medial, minEdge, maxEdge, routeWork, route, progress))
-                route.assign(1, a);  // cannot happen: a and b lie in one piece
-            searchedOn = "whole piece";
-        }
-        std::vector<Vec3d> raw;
-        for (Slot s : route) raw.push_back(toVec(xf.indexToWorld(index.coord(s))));
-        PiecePath path;
-        path.label = label;
-        path.pointsMm = refinePath(raw, *grid, voxelMm, fineMm, params);
-        path.searchedOn = searchedOn;
-        return path;
-    };
-    for (std::size_t u = 0; u < used.size(); ++u) {
-        reportProgress(progress, 0.2 + 0.6 * double(u) / double(used.size()), "minimal path");
-        paths.push_back(tracePiece(used[u], NO_SLOT));
+    PieceTracer tracer(index, holes, pieces, *grid, params, fineMm, progress);
+    TracedPieces traced;
+    for (std::size_t u = 0; u < use.used.size(); ++u) {
+        reportProgress(progress, 0.2 + 0.6 * double(u) / double(use.used.size()), "minimal path");
+        traced.paths.push_back(tracer.trace(use.used[u], NO_SLOT));
     }
     reportProgress(progress, 0.8, "order and bridge pieces");
 
-    // 4. The rectum end: the lowest piece end in world z (LPS: +z is superior), or the end
-    // nearest to rectumMm; its piece comes first, entered there. Every piece is first traced
-    // between its own farthest pair, whatever the hint, so that the path from one end and the
-    // path from the other are the same curve (a piece with cycles or branches has several
-    // tips, and the tip farthest from the hint's end need not be the one the other direction
-    // starts from). Only a hint that lies at none of these ends re-traces its piece from there.
+    // 4. The rectum end and the order of the pieces; the far end's ileum and appendix.
     DepthProbe depthAt(*grid);
-    std::vector<PieceEnds> ends(paths.size());
-    for (std::size_t i = 0; i < paths.size(); ++i) {
-        const auto& p = paths[i].pointsMm;
-        ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
-    }
-    int first = 0;
-    bool firstReversed = false;
-    {
-        double best = std::numeric_limits<double>::infinity();
-        auto score = [&](const Vec3d& e) {
-            return params.rectumMm ? distance(e, *params.rectumMm) : e.z;
-        };
-        for (std::size_t i = 0; i < ends.size(); ++i)
-            for (bool back : {false, true}) {
-                const double sc = score(back ? ends[i].backMm : ends[i].frontMm);
-                if (sc < best) {
-                    best = sc;
-                    first = static_cast<int>(i);
-                    firstReversed = back;
-                }
-            }
-    }
-    // Re-trace the piece of `seed` from the end of the tube nearest to it, and start there.
-    auto retraceFrom = [&](Slot seed) {
-        const std::int32_t label = pieces.label[seed];
-        for (std::size_t i = 0; i < paths.size(); ++i)
-            if (paths[i].label == label) {
-                paths[i] = tracePiece(label, seed);
-                const auto& p = paths[i].pointsMm;
-                ends[i] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
-                first = static_cast<int>(i);
-                firstReversed = false;
-            }
-    };
-    const Vec3d lowestMm = toVec(xf.indexToWorld(index.coord(lowestSlot)));
-    bool reseeded = false;
-    const Vec3d start = firstReversed ? ends[first].backMm : ends[first].frontMm;
-    if (params.rectumMm) {
-        // The hint at an end: the lumen voxel nearest to it (on the cap wall for a hint outside
-        // the lumen, such as the anus) within two depths of the end (the path stops where the
-        // depth in the cap falls to 60% of the lumen radius, that far from the cap wall).
-        const Vec3d seedMm = toVec(xf.indexToWorld(index.coord(rectumSeed)));
-        const double reach = std::max(2.0 * std::max(0.0, depthAt(start)), 3.0 * voxelMm);
-        if (distance(start, seedMm) > reach) {
-            retraceFrom(rectumSeed);
-            reseeded = true;
-        }
-    } else if (start.z - lowestMm.z > LOWEST_END_SLACK_MM) {
-        // The lowest end far above the lowest lumen voxel: the farthest pair of its piece
-        // missed the rectum (a shortcut left through an uncut contact, a branch).
-        retraceFrom(lowestSlot);
-        reseeded = true;
-    }
-    const PieceChain chain = orderPieces(ends, first, firstReversed, params.bridgeTurnMmPerRad);
+    traced.ends.resize(traced.paths.size());
+    for (std::size_t i = 0; i < traced.paths.size(); ++i) traced.ends[i] = endsOf(traced.paths[i].pointsMm, voxelMm);
+    chooseRectumEnd(traced, tracer, index, pieces, xf, seeds, depthAt, params, voxelMm);
+    const PieceChain chain = orderPieces(traced.ends, traced.first, traced.firstReversed, params.bridgeTurnMmPerRad);
+    FarEnd far = traceBelowIleum(traced, chain, tracer, index, pieces, holes, xf, depthAt, voxelMm, fineMm);
+    if (!far.branch) far = stopAtAppendix(traced, chain, depthAt, voxelMm, fineMm);
 
-    // 4b. The far end (centerline_far_end.h): when the last piece's path ends in a narrow tube
-    // off a wide lumen (the terminal ileum off the cecum), the tube is plugged past its mouth
-    // and the farthest voxel from the piece's near end is searched again. When that lies well
-    // beyond the mouth (FAR_SAC_DEPTHS wide depths, in steps), the wide lumen has an end of its
-    // own that the path skipped (the cecum below the valve): the piece is traced to it. Else
-    // (a narrow cecum, no wide end beyond its mouth) the path stays.
-    std::optional<CenterlineFarBranch> farBranch;
-    std::vector<Vec3d> leftOutBranch;
-    {
-        const std::size_t lastPos = chain.order.size() - 1;
-        const int last = chain.order[lastPos];
-        const bool reversed = chain.reversed[lastPos];
-        std::vector<Vec3d> pts = paths[std::size_t(last)].pointsMm;
-        if (reversed) std::reverse(pts.begin(), pts.end());
-        if (const auto narrow = narrowFarEnd(pts, [&](const Vec3d& p) { return depthAt(p); })) {
-            const std::int32_t label = paths[std::size_t(last)].label;
-            const Vec3d mouth = pts[narrow->mouthIndex];
-            Slot nearSlot = NO_SLOT, mouthSlot = NO_SLOT, farSlot = NO_SLOT;
-            double nearMm = std::numeric_limits<double>::infinity(), mouthMm = nearMm, farMm = nearMm;
-            SlotBits plugged = holes;
-            for (Slot s = 0; s < index.slotCount(); ++s) {
-                if (pieces.label[s] != label) continue;
-                const Vec3d w = toVec(xf.indexToWorld(index.coord(s)));
-                const auto nearest = [&](const Vec3d& p, Slot& slot, double& best) {
-                    const double d = distance(w, p);
-                    if (d < best) {
-                        best = d;
-                        slot = s;
-                    }
-                };
-                nearest(pts.front(), nearSlot, nearMm);
-                nearest(mouth, mouthSlot, mouthMm);
-                nearest(pts.back(), farSlot, farMm);
-                if (distance(w, narrow->plugMm) <= narrow->plugRadiusMm) plugged.set(s);
-            }
-            if (!plugged.test(nearSlot) && !plugged.test(mouthSlot)) {
-                unreached(label);
-                const Slot end = stepsFrom(index, plugged, nearSlot, steps, progress);
-                const double beyondMm = double(steps[end] - steps[mouthSlot]) * voxelMm;
-                if (steps[farSlot] < 0 && beyondMm >= FAR_SAC_DEPTHS * narrow->wideDepthMm) {
-                    PiecePath traced = tracePiece(label, NO_SLOT, nearSlot, &plugged);
-                    // The tube's axis past the plug's centre, kept for coverage.
-                    leftOutBranch.clear();
-                    bool inTube = false;
-                    for (const Vec3d& q : pts) {
-                        inTube = inTube || distance(q, narrow->plugMm) < 0.5 * fineMm;
-                        if (inTube && (leftOutBranch.empty() || distance(leftOutBranch.back(), q) >= 2.0))
-                            leftOutBranch.push_back(q);
-                    }
-                    if (!leftOutBranch.empty() && leftOutBranch.back() != pts.back()) leftOutBranch.push_back(pts.back());
-                    CenterlineFarBranch info;
-                    info.mouthMm = mouth;
-                    info.endMm = pts.back();
-                    info.lengthMm = narrow->lengthMm;
-                    info.depthMm = narrow->narrowDepthMm;
-                    info.wideDepthMm = narrow->wideDepthMm;
-                    info.wideEndBeyondMouthMm = beyondMm;
-                    farBranch = info;
-                    if (reversed) std::reverse(traced.pointsMm.begin(), traced.pointsMm.end());
-                    const auto& p = traced.pointsMm;
-                    ends[std::size_t(last)] = {p.front(), p.back(), frontOutward(p, voxelMm), backOutward(p, voxelMm)};
-                    paths[std::size_t(last)] = std::move(traced);
-                }
-            }
-        }
-    }
-
-    // 4c. A thin tube at the far end with no wide end beyond: the appendix (or a thread of
-    // ileum) off the cecum's end, at most APPENDIX_DEPTH_FRACTION as deep as the colon before
-    // it, is no colon to fly: the path ends at its mouth, continued into the cecum's cap, and the
-    // tube's axis is kept for coverage as the ileum's is.
-    if (!farBranch) {
-        const std::size_t lastPos = chain.order.size() - 1;
-        const int last = chain.order[lastPos];
-        const bool reversed = chain.reversed[lastPos];
-        std::vector<Vec3d> pts = paths[std::size_t(last)].pointsMm;
-        if (reversed) std::reverse(pts.begin(), pts.end());
-        if (const auto mouth = thinFarEnd(pts, depthAt, fineMm)) {
-            CenterlineFarBranch info;
-            info.mouthMm = pts[mouth->index];
-            info.endMm = pts.back();
-            info.lengthMm = mouth->lengthMm;
-            info.depthMm = mouth->thinDepthMm;
-            info.wideDepthMm = mouth->wideDepthMm;
-            farBranch = info;
-            leftOutBranch.clear();
-            for (std::size_t i = mouth->index; i < pts.size(); ++i)
-                if (leftOutBranch.empty() || distance(leftOutBranch.back(), pts[i]) >= 2.0) leftOutBranch.push_back(pts[i]);
-            if (leftOutBranch.back() != pts.back()) leftOutBranch.push_back(pts.back());
-            pts.resize(mouth->index + 1);
-            extendEnd(pts, depthAt, fineMm);
-            if (reversed) std::reverse(pts.begin(), pts.end());
-            ends[std::size_t(last)] = {pts.front(), pts.back(), frontOutward(pts, voxelMm), backOutward(pts, voxelMm)};
-            paths[std::size_t(last)].pointsMm = std::move(pts);
-        }
-    }
-
-    // 5. One polyline: pieces in chain order, bridges between them.
-    struct Bridge {
-        double startArc, endArc, startDepth, endDepth;
-    };
-    std::vector<Vec3d> chainPts;
-    std::vector<Bridge> bridges;
-    std::vector<CenterlineBridgeInfo> bridgeInfo;
-    for (std::size_t k = 0; k < chain.order.size(); ++k) {
-        std::vector<Vec3d> pts = paths[chain.order[k]].pointsMm;
-        if (chain.reversed[k]) std::reverse(pts.begin(), pts.end());
-        if (k > 0) {
-            const Vec3d exit = chainPts.back();
-            const Vec3d exitOut = chain.reversed[k - 1] ? ends[chain.order[k - 1]].frontOut
-                                                        : ends[chain.order[k - 1]].backOut;
-            const Vec3d entryOut = chain.reversed[k] ? ends[chain.order[k]].backOut
-                                                     : ends[chain.order[k]].frontOut;
-            const std::vector<Vec3d> curve = bridgeCurve(exit, exitOut, pts.front(), entryOut, fineMm);
-            Bridge b;
-            b.startArc = arcLengths(chainPts).back();
-            b.startDepth = std::max(0.0, depthAt(exit));
-            b.endDepth = std::max(0.0, depthAt(pts.front()));
-            chainPts.insert(chainPts.end(), curve.begin() + 1, curve.end() - 1);
-            const double bridgeLength = arcLengths(curve).back();
-            b.endArc = b.startArc + bridgeLength;
-            bridges.push_back(b);
-            CenterlineBridgeInfo info;
-            info.fromPiece = chain.order[k - 1];
-            info.toPiece = chain.order[k];
-            info.gapMm = distance(exit, pts.front());
-            info.lengthMm = bridgeLength;
-            bridgeInfo.push_back(info);
-        }
-        chainPts.insert(chainPts.end(), pts.begin(), pts.end());
-    }
-
-    // Uniform arc-length resampling at stepMm from the rectum end; the remainder (< stepMm) at
-    // the cecum end is dropped so that every step is exactly stepMm. Radii: D at the point; on
-    // a bridge (no lumen to measure) linear in arc length between D at its two ends.
-    Centerline cl;
-    cl.stepMm = params.stepMm;
-    const std::vector<double> s = arcLengths(chainPts);
-    if (chainPts.size() < 2 || !(s.back() > 0)) {
-        CenterlinePoint p;
-        p.positionMm = chainPts.front();
-        p.radiusMm = std::max(0.0, depthAt(p.positionMm));
-        cl.points.push_back(p);
-    } else {
-        const std::size_t count = static_cast<std::size_t>(std::floor(s.back() / params.stepMm + 1e-9)) + 1;
-        cl.points.resize(count);
-        std::size_t hint = 0, bridge = 0;
-        for (std::size_t i = 0; i < count; ++i) {
-            const double arc = double(i) * params.stepMm;
-            CenterlinePoint& p = cl.points[i];
-            p.positionMm = pointAt(chainPts, s, arc, hint);
-            while (bridge < bridges.size() && bridges[bridge].endArc <= arc) ++bridge;
-            if (bridge < bridges.size() && bridges[bridge].startArc < arc) {
-                const Bridge& b = bridges[bridge];
-                const double t = (arc - b.startArc) / std::max(b.endArc - b.startArc, 1e-9);
-                p.bridged = true;
-                p.radiusMm = b.startDepth + (b.endDepth - b.startDepth) * t;
-            } else {
-                p.radiusMm = std::max(0.0, depthAt(p.positionMm));
-            }
-        }
-    }
-    computeTangentsAndNormals(cl);
-    if (farBranch) {
-        cl.leftOutBranchMm = leftOutBranch;
-        cl.leftOutBranchRadiusMm = farBranch->depthMm;
-    }
-
-    // Stretches of the path closer to the wall than nearWallMm outside bridges.
-    std::vector<CenterlineNearWall> nearWall;
-    for (std::size_t i = 0; i < cl.points.size(); ++i) {
-        const CenterlinePoint& p = cl.points[i];
-        if (p.bridged || !(p.radiusMm < params.nearWallMm)) continue;
-        const double arc = double(i) * params.stepMm;
-        if (!nearWall.empty() && nearWall.back().toArcMm + 1.5 * params.stepMm >= arc) {
-            CenterlineNearWall& w = nearWall.back();
-            w.toArcMm = arc;
-            if (p.radiusMm < w.minRadiusMm) {
-                w.minRadiusMm = p.radiusMm;
-                w.positionMm = p.positionMm;
-            }
-        } else {
-            nearWall.push_back({arc, arc, p.radiusMm, p.positionMm});
-        }
+    // 5. One polyline, resampled every stepMm with radii and frames.
+    const ChainedPath chained = chainPieces(traced, chain, depthAt, fineMm);
+    Centerline cl = resampleChain(chained, params.stepMm, depthAt);
+    if (far.branch) {
+        cl.leftOutBranchMm = far.leftOutMm;
+        cl.leftOutBranchRadiusMm = far.branch->depthMm;
     }
 
     if (report) {
         report->pieces.clear();
-        report->bridges = bridgeInfo;
-        report->rectumRule = params.rectumMm ? (reseeded ? "end of the tube nearest to rectum_mm"
-                                                         : "piece end nearest to rectum_mm")
-                             : reseeded      ? "end nearest to the lowest lumen voxel"
-                                             : "lowest end";
-        report->lowestLumenMm = lowestMm;
-        report->nearWall = nearWall;
-        report->farBranchLeftOut = farBranch;
+        report->bridges = chained.info;
+        report->rectumRule = params.rectumMm ? (traced.reseeded ? "end of the tube nearest to rectum_mm"
+                                                                : "piece end nearest to rectum_mm")
+                             : traced.reseeded ? "end nearest to the lowest lumen voxel"
+                                               : "lowest end";
+        report->lowestLumenMm = toVec(xf.indexToWorld(index.coord(seeds.lowestSlot)));
+        report->nearWall = nearWallStretches(cl, params);
+        report->farBranchLeftOut = far.branch;
         report->leftOut = leftOutLumen(index, xf, cl, LEFT_OUT_MIN_ML);
-        auto degrees = [](const Vec3d& a, const Vec3d& b) {
-            const double la = length(a), lb = length(b);
-            if (la == 0 || lb == 0) return 0.0;
-            return std::acos(std::clamp(dot(a, b) / (la * lb), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
-        };
-        const auto& cp = cl.points;
-        for (std::size_t i = 1; i < cp.size(); ++i) {
-            if (i + 1 < cp.size()) {
-                const double t = degrees(cp[i].positionMm - cp[i - 1].positionMm, cp[i + 1].positionMm - cp[i].positionMm);
-                report->maxTurnDeg = std::max(report->maxTurnDeg, t);
-                report->turnsOver30 += t > 30.0;
-            }
-            const double nrm = degrees(cp[i - 1].normal, cp[i].normal);
-            report->maxNormalStepDeg = std::max(report->maxNormalStepDeg, nrm);
-            report->normalStepsOver15 += nrm > 15.0;
-        }
-        std::vector<int> infoOf(pieces.size.size(), -1);
-        for (std::size_t r = 0; r < bySize.size(); ++r) {
-            CenterlinePieceInfo info;
-            info.volumeMl = double(pieces.size[bySize[r]]) * voxelMl;
-            infoOf[bySize[r]] = static_cast<int>(r);
-            report->pieces.push_back(info);
-        }
-        for (std::size_t k = 0; k < chain.order.size(); ++k) {
-            const PiecePath& path = paths[chain.order[k]];
-            CenterlinePieceInfo& info = report->pieces[infoOf[path.label]];
-            info.used = true;
-            info.chainIndex = static_cast<int>(k);
-            info.pathLengthMm = arcLengths(path.pointsMm).back();
-            info.routeSearchedOn = path.searchedOn;
-            info.entryMm = chain.reversed[k] ? path.pointsMm.back() : path.pointsMm.front();
-            info.exitMm = chain.reversed[k] ? path.pointsMm.front() : path.pointsMm.back();
-        }
-        for (CenterlineBridgeInfo& b : report->bridges) {
-            b.fromPiece = infoOf[paths[b.fromPiece].label];
-            b.toPiece = infoOf[paths[b.toPiece].label];
-        }
+        reportTurns(cl, *report);
+        reportPieces(traced, chain, pieces, use.bySize, voxelMl, *report);
     }
     reportProgress(progress, 1.0, "centerline done");
     return cl;
