@@ -251,20 +251,25 @@ bool nearInactive(const BoolTree& set, const openvdb::FloatTree& hu, int reach)
     return false;
 }
 
-BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform& xf, const TubeSearch& search,
-                             RectalTube& info, BoolTree::Ptr* fill)
+namespace {
+
+/// Step 1: the set split by an opening into its wide parts and the thin rest. A cube of half
+/// side n voxels does not fit in a tube of radius TUBE_MAX_RADIUS_MM (its corners reach
+/// n h sqrt 2); growing back m >= n sqrt 3 steps within the set covers every voxel of the wide
+/// parts (the cube's corners reach n h sqrt 3). Null parts when either is empty.
+struct WideAndThin {
+    BoolTree::Ptr wide, thin;
+};
+
+WideAndThin splitWideAndThin(const BoolTree& set, double h)
 {
-    auto none = std::make_shared<BoolTree>(false);
-    const double h = xf.voxelSize()[0];
-    const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
-    // 1. Opening: a cube of half side n voxels does not fit in a tube of radius
-    //    TUBE_MAX_RADIUS_MM (its corners reach n h sqrt 2); growing back m >= n sqrt 3 steps
-    //    within the set covers every voxel of the wide parts (the cube's corners reach n h sqrt 3).
     const int n = std::max(1, int(std::ceil(TUBE_MAX_RADIUS_MM / (h * std::sqrt(2.0)))));
     const int m = int(std::ceil(n * std::sqrt(3.0))) + 1;
-    BoolTree wide(set);
+    WideAndThin parts;
+    parts.wide = std::make_shared<BoolTree>(set);
+    BoolTree& wide = *parts.wide;
     erodeVoxels(wide, n, Neighbours::All);
-    if (wide.empty()) return none;
+    if (wide.empty()) return {};
     // Grown back one step at a time within the set; each step grows from the voxels the
     // previous one added (the rest of `wide` grew already): the same voxels as dilating the
     // whole of `wide` m times, at the cost of a shell.
@@ -276,20 +281,27 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
         pruneInactive(*added);
         wide.topologyUnion(*added);
     }
-    BoolTree thin(set);
+    parts.thin = std::make_shared<BoolTree>(set);
+    BoolTree& thin = *parts.thin;
     thin.topologyDifference(wide);
     pruneInactive(thin);
-    if (thin.empty()) return none;
+    if (thin.empty()) return {};
+    return parts;
+}
 
-    // 2. The thin pieces that look like a tube leaving the body.
-    std::vector<BoolTree::Ptr> pieces = connectedComponents(thin);
+/// Step 2: of the thin pieces, the longest that looks like a tube leaving the body (`pieces`
+/// keeps it alive); null when none does.
+const BoolTree* tubeLeavingBody(const std::vector<BoolTree::Ptr>& pieces, const BoolTree& set, const BoolTree& wide,
+                                const openvdb::math::Transform& xf, const TubeSearch& search, PieceAxis& tube)
+{
+    const double h = xf.voxelSize()[0];
+    const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
     double wideLowZ = 0, setLowZ = 0;
     if (search.acceptLowestEnd) {
         wideLowZ = lowestZ(wide, xf);
         setLowZ = lowestZ(set, xf);
     }
     const BoolTree* tubePiece = nullptr;
-    PieceAxis tube;
     for (const BoolTree::Ptr& p : pieces) {
         const double ml = double(p->activeVoxelCount()) * voxelMl;
         if (ml > TUBE_MAX_VOLUME_ML) continue;
@@ -311,221 +323,234 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
             tube = a;
         }
     }
-    if (!tubePiece) return none;
+    return tubePiece;
+}
 
-    // 3. Follow it into the rectum while the cross-section shows the tube: the lumen inside,
-    //    and around it the wall (CT: dense; mask: not in the set). A catheter may bend where
-    //    it enters the rectum (the anal canal points elsewhere than the rectum's axis), so the
-    //    straight run is looked for in a cone around the piece's last direction: the
-    //    direction that follows the tube farthest (the least tilted of equal ones).
-    const double radius = 0.5 * tube.diameterMm;
-    const std::size_t back = std::min<std::size_t>(tube.axis.size() - 1, std::size_t(std::ceil(10.0 / AXIS_BIN_MM)));
-    const Vec3d dir = normalize(tube.axis.front() - tube.axis[back]);
-    BoolConstAccessor setAcc(set);
-    std::optional<FloatConstAccessor> huAcc;
-    if (search.hu) huAcc.emplace(*search.hu);
-    // A voxel's air: > 0 in the lumen (CT: LUMEN_MAX_HU - HU, outside the grid -1000; mask:
-    // +-0.5), so that interpolated it is > 0 nearer the lumen (airness below).
-    auto airAt = [&](const Coord& c) {
-        if (huAcc) {
+/// Step 3: the tube followed into the rectum while the cross-section shows it: the lumen
+/// inside, and around it the wall (CT: dense; mask: not in the set).
+class TubeFollower {
+public:
+    TubeFollower(const BoolTree& set, const openvdb::math::Transform& xf, const openvdb::FloatTree* hu, double radius)
+        : mXf(xf), mH(xf.voxelSize()[0]), mRadius(radius), mSetAcc(set),
+          mInsideProbe(radius + TUBE_MAX_WALL_MM + 2.0 * mH)
+    {
+        if (hu) mHuAcc.emplace(*hu);
+    }
+
+    /// A catheter may bend where it enters the rectum (the anal canal points elsewhere than the
+    /// rectum's axis), so each straight run is looked for in a cone around the last direction:
+    /// the direction that follows the tube farthest (the least tilted of equal ones). Runs
+    /// follow from the end of the previous one; the followed polyline, from `start` along
+    /// `heading`, resampled every AXIS_BIN_MM and centred on the core.
+    std::vector<Vec3d> followFrom(const Vec3d& start, Vec3d heading);
+
+    /// The centre of the tube's air core in the plane normal to d near p: the centroid of the
+    /// lumen (interpolated: CT air, or the mask's inside) reached from p's nearest lumen sample
+    /// within the core's radius and half a voxel, twice (a point off the axis by up to a voxel
+    /// sees part of the core first). The straight runs and the bin centroids of the thin piece
+    /// stray from the axis by up to a voxel; the core's centre is the axis.
+    Vec3d centreOnCore(Vec3d p, const Vec3d& d);
+
+private:
+    /// A voxel's air: > 0 in the lumen (CT: LUMEN_MAX_HU - HU, outside the grid -1000; mask:
+    /// +-0.5), so that interpolated it is > 0 nearer the lumen (airness below).
+    double airAt(const Coord& c)
+    {
+        if (mHuAcc) {
             float hu = 0;
-            return huAcc->probeValue(c, hu) ? double(LUMEN_MAX_HU - hu) : -1000.0;
+            return mHuAcc->probeValue(c, hu) ? double(LUMEN_MAX_HU - hu) : -1000.0;
         }
-        return setAcc.isValueOn(c) ? 0.5 : -0.5;
-    };
-    auto inLumen = [&](const Vec3d& p) { return airAt(nearestIndex(xf, p)) > 0; };
-    auto wallAt = [&](const Vec3d& q) {
-        const Coord c = nearestIndex(xf, q);
-        if (huAcc) {
+        return mSetAcc.isValueOn(c) ? 0.5 : -0.5;
+    }
+    bool inLumen(const Vec3d& p) { return airAt(nearestIndex(mXf, p)) > 0; }
+    bool wallAt(const Vec3d& q)
+    {
+        const Coord c = nearestIndex(mXf, q);
+        if (mHuAcc) {
             float hu = 0;
-            return huAcc->probeValue(c, hu) && hu >= RING_MIN_HU;
+            return mHuAcc->probeValue(c, hu) && hu >= RING_MIN_HU;
         }
-        return !setAcc.isValueOn(c);
-    };
-    // The lumen all round p at the probe's distance (beyond the tube's wall): p lies inside
-    // the rectum's air, not against its wall nor in the anal canal.
-    const double insideProbe = radius + TUBE_MAX_WALL_MM + 2.0 * h;
-    auto inColonAir = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
+        return !mSetAcc.isValueOn(c);
+    }
+    /// airAt interpolated trilinearly at q (> 0: lumen).
+    double airness(const Vec3d& q);
+    /// The lumen all round p at the probe's distance (beyond the tube's wall): p lies inside
+    /// the rectum's air, not against its wall nor in the anal canal.
+    bool inColonAir(const Vec3d& p, const Vec3d& u, const Vec3d& v)
+    {
         int hits = 0;
         for (int j = 0; j < RING_DIRECTIONS; ++j) {
             const double t = 2.0 * PI * j / RING_DIRECTIONS;
-            hits += inLumen(p + (u * std::cos(t) + v * std::sin(t)) * insideProbe) ? 1 : 0;
+            hits += inLumen(p + (u * std::cos(t) + v * std::sin(t)) * mInsideProbe) ? 1 : 0;
         }
         return hits >= RING_MIN_HITS;
-    };
-    auto ringAround = [&](const Vec3d& p, const Vec3d& u, const Vec3d& v) {
-        int hits = 0, gap = 0, run = 0, leading = -1;
-        for (int j = 0; j < RING_DIRECTIONS; ++j) {
-            const double t = 2.0 * PI * j / RING_DIRECTIONS;
-            const Vec3d e = u * std::cos(t) + v * std::sin(t);
-            bool hit = false;
-            for (double r = radius + 0.5 * h; r <= radius + 3.0 && !hit; r += 0.5 * h) hit = wallAt(p + e * r);
-            if (hit) {
-                ++hits;
-                if (leading < 0) leading = run;
-                run = 0;
-            } else {
-                gap = std::max(gap, ++run);
-            }
-        }
-        gap = std::max(gap, run + std::max(leading, 0));  // the misses that wrap round
-        // Inside the rectum's air no wall but the tube's lies this near its axis, so a ring
-        // with a gap is still the tube: at coarse voxels a mask's 2 mm wall misses a whole
-        // side of the ring over several slices, depending on where the axis lies in its
-        // voxels. Not a wall on one side only (a point beside the tube, off its axis).
-        return hits >= RING_MIN_HITS ||
-               (hits >= RING_MIN_HITS_INSIDE && gap <= RING_MAX_GAP_INSIDE && inColonAir(p, u, v));
-    };
-    // The centre of the tube's air core in the plane of u and v near p: the centroid of the
-    // lumen (interpolated: CT air, or the mask's inside) reached from p's nearest lumen sample
-    // within the core's radius and half a voxel, twice (a point off the axis by up to a voxel
-    // sees part of the core first). The straight runs and the bin centroids of the thin piece
-    // stray from the axis by up to a voxel; the core's centre is the axis.
-    auto airness = [&](const Vec3d& q) {  // > 0: lumen
-        const openvdb::Vec3d ijk = xf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
-        const Coord c0 = Coord::floor(ijk);
-        const openvdb::Vec3d f = ijk - c0.asVec3d();
-        double sum = 0;
-        for (int k = 0; k < 8; ++k) {
-            const Coord c = c0.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1);
-            const double w = ((k & 1) ? f[0] : 1 - f[0]) * (((k >> 1) & 1) ? f[1] : 1 - f[1]) *
-                             (((k >> 2) & 1) ? f[2] : 1 - f[2]);
-            sum += w * airAt(c);
-        }
-        return sum;
-    };
-    auto centreOnCore = [&](Vec3d p, const Vec3d& d) {
-        Vec3d u, v;
-        perpendiculars(d, u, v);
-        const double step = 0.25 * h, disc = radius + 0.5 * h;
-        const int n = int(std::ceil(disc / step));
-        const int side = 2 * n + 1;
-        for (int round = 0; round < 2; ++round) {
-            std::vector<std::int8_t> state(std::size_t(side * side), 0);  // 0 unseen, 1 lumen, 2 reached
-            int seed = -1;
-            double seedDistance = std::numeric_limits<double>::max();
-            for (int a = -n; a <= n; ++a)
-                for (int b = -n; b <= n; ++b) {
-                    const double r = step * std::sqrt(double(a * a + b * b));
-                    if (r > disc) continue;
-                    if (airness(p + u * (a * step) + v * (b * step)) <= 0) continue;
-                    const int k = (a + n) + side * (b + n);
-                    state[std::size_t(k)] = 1;
-                    if (r < seedDistance) {
-                        seedDistance = r;
-                        seed = k;
-                    }
-                }
-            if (seed < 0) return p;
-            std::vector<int> stack{seed};
-            state[std::size_t(seed)] = 2;
-            double su = 0, sv = 0;
-            std::size_t count = 0;
-            while (!stack.empty()) {
-                const int k = stack.back();
-                stack.pop_back();
-                const int a = k % side - n, b = k / side - n;
-                su += a * step;
-                sv += b * step;
-                ++count;
-                const int next[4][2] = {{a - 1, b}, {a + 1, b}, {a, b - 1}, {a, b + 1}};
-                for (const auto& q : next) {
-                    if (q[0] < -n || q[0] > n || q[1] < -n || q[1] > n) continue;
-                    const int m = (q[0] + n) + side * (q[1] + n);
-                    if (state[std::size_t(m)] != 1) continue;
-                    state[std::size_t(m)] = 2;
-                    stack.push_back(m);
-                }
-            }
-            p = p + u * (su / double(count)) + v * (sv / double(count));
-        }
-        return p;
-    };
-    // The last point of the straight run from `from` along `d` (misses of up to two steps
-    // allowed), at most `maxMm` long.
-    auto follow = [&](const Vec3d& from, const Vec3d& d, double maxMm) {
-        Vec3d u, v;
-        perpendiculars(d, u, v);
-        Vec3d last = from;
-        int misses = 0;
-        for (double t = 0; t <= maxMm; t += 0.5 * h) {
-            const Vec3d p = from + d * t;
-            if (inLumen(p) && ringAround(p, u, v)) {
-                last = p;
-                misses = 0;
-            } else if (++misses > 2) {
-                break;
-            }
-        }
-        return last;
-    };
-    // Straight runs, each from the end of the previous one along the direction (within the
-    // cone around the previous direction) that goes farthest: the followed polyline, from
-    // `start` along `heading`, resampled every AXIS_BIN_MM and centred on the core.
-    auto followFrom = [&](const Vec3d& start, Vec3d heading) {
-        std::vector<Vec3d> followed{start};
-        double followedMm = 0;
-        for (int run = 0; run < FOLLOW_MAX_RUNS && followedMm < MAX_FOLLOW_MM; ++run) {
-            // Each run starts from the core's centre: a start off the axis leaves the core early.
-            const Vec3d from = followed.back() = centreOnCore(followed.back(), heading);
-            const double maxMm = MAX_FOLLOW_MM - followedMm;
-            Vec3d best = follow(from, heading, maxMm), bestDir = heading;
-            Vec3d u, v;
-            perpendiculars(heading, u, v);
-            for (int tilt = 1; tilt <= FOLLOW_CONE_STEPS; ++tilt) {
-                const double a = FOLLOW_CONE_DEG * PI / 180.0 * tilt / FOLLOW_CONE_STEPS;
-                for (int k = 0; k < FOLLOW_CONE_AZIMUTHS; ++k) {
-                    const double b = 2.0 * PI * k / FOLLOW_CONE_AZIMUTHS;
-                    const Vec3d d = normalize(heading * std::cos(a) + (u * std::cos(b) + v * std::sin(b)) * std::sin(a));
-                    const Vec3d q = follow(from, d, maxMm);
-                    if (distance(from, q) > distance(from, best) + h) {
-                        best = q;
-                        bestDir = d;
-                    }
-                }
-            }
-            if (distance(from, best) < h) break;  // no run of a voxel or more: the tip
-            followedMm += distance(from, best);
-            followed.push_back(best);
-            heading = bestDir;
-        }
-        // Each run resampled every AXIS_BIN_MM, each sample moved to the core's centre (a
-        // run's ends are centred, its straight line need not be).
-        std::vector<Vec3d> centred{followed.front()};
-        for (std::size_t i = 0; i + 1 < followed.size(); ++i) {
-            const double len = distance(followed[i], followed[i + 1]);
-            const Vec3d d = (followed[i + 1] - followed[i]) / len;
-            const int samples = std::max(1, int(std::ceil(len / AXIS_BIN_MM)));
-            for (int k = 1; k <= samples; ++k)
-                centred.push_back(centreOnCore(followed[i] + d * (len * k / samples), d));
-        }
-        return centred;
-    };
-    std::vector<Vec3d> followed = followFrom(centreOnCore(tube.axis.front(), dir), dir);
-    // Where the thin piece meets the rectum its bins may stray from the tube (thin air beside
-    // it there: an air-fluid level, partial volume round the tube's wall), and a start there
-    // may lie off the tube's core: the run found no tube and stopped a millimetre into the
-    // rectum, 35 mm short of the tip (small phantom --rectal-tube seed 12 from the CT). So
-    // the tube is also followed from the piece's bin `back` (10 mm before the attachment,
-    // inside the anal canal, where tissue rings it); that run is taken, and the piece's bins
-    // after `back` are left out of the axis, when it reaches more than two voxels farther
-    // into the rectum (along `dir`, from the attachment).
-    std::size_t pieceBins = tube.axis.size();
-    if (back > 0 && huAcc) {
-        std::vector<Vec3d> fromBack = followFrom(centreOnCore(tube.axis[back], dir), dir);
-        auto reach = [&](const std::vector<Vec3d>& f) { return dot(f.back() - tube.axis.front(), dir); };
-        if (reach(fromBack) > reach(followed) + 2.0 * h) {
-            followed.swap(fromBack);
-            pieceBins = tube.axis.size() - back;
+    }
+    bool ringAround(const Vec3d& p, const Vec3d& u, const Vec3d& v);
+    /// The last point of the straight run from `from` along `d` (misses of up to two steps
+    /// allowed), at most `maxMm` long.
+    Vec3d follow(const Vec3d& from, const Vec3d& d, double maxMm);
+
+    const openvdb::math::Transform& mXf;
+    const double mH, mRadius;
+    BoolConstAccessor mSetAcc;
+    std::optional<FloatConstAccessor> mHuAcc;
+    const double mInsideProbe;
+};
+
+bool TubeFollower::ringAround(const Vec3d& p, const Vec3d& u, const Vec3d& v)
+{
+    int hits = 0, gap = 0, run = 0, leading = -1;
+    for (int j = 0; j < RING_DIRECTIONS; ++j) {
+        const double t = 2.0 * PI * j / RING_DIRECTIONS;
+        const Vec3d e = u * std::cos(t) + v * std::sin(t);
+        bool hit = false;
+        for (double r = mRadius + 0.5 * mH; r <= mRadius + 3.0 && !hit; r += 0.5 * mH) hit = wallAt(p + e * r);
+        if (hit) {
+            ++hits;
+            if (leading < 0) leading = run;
+            run = 0;
+        } else {
+            gap = std::max(gap, ++run);
         }
     }
-    const double followedMm = polylineLength(followed, 0, followed.size() - 1);
-    const Vec3d tip = followed.back();
+    gap = std::max(gap, run + std::max(leading, 0));  // the misses that wrap round
+    // Inside the rectum's air no wall but the tube's lies this near its axis, so a ring with a
+    // gap is still the tube: at coarse voxels a mask's 2 mm wall misses a whole side of the
+    // ring over several slices, depending on where the axis lies in its voxels. Not a wall on
+    // one side only (a point beside the tube, off its axis).
+    return hits >= RING_MIN_HITS || (hits >= RING_MIN_HITS_INSIDE && gap <= RING_MAX_GAP_INSIDE && inColonAir(p, u, v));
+}
 
-    // 4. The tube's voxels: the thin piece, and the set's voxels within its lumen radius + a
-    //    voxel of the followed stretch.
-    auto cut = std::make_shared<BoolTree>(*tubePiece);
-    const double reach = radius + h;
+double TubeFollower::airness(const Vec3d& q)
+{
+    const openvdb::Vec3d ijk = mXf.worldToIndex(openvdb::Vec3d(q.x, q.y, q.z));
+    const Coord c0 = Coord::floor(ijk);
+    const openvdb::Vec3d f = ijk - c0.asVec3d();
+    double sum = 0;
+    for (int k = 0; k < 8; ++k) {
+        const Coord c = c0.offsetBy(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+        const double w =
+            ((k & 1) ? f[0] : 1 - f[0]) * (((k >> 1) & 1) ? f[1] : 1 - f[1]) * (((k >> 2) & 1) ? f[2] : 1 - f[2]);
+        sum += w * airAt(c);
+    }
+    return sum;
+}
+
+Vec3d TubeFollower::centreOnCore(Vec3d p, const Vec3d& d)
+{
+    Vec3d u, v;
+    perpendiculars(d, u, v);
+    const double step = 0.25 * mH, disc = mRadius + 0.5 * mH;
+    const int n = int(std::ceil(disc / step));
+    const int side = 2 * n + 1;
+    for (int round = 0; round < 2; ++round) {
+        std::vector<std::int8_t> state(std::size_t(side * side), 0);  // 0 unseen, 1 lumen, 2 reached
+        int seed = -1;
+        double seedDistance = std::numeric_limits<double>::max();
+        for (int a = -n; a <= n; ++a)
+            for (int b = -n; b <= n; ++b) {
+                const double r = step * std::sqrt(double(a * a + b * b));
+                if (r > disc) continue;
+                if (airness(p + u * (a * step) + v * (b * step)) <= 0) continue;
+                const int k = (a + n) + side * (b + n);
+                state[std::size_t(k)] = 1;
+                if (r < seedDistance) {
+                    seedDistance = r;
+                    seed = k;
+                }
+            }
+        if (seed < 0) return p;
+        std::vector<int> stack{seed};
+        state[std::size_t(seed)] = 2;
+        double su = 0, sv = 0;
+        std::size_t count = 0;
+        while (!stack.empty()) {
+            const int k = stack.back();
+            stack.pop_back();
+            const int a = k % side - n, b = k / side - n;
+            su += a * step;
+            sv += b * step;
+            ++count;
+            const int next[4][2] = {{a - 1, b}, {a + 1, b}, {a, b - 1}, {a, b + 1}};
+            for (const auto& q : next) {
+                if (q[0] < -n || q[0] > n || q[1] < -n || q[1] > n) continue;
+                const int m = (q[0] + n) + side * (q[1] + n);
+                if (state[std::size_t(m)] != 1) continue;
+                state[std::size_t(m)] = 2;
+                stack.push_back(m);
+            }
+        }
+        p = p + u * (su / double(count)) + v * (sv / double(count));
+    }
+    return p;
+}
+
+Vec3d TubeFollower::follow(const Vec3d& from, const Vec3d& d, double maxMm)
+{
+    Vec3d u, v;
+    perpendiculars(d, u, v);
+    Vec3d last = from;
+    int misses = 0;
+    for (double t = 0; t <= maxMm; t += 0.5 * mH) {
+        const Vec3d p = from + d * t;
+        if (inLumen(p) && ringAround(p, u, v)) {
+            last = p;
+            misses = 0;
+        } else if (++misses > 2) {
+            break;
+        }
+    }
+    return last;
+}
+
+std::vector<Vec3d> TubeFollower::followFrom(const Vec3d& start, Vec3d heading)
+{
+    std::vector<Vec3d> followed{start};
+    double followedMm = 0;
+    for (int run = 0; run < FOLLOW_MAX_RUNS && followedMm < MAX_FOLLOW_MM; ++run) {
+        // Each run starts from the core's centre: a start off the axis leaves the core early.
+        const Vec3d from = followed.back() = centreOnCore(followed.back(), heading);
+        const double maxMm = MAX_FOLLOW_MM - followedMm;
+        Vec3d best = follow(from, heading, maxMm), bestDir = heading;
+        Vec3d u, v;
+        perpendiculars(heading, u, v);
+        for (int tilt = 1; tilt <= FOLLOW_CONE_STEPS; ++tilt) {
+            const double a = FOLLOW_CONE_DEG * PI / 180.0 * tilt / FOLLOW_CONE_STEPS;
+            for (int k = 0; k < FOLLOW_CONE_AZIMUTHS; ++k) {
+                const double b = 2.0 * PI * k / FOLLOW_CONE_AZIMUTHS;
+                const Vec3d d = normalize(heading * std::cos(a) + (u * std::cos(b) + v * std::sin(b)) * std::sin(a));
+                const Vec3d q = follow(from, d, maxMm);
+                if (distance(from, q) > distance(from, best) + mH) {
+                    best = q;
+                    bestDir = d;
+                }
+            }
+        }
+        if (distance(from, best) < mH) break;  // no run of a voxel or more: the tip
+        followedMm += distance(from, best);
+        followed.push_back(best);
+        heading = bestDir;
+    }
+    // Each run resampled every AXIS_BIN_MM, each sample moved to the core's centre (a run's
+    // ends are centred, its straight line need not be).
+    std::vector<Vec3d> centred{followed.front()};
+    for (std::size_t i = 0; i + 1 < followed.size(); ++i) {
+        const double len = distance(followed[i], followed[i + 1]);
+        const Vec3d d = (followed[i + 1] - followed[i]) / len;
+        const int samples = std::max(1, int(std::ceil(len / AXIS_BIN_MM)));
+        for (int k = 1; k <= samples; ++k) centred.push_back(centreOnCore(followed[i] + d * (len * k / samples), d));
+    }
+    return centred;
+}
+
+/// Step 4: the tube's voxels: the thin piece, and the set's voxels within `reach` of the
+/// followed stretch.
+BoolTree::Ptr tubeVoxels(const BoolTree& tubePiece, const BoolTree& set, const openvdb::math::Transform& xf,
+                         const std::vector<Vec3d>& followed, double reach)
+{
+    const double h = xf.voxelSize()[0];
+    auto cut = std::make_shared<BoolTree>(tubePiece);
+    BoolConstAccessor setAcc(set);
     for (std::size_t i = 0; i + 1 < followed.size(); ++i) {
         openvdb::CoordBBox box;
         for (const Vec3d& p : {followed[i], followed[i + 1]}) {
@@ -542,37 +567,89 @@ BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform
                 cutAcc.setValueOn(c, true);
         }
     }
+    return cut;
+}
+
+/// The body surface on a CT: going inwards from the outer end, the first axis point with the
+/// body all around (active voxels beyond the wall); the outer end when there is none.
+Vec3d bodyEntry(const PieceAxis& tube, const openvdb::FloatTree& hu, const openvdb::math::Transform& xf,
+                const Vec3d& dir, double radius)
+{
+    FloatConstAccessor huAcc(hu);
+    for (std::size_t i = tube.axis.size(); i-- > 0;) {
+        const Vec3d p = tube.axis[i];
+        const Vec3d d = normalize(tube.axis[i == 0 ? 0 : i - 1] - tube.axis[std::min(i + 1, tube.axis.size() - 1)]);
+        Vec3d a, b;
+        perpendiculars(length(d) > 0 ? d : dir, a, b);
+        int inside = 0;
+        for (int j = 0; j < RING_DIRECTIONS; ++j) {
+            const double t = 2.0 * PI * j / RING_DIRECTIONS;
+            const Coord c = nearestIndex(xf, p + (a * std::cos(t) + b * std::sin(t)) * (radius + 5.0));
+            inside += huAcc.isValueOn(c) ? 1 : 0;
+        }
+        if (inside >= RING_DIRECTIONS - 2) return p;
+    }
+    return tube.outerEnd;
+}
+
+} // namespace
+
+BoolTree::Ptr findRectalTube(const BoolTree& set, const openvdb::math::Transform& xf, const TubeSearch& search,
+                             RectalTube& info, BoolTree::Ptr* fill)
+{
+    auto none = std::make_shared<BoolTree>(false);
+    const double h = xf.voxelSize()[0];
+    const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
+    // 1. Opening: the wide parts and the thin rest.
+    const WideAndThin parts = splitWideAndThin(set, h);
+    if (!parts.thin) return none;
+    const BoolTree& wide = *parts.wide;
+
+    // 2. The thin pieces that look like a tube leaving the body.
+    const std::vector<BoolTree::Ptr> pieces = connectedComponents(*parts.thin);
+    PieceAxis tube;
+    const BoolTree* tubePiece = tubeLeavingBody(pieces, set, wide, xf, search, tube);
+    if (!tubePiece) return none;
+
+    // 3. Follow it into the rectum.
+    const double radius = 0.5 * tube.diameterMm;
+    const std::size_t back = std::min<std::size_t>(tube.axis.size() - 1, std::size_t(std::ceil(10.0 / AXIS_BIN_MM)));
+    const Vec3d dir = normalize(tube.axis.front() - tube.axis[back]);
+    TubeFollower follower(set, xf, search.hu, radius);
+    std::vector<Vec3d> followed = follower.followFrom(follower.centreOnCore(tube.axis.front(), dir), dir);
+    // Where the thin piece meets the rectum its bins may stray from the tube (thin air beside
+    // it there: an air-fluid level, partial volume round the tube's wall), and a start there
+    // may lie off the tube's core: the run found no tube and stopped a millimetre into the
+    // rectum, 35 mm short of the tip (small phantom --rectal-tube seed 12 from the CT). So
+    // the tube is also followed from the piece's bin `back` (10 mm before the attachment,
+    // inside the anal canal, where tissue rings it); that run is taken, and the piece's bins
+    // after `back` are left out of the axis, when it reaches more than two voxels farther
+    // into the rectum (along `dir`, from the attachment).
+    std::size_t pieceBins = tube.axis.size();
+    if (back > 0 && search.hu) {
+        std::vector<Vec3d> fromBack = follower.followFrom(follower.centreOnCore(tube.axis[back], dir), dir);
+        auto reach = [&](const std::vector<Vec3d>& f) { return dot(f.back() - tube.axis.front(), dir); };
+        if (reach(fromBack) > reach(followed) + 2.0 * h) {
+            followed.swap(fromBack);
+            pieceBins = tube.axis.size() - back;
+        }
+    }
+    const double followedMm = polylineLength(followed, 0, followed.size() - 1);
+
+    // 4. The tube's voxels: the thin piece, and the set's voxels within its lumen radius + a
+    //    voxel of the followed stretch.
+    BoolTree::Ptr cut = tubeVoxels(*tubePiece, set, xf, followed, radius + h);
 
     info = RectalTube{};
     info.found = true;
-    info.tipMm = tip;
+    info.tipMm = followed.back();
     info.outerEndMm = tube.outerEnd;
     info.diameterMm = tube.diameterMm;
     info.lengthMm = polylineLength(tube.axis, tube.axis.size() - pieceBins, tube.axis.size() - 1) + followedMm;
     info.volumeMl = double(cut->activeVoxelCount()) * voxelMl;
     info.axisMm.assign(tube.axis.rbegin(), tube.axis.rbegin() + std::ptrdiff_t(pieceBins));
     info.axisMm.insert(info.axisMm.end(), followed.begin() + 1, followed.end());
-    // The body surface (CT): going inwards from the outer end, the first axis point with the
-    // body all around (active voxels beyond the wall); from a mask: the outer end.
-    info.entryMm = tube.outerEnd;
-    if (huAcc) {
-        for (std::size_t i = tube.axis.size(); i-- > 0;) {
-            const Vec3d p = tube.axis[i];
-            const Vec3d d = normalize(tube.axis[i == 0 ? 0 : i - 1] - tube.axis[std::min(i + 1, tube.axis.size() - 1)]);
-            Vec3d a, b;
-            perpendiculars(length(d) > 0 ? d : dir, a, b);
-            int inside = 0;
-            for (int j = 0; j < RING_DIRECTIONS; ++j) {
-                const double t = 2.0 * PI * j / RING_DIRECTIONS;
-                const Coord c = nearestIndex(xf, p + (a * std::cos(t) + b * std::sin(t)) * (radius + 5.0));
-                inside += huAcc->isValueOn(c) ? 1 : 0;
-            }
-            if (inside >= RING_DIRECTIONS - 2) {
-                info.entryMm = p;
-                break;
-            }
-        }
-    }
+    info.entryMm = search.hu ? bodyEntry(tube, *search.hu, xf, dir, radius) : tube.outerEnd;
 
     // 5. The tube within the colon's air (rectalTubeFill).
     if (fill) {
