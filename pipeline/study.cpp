@@ -197,223 +197,300 @@ std::vector<std::string> stagesAffectedBy(const StudyPipeline& pipeline, const s
     return out;
 }
 
-nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
-{
-    const StudyOptions& options = run.options;
-    const auto& specs = pipeline.stages;
-    run.params.validate();
+namespace {
+
+/// The stages a run computes or reuses (`wanted`) and recomputes whatever the cache holds
+/// (`forced`), after its options are checked; without a CT the stages reading the scan are
+/// neither.
+struct StageSelection {
     std::set<std::string> wanted, forced;
+    bool hasCt = false, hasMask = false;
+};
+
+StageSelection selectStages(const StudyPipeline& pipeline, const StudyOptions& options)
+{
+    StageSelection sel;
+    const auto& specs = pipeline.stages;
     if (options.untilStage.empty())
-        for (const auto& s : specs) wanted.insert(s.name);
+        for (const auto& s : specs) sel.wanted.insert(s.name);
     else
-        for (const auto& s : stagesNeededFor(pipeline, options.untilStage)) wanted.insert(s);
+        for (const auto& s : stagesNeededFor(pipeline, options.untilStage)) sel.wanted.insert(s);
     if (!options.forceStage.empty())
-        for (const auto& s : stagesAffectedBy(pipeline, options.forceStage)) forced.insert(s);
+        for (const auto& s : stagesAffectedBy(pipeline, options.forceStage)) sel.forced.insert(s);
     if (!(options.cacheMaxGb > 0)) throw ParameterError("--cache-max-gb: must be > 0");
 
-    const bool hasCt = !options.ctPath.empty(), hasMask = !options.maskPath.empty();
-    if (!hasCt && !hasMask) throw ParameterError("run: no input: give a CT scan, --mask FILE, or both");
-    if (!hasCt)
+    sel.hasCt = !options.ctPath.empty();
+    sel.hasMask = !options.maskPath.empty();
+    if (!sel.hasCt && !sel.hasMask) throw ParameterError("run: no input: give a CT scan, --mask FILE, or both");
+    if (!sel.hasCt)
         for (const auto& spec : specs) {
             if (!readsScan(spec)) continue;
             if (options.untilStage == spec.name)
                 throw ParameterError("--until " + spec.name + ": there is no CT scan to " + spec.name);
-            wanted.erase(spec.name);
-            forced.erase(spec.name);
+            sel.wanted.erase(spec.name);
+            sel.forced.erase(spec.name);
         }
     std::error_code ec;
-    if (hasCt && !fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
-    if (hasMask && !fs::is_regular_file(options.maskPath, ec))
+    if (sel.hasCt && !fs::exists(options.ctPath, ec)) throw InputError(options.ctPath + ": no such file or directory");
+    if (sel.hasMask && !fs::is_regular_file(options.maskPath, ec))
         throw InputError(options.maskPath + ": --mask: no such file");
-    if (hasMask && fs::file_size(options.maskPath, ec) == 0)
+    if (sel.hasMask && fs::file_size(options.maskPath, ec) == 0)
         throw InputError(options.maskPath + ": --mask: the file is empty");
-    fs::create_directories(options.studyDir, ec);
-    if (ec) throw InputError(options.studyDir + ": cannot create the study folder: " + ec.message());
+    return sel;
+}
 
-    StudyLock lock(options.studyDir, options.waitForLock);
-    DigestStamps stamps((fs::path(options.studyDir) / ".flyover" / "stamps.json").string());
-    ArtifactStore store(options.studyDir, &stamps);
-    store.removeStaleTemporaries();
-    RunLog* log = options.log;
+/// One run of a study's stage graph, under the study's lock: each stage's node reuses the
+/// cache's record or runs the body; write-behind stages leave their finishing to a commit node;
+/// the manifest is rewritten as stages finish and once at the end.
+class StudyRunner {
+public:
+    StudyRunner(const StudyPipeline& pipeline, StageRun& run, StageSelection sel)
+        : mPipeline(pipeline), mRun(run), mOptions(run.options), mSel(std::move(sel)),
+          mStamps((fs::path(mOptions.studyDir) / ".flyover" / "stamps.json").string()),
+          mStore(mOptions.studyDir, &mStamps), mLog(mOptions.log), mPrevious(readManifest(run.dir))
+    {
+        mStore.removeStaleTemporaries();
+        if (mSel.hasCt) mDigests["input"] = mStamps.digest(mOptions.ctPath);
+        if (mSel.hasMask) mDigests["mask"] = mStamps.digest(mOptions.maskPath);
+        mRunParameters = json::object();
+        for (const auto& section : run.params.sections()) mRunParameters[section] = run.params.sectionJson(section);
+    }
 
-    std::mutex mutex;  // guards digests and entries
-    std::map<std::string, std::string> digests;
-    if (hasCt) digests["input"] = stamps.digest(options.ctPath);
-    if (hasMask) digests["mask"] = stamps.digest(options.maskPath);
-    std::map<std::string, json> entries;
-    std::set<std::string> usedRecords;
+    json run();
 
-    // The manifest: the entries of this run's stages so far, plus earlier entries of stages this
-    // run does not touch. It is rewritten (atomically) each time a stage's files and cache record
-    // are in place, with "complete": false, so that a killed run leaves a manifest that names
-    // what finished; the last write says whether every wanted stage finished.
-    const json previous = readManifest(run.dir);
-    json runParameters = json::object();
-    for (const auto& section : run.params.sections()) runParameters[section] = run.params.sectionJson(section);
-    auto manifestOf = [&](const std::map<std::string, json>& done, bool keepPrevious, bool complete) {
-        json stages = json::array();
-        for (const auto& spec : specs) {
-            const auto it = done.find(spec.name);
-            if (it != done.end()) stages.push_back(it->second);
-            else if (keepPrevious && !wanted.count(spec.name) && !(readsScan(spec) && !hasCt)) {
-                json e = manifestEntry(previous, spec.name);
-                if (!e.is_null()) stages.push_back(e);
-            }
+private:
+    json manifestOf(const std::map<std::string, json>& done, bool keepPrevious, bool complete) const;
+    void recordFinished(const std::string& name, const json& entry);
+    bool reuse(const StageSpec& spec, const std::string& key, json& entry);
+    void compute(const StageSpec& spec, const std::string& key, json& entry);
+    void execute(const StageSpec& spec);
+    void commit(const std::string& name);
+    std::exception_ptr runGraph();
+    std::exception_ptr commitFailures(std::exception_ptr failure);
+
+    const StudyPipeline& mPipeline;
+    StageRun& mRun;
+    const StudyOptions& mOptions;
+    const StageSelection mSel;
+    DigestStamps mStamps;
+    ArtifactStore mStore;
+    RunLog* mLog;
+    const json mPrevious;  ///< the manifest before this run
+    json mRunParameters;
+
+    std::mutex mMutex;  ///< guards mDigests, mEntries, mUsedRecords, mCommits, mCommitErrors
+    std::map<std::string, std::string> mDigests;
+    std::map<std::string, json> mEntries;
+    std::set<std::string> mUsedRecords;
+    /// Write-behind: the finishing of each such stage (rename, fsync, record), left by its body
+    /// for its commit node (or, when the graph failed, for the end of the run).
+    std::map<std::string, std::function<void()>> mCommits;
+    /// A commit's failure is the stage's (reported after the graph), not the graph's.
+    std::map<std::string, std::exception_ptr> mCommitErrors;
+    std::mutex mManifestMutex;              ///< guards mFinished and the progress writes
+    std::map<std::string, json> mFinished;  ///< stages whose files and record are in place
+};
+
+// The manifest: the entries of this run's stages so far, plus earlier entries of stages this
+// run does not touch. It is rewritten (atomically) each time a stage's files and cache record
+// are in place, with "complete": false, so that a killed run leaves a manifest that names what
+// finished; the last write says whether every wanted stage finished.
+json StudyRunner::manifestOf(const std::map<std::string, json>& done, bool keepPrevious, bool complete) const
+{
+    json stages = json::array();
+    for (const auto& spec : mPipeline.stages) {
+        const auto it = done.find(spec.name);
+        if (it != done.end()) stages.push_back(it->second);
+        else if (keepPrevious && !mSel.wanted.count(spec.name) && !(readsScan(spec) && !mSel.hasCt)) {
+            json e = manifestEntry(mPrevious, spec.name);
+            if (!e.is_null()) stages.push_back(e);
         }
-        json m{{"schema", "flyover.manifest/1"},
-               {"world_frame", WORLD_FRAME},
-               {"input", hasCt ? json(fs::absolute(options.ctPath).string()) : json(nullptr)},
-               {"input_digest", hasCt ? json(digests.at("input")) : json(nullptr)},
-               {"mask", hasMask ? json(fs::absolute(options.maskPath).string()) : json(nullptr)},
-               {"mask_digest", hasMask ? json(digests.at("mask")) : json(nullptr)},
-               {"complete", complete},
-               {"parameters", runParameters},
-               {"stages", stages}};
-        if (!pipeline.manifestName.empty()) m["pipeline"] = pipeline.manifestName;
-        return m;
-    };
-    std::mutex manifestMutex;              // guards finished and the progress writes
-    std::map<std::string, json> finished;  // stages whose files and record are in place
-    // A reused stage is only noted (an unchanged re-run stays a single manifest write); the next
-    // computed stage's write lists it.
-    auto recordFinished = [&](const std::string& name, const json& entry) {
-        std::lock_guard<std::mutex> g(manifestMutex);
-        finished[name] = entry;
-        if (!entry.value("computed", true)) return;
-        json m;
+    }
+    const bool hasCt = mSel.hasCt, hasMask = mSel.hasMask;
+    json m{{"schema", "flyover.manifest/1"},
+           {"world_frame", WORLD_FRAME},
+           {"input", hasCt ? json(fs::absolute(mOptions.ctPath).string()) : json(nullptr)},
+           {"input_digest", hasCt ? json(mDigests.at("input")) : json(nullptr)},
+           {"mask", hasMask ? json(fs::absolute(mOptions.maskPath).string()) : json(nullptr)},
+           {"mask_digest", hasMask ? json(mDigests.at("mask")) : json(nullptr)},
+           {"complete", complete},
+           {"parameters", mRunParameters},
+           {"stages", stages}};
+    if (!mPipeline.manifestName.empty()) m["pipeline"] = mPipeline.manifestName;
+    return m;
+}
+
+// A reused stage is only noted (an unchanged re-run stays a single manifest write); the next
+// computed stage's write lists it.
+void StudyRunner::recordFinished(const std::string& name, const json& entry)
+{
+    std::lock_guard<std::mutex> g(mManifestMutex);
+    mFinished[name] = entry;
+    if (!entry.value("computed", true)) return;
+    json m;
+    {
+        std::lock_guard<std::mutex> g2(mMutex);  // digests
+        m = manifestOf(mFinished, true, false);
+    }
+    writeJson(mRun.path("manifest.json"), m);
+}
+
+/// The cache's record of the stage under `key`, put in place when it is sound; false when there
+/// is none (or it was dropped as unusable).
+bool StudyRunner::reuse(const StageSpec& spec, const std::string& key, json& entry)
+{
+    std::optional<json> record;
+    if (!mSel.forced.count(spec.name)) record = mStore.findRecord(spec.name, key);
+    if (!record) return false;
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::string problem = mStore.verifyRecord(*record);
+    if (!problem.empty()) {
+        if (mLog) mLog->message(spec.name + ": cached result unusable (" + problem + "); recomputing");
+        mStore.dropRecord(spec.name, key);
+        return false;
+    }
+    mStore.materialize(*record);
+    mStore.touch(spec.name, key);
+    const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    entry["outputs"] = record->at("outputs");
+    entry["wall_seconds"] = record->value("wall_seconds", 0.0);
+    entry["reuse_seconds"] = secs;
+    entry["computed"] = false;
+    entry["report"] = record->value("report", json::object());
+    {
+        std::lock_guard<std::mutex> g(mMutex);
+        for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
+            mDigests[it.key()] = it.value().get<std::string>();
+        mEntries[spec.name] = entry;
+        mUsedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+    }
+    recordFinished(spec.name, entry);
+    if (mLog) mLog->stageFinished(spec.name, false, secs, "");
+    return true;
+}
+
+/// Runs the stage's body, digests its outputs and commits them (now, or for a write-behind
+/// stage in its commit node).
+void StudyRunner::compute(const StageSpec& spec, const std::string& key, json& entry)
+{
+    if (mLog) mLog->stageStarted(spec.name);
+    StageProgress progress(mLog, spec.name);
+    const auto t0 = std::chrono::steady_clock::now();
+    auto deferred = std::make_shared<DeferredWrites>();
+    json report;
+    try {
+        const DeferredWrites::Scope scope(spec.writeBehind ? deferred.get() : nullptr);
+        report = spec.body(mRun, &progress);
+    } catch (const std::exception& e) {
+        // Nested: the cause's type stays visible (out of memory, a full disk: retryable).
+        std::throw_with_nested(StageError(spec.name, e.what()));
+    }
+    const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    json outputs = json::object();
+    for (const auto& a : spec.outputs) {
+        const std::string pending = deferred->pendingFile(mRun.path(a));
+        outputs[a] = artifactDigest(pending.empty() ? mRun.path(a) : pending);
+    }
+    entry["outputs"] = outputs;
+    entry["wall_seconds"] = secs;
+    entry["computed"] = true;
+    entry["report"] = report;
+    json record = entry;
+    record.erase("computed");
+    auto finish = [this, deferred, record, entry, name = spec.name]() mutable {
+        crashPoint(("writebehind:" + name + ":before-finish").c_str());
+        // The files under their names, then their fsyncs, what the body left to be made behind
+        // (the mesh checks) and the record. A run killed in between leaves renamed files
+        // without a record, which the next run recomputes.
+        deferred->rename();
+        crashPoint(("writebehind:" + name + ":renamed").c_str());
+        deferred->sync();
+        deferred->completeReport(record["report"]);
+        entry["report"] = record["report"];
         {
-            std::lock_guard<std::mutex> g2(mutex);  // digests
-            m = manifestOf(finished, true, false);
+            std::lock_guard<std::mutex> g(mMutex);
+            mEntries[name]["report"] = record["report"];
         }
-        writeJson(run.path("manifest.json"), m);
+        crashPoint(("writebehind:" + name + ":report-completed").c_str());
+        mStore.commit(record);
+        // The file objects' digests were computed from their content above: stamp them.
+        for (auto it = record.at("outputs").begin(); it != record.at("outputs").end(); ++it) {
+            const std::string obj = mStore.objectPath(it.key(), it.value().get<std::string>());
+            std::error_code ec;
+            if (fs::is_regular_file(obj, ec)) mStamps.hashed(obj, it.value().get<std::string>());
+        }
+        crashPoint(("stage:" + name + ":committed").c_str());
+        recordFinished(name, entry);
     };
-    // Write-behind: the finishing of each such stage (rename, fsync, record), left by its body
-    // for its commit node (or, when the graph failed, for the end of the run).
-    std::map<std::string, std::function<void()>> commits;  // guarded by mutex
-    auto execute = [&](const StageSpec& spec) {
-        if (!wanted.count(spec.name)) return;
-        std::map<std::string, std::string> inputs;
-        {
-            std::lock_guard<std::mutex> g(mutex);
-            for (const auto& a : stageInputs(spec, hasCt, hasMask)) inputs[a] = digests.at(a);
-        }
-        const json params = stageParams(spec, run.params);
-        const int version = stageVersionOf(spec, run.params);
-        const std::string key = stageKey(spec.name, version, params, inputs);
-        json entry{{"stage", spec.name}, {"version", version}, {"key", key},
-                   {"parameters", params}, {"inputs", inputs}};
+    {
+        std::lock_guard<std::mutex> g(mMutex);
+        for (auto it = outputs.begin(); it != outputs.end(); ++it) mDigests[it.key()] = it.value().get<std::string>();
+        mEntries[spec.name] = entry;
+        mUsedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
+    }
+    if (spec.writeBehind) {
+        std::lock_guard<std::mutex> g(mMutex);
+        mCommits[spec.name] = std::move(finish);  // run by the stage's commit node
+    } else {
+        finish();
+    }
+    if (mLog) mLog->stageFinished(spec.name, true, secs, spec.writeBehind ? "artifacts written behind" : "");
+}
 
-        std::optional<json> record;
-        if (!forced.count(spec.name)) record = store.findRecord(spec.name, key);
-        if (record) {
-            const auto t0 = std::chrono::steady_clock::now();
-            const std::string problem = store.verifyRecord(*record);
-            if (problem.empty()) {
-                store.materialize(*record);
-                store.touch(spec.name, key);
-                const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-                entry["outputs"] = record->at("outputs");
-                entry["wall_seconds"] = record->value("wall_seconds", 0.0);
-                entry["reuse_seconds"] = secs;
-                entry["computed"] = false;
-                entry["report"] = record->value("report", json::object());
-                {
-                    std::lock_guard<std::mutex> g(mutex);
-                    for (auto it = record->at("outputs").begin(); it != record->at("outputs").end(); ++it)
-                        digests[it.key()] = it.value().get<std::string>();
-                    entries[spec.name] = entry;
-                    usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
-                }
-                recordFinished(spec.name, entry);
-                if (log) log->stageFinished(spec.name, false, secs, "");
-                return;
-            }
-            if (log) log->message(spec.name + ": cached result unusable (" + problem + "); recomputing");
-            store.dropRecord(spec.name, key);
-        }
+void StudyRunner::execute(const StageSpec& spec)
+{
+    if (!mSel.wanted.count(spec.name)) return;
+    std::map<std::string, std::string> inputs;
+    {
+        std::lock_guard<std::mutex> g(mMutex);
+        for (const auto& a : stageInputs(spec, mSel.hasCt, mSel.hasMask)) inputs[a] = mDigests.at(a);
+    }
+    const json params = stageParams(spec, mRun.params);
+    const int version = stageVersionOf(spec, mRun.params);
+    const std::string key = stageKey(spec.name, version, params, inputs);
+    json entry{{"stage", spec.name}, {"version", version}, {"key", key}, {"parameters", params}, {"inputs", inputs}};
+    if (!reuse(spec, key, entry)) compute(spec, key, entry);
+}
 
-        if (log) log->stageStarted(spec.name);
-        StageProgress progress(log, spec.name);
-        const auto t0 = std::chrono::steady_clock::now();
-        auto deferred = std::make_shared<DeferredWrites>();
-        json report;
-        try {
-            const DeferredWrites::Scope scope(spec.writeBehind ? deferred.get() : nullptr);
-            report = spec.body(run, &progress);
-        } catch (const std::exception& e) {
-            // Nested: the cause's type stays visible (out of memory, a full disk: retryable).
-            std::throw_with_nested(StageError(spec.name, e.what()));
-        }
-        const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        json outputs = json::object();
-        for (const auto& a : spec.outputs) {
-            const std::string pending = deferred->pendingFile(run.path(a));
-            outputs[a] = artifactDigest(pending.empty() ? run.path(a) : pending);
-        }
-        entry["outputs"] = outputs;
-        entry["wall_seconds"] = secs;
-        entry["computed"] = true;
-        entry["report"] = report;
-        json record2 = entry;
-        record2.erase("computed");
-        auto finish = [&store, &stamps, &recordFinished, &mutex, &entries, deferred, record2, entry,
-                       name = spec.name]() mutable {
-            crashPoint(("writebehind:" + name + ":before-finish").c_str());
-            // The files under their names, then their fsyncs, what the body left to be made
-            // behind (the mesh checks) and the record. A run killed in between leaves renamed
-            // files without a record, which the next run recomputes.
-            deferred->rename();
-            crashPoint(("writebehind:" + name + ":renamed").c_str());
-            deferred->sync();
-            deferred->completeReport(record2["report"]);
-            entry["report"] = record2["report"];
-            {
-                std::lock_guard<std::mutex> g(mutex);
-                entries[name]["report"] = record2["report"];
-            }
-            crashPoint(("writebehind:" + name + ":report-completed").c_str());
-            store.commit(record2);
-            // The file objects' digests were computed from their content above: stamp them.
-            for (auto it = record2.at("outputs").begin(); it != record2.at("outputs").end(); ++it) {
-                const std::string obj = store.objectPath(it.key(), it.value().get<std::string>());
-                std::error_code ec;
-                if (fs::is_regular_file(obj, ec)) stamps.hashed(obj, it.value().get<std::string>());
-            }
-            crashPoint(("stage:" + name + ":committed").c_str());
-            recordFinished(name, entry);
-        };
-        {
-            std::lock_guard<std::mutex> g(mutex);
-            for (auto it = outputs.begin(); it != outputs.end(); ++it) digests[it.key()] = it.value().get<std::string>();
-            entries[spec.name] = entry;
-            usedRecords.insert(ArtifactStore::recordFileName(spec.name, key));
-        }
-        if (spec.writeBehind) {
-            std::lock_guard<std::mutex> g(mutex);
-            commits[spec.name] = std::move(finish);  // run by the stage's commit node
-        } else {
-            finish();
-        }
-        if (log) log->stageFinished(spec.name, true, secs, spec.writeBehind ? "artifacts written behind" : "");
-    };
+void StudyRunner::commit(const std::string& name)
+{
+    std::function<void()> finish;
+    {
+        std::lock_guard<std::mutex> g(mMutex);
+        const auto it = mCommits.find(name);
+        if (it == mCommits.end()) return;
+        finish = std::move(it->second);
+        mCommits.erase(it);
+    }
+    try {
+        finish();
+    } catch (...) {
+        std::lock_guard<std::mutex> g(mMutex);
+        mCommitErrors[name] = std::current_exception();
+    }
+}
 
-    // The stage graph: ingest -> segment -> {centerline, mesh} -> frames -> {flythrough,
-    // overviews, video, coverage}; beside it the early nodes (earlySpecs), each from a stage's
-    // hand-on to the stages that take its result, and a commit node after each write-behind
-    // stage (and after the first pair). Parallel loops run inside the nodes. An exception in a
-    // stage's node cancels the graph and is rethrown by wait_for_all().
+// The stage graph: ingest -> segment -> {centerline, mesh} -> frames -> {flythrough, overviews,
+// video, coverage}; beside it the early nodes (earlySpecs), each from a stage's hand-on to the
+// stages that take its result, and a commit node after each write-behind stage (and after the
+// first pair). Parallel loops run inside the nodes. An exception in a stage's node cancels the
+// graph and is rethrown by wait_for_all(); it is returned.
+std::exception_ptr StudyRunner::runGraph()
+{
     using namespace tbb::flow;
+    const auto& specs = mPipeline.stages;
     graph g;
     std::map<std::string, std::unique_ptr<continue_node<continue_msg>>> nodes;
     std::map<std::string, std::unique_ptr<broadcast_node<continue_msg>>> handOns;
     std::map<std::string, std::once_flag> handedOn;
-    const std::string commitHandOn = pipeline.commitsAfter;
+    const std::string commitHandOn = mPipeline.commitsAfter;
     // An early node does its work when a stage it feeds is wanted (else it only passes on).
     auto earlyRuns = [&](const EarlySpec& early) {
-        return std::any_of(early.feeds.begin(), early.feeds.end(), [&](const std::string& f) { return wanted.count(f) > 0; });
+        return std::any_of(early.feeds.begin(), early.feeds.end(),
+                           [&](const std::string& f) { return mSel.wanted.count(f) > 0; });
     };
     std::map<std::string, int> earlyReaders;
-    for (const auto& early : pipeline.early) {
+    for (const auto& early : mPipeline.early) {
         earlyReaders[early.reads] += earlyRuns(early) ? 1 : 0;
         handOns[early.reads];
     }
@@ -427,11 +504,11 @@ nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
         const auto it = handOns.find(what);
         if (it != handOns.end()) std::call_once(handedOn.at(what), [&] { it->second->try_put(continue_msg()); });
     };
-    run.setHandOns(handOn, earlyReaders);
+    mRun.setHandOns(handOn, earlyReaders);
     for (const auto& spec : specs)
         nodes[spec.name] = std::make_unique<continue_node<continue_msg>>(
             g,
-            [&execute, &handOn, &handOns, &spec](const continue_msg&) {
+            [this, &handOn, &handOns, &spec](const continue_msg&) {
                 execute(spec);
                 for (const auto& h : handOns)
                     if (h.first.rfind(spec.name + ":", 0) == 0) handOn(h.first);
@@ -442,42 +519,24 @@ nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
         for (const auto& u : spec.after) make_edge(*nodes[u], *nodes[spec.name]);
     }
     std::vector<std::unique_ptr<continue_node<continue_msg>>> earlyNodes, commitNodes;
-    for (const auto& early : pipeline.early) {
-        earlyNodes.push_back(std::make_unique<continue_node<continue_msg>>(g, [&run, &early, runs = earlyRuns(early)](const continue_msg&) {
-            if (!runs) return;
-            try {
-                early.body(run, nullptr);
-            } catch (...) {
-                // Cancelled, or failed: no result, and the stage it feeds does the work itself.
-            }
-        }));
+    for (const auto& early : mPipeline.early) {
+        earlyNodes.push_back(std::make_unique<continue_node<continue_msg>>(
+            g, [this, &early, runs = earlyRuns(early)](const continue_msg&) {
+                if (!runs) return;
+                try {
+                    early.body(mRun, nullptr);
+                } catch (...) {
+                    // Cancelled, or failed: no result, and the stage it feeds does the work itself.
+                }
+            }));
         make_edge(*handOns.at(early.reads), *earlyNodes.back());
         for (const auto& f : early.feeds) make_edge(*earlyNodes.back(), *nodes.at(f));
     }
-    // A commit's failure is the stage's (reported after the graph), not the graph's: the other
-    // stages and commits go on.
-    std::map<std::string, std::exception_ptr> commitErrors;  // guarded by mutex
-    auto commit = [&](const std::string& name) {
-        std::function<void()> finish;
-        {
-            std::lock_guard<std::mutex> g2(mutex);
-            const auto it = commits.find(name);
-            if (it == commits.end()) return;
-            finish = std::move(it->second);
-            commits.erase(it);
-        }
-        try {
-            finish();
-        } catch (...) {
-            std::lock_guard<std::mutex> g2(mutex);
-            commitErrors[name] = std::current_exception();
-        }
-    };
     std::map<std::string, continue_node<continue_msg>*> commitOf;
     for (const auto& spec : specs) {
         if (!spec.writeBehind) continue;
         commitNodes.push_back(std::make_unique<continue_node<continue_msg>>(
-            g, [&commit, name = spec.name](const continue_msg&) { commit(name); }));
+            g, [this, name = spec.name](const continue_msg&) { commit(name); }));
         make_edge(*nodes[spec.name], *commitNodes.back());
         if (!commitHandOn.empty()) make_edge(*handOns.at(commitHandOn), *commitNodes.back());
         commitOf[spec.name] = commitNodes.back().get();
@@ -490,21 +549,26 @@ nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
                 if (commitOf.count(w.name) && std::find(w.outputs.begin(), w.outputs.end(), a) != w.outputs.end())
                     make_edge(*commitOf.at(w.name), *nodes[spec.name]);
 
-    std::exception_ptr failure;
     for (const auto& spec : specs)
         if (spec.upstream.empty() && spec.after.empty()) nodes[spec.name]->try_put(continue_msg());
     try {
         g.wait_for_all();
     } catch (...) {
-        failure = std::current_exception();
+        return std::current_exception();
     }
-    // The graph failed: the commits of the stages that finished, which their nodes did not run.
-    for (const auto& spec : specs)
+    return nullptr;
+}
+
+/// After the graph: the commits its failure left (of the stages that finished), and the first
+/// commit error as the run's failure when the graph itself did not fail.
+std::exception_ptr StudyRunner::commitFailures(std::exception_ptr failure)
+{
+    for (const auto& spec : mPipeline.stages)
         if (spec.writeBehind) commit(spec.name);
-    for (const auto& spec : specs) {
-        const auto it = commitErrors.find(spec.name);
-        if (it == commitErrors.end()) continue;
-        entries.erase(spec.name);
+    for (const auto& spec : mPipeline.stages) {
+        const auto it = mCommitErrors.find(spec.name);
+        if (it == mCommitErrors.end()) continue;
+        mEntries.erase(spec.name);
         if (failure) continue;
         try {
             std::rethrow_exception(it->second);
@@ -516,21 +580,40 @@ nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
             }
         }
     }
+    return failure;
+}
 
+json StudyRunner::run()
+{
+    const std::exception_ptr failure = commitFailures(runGraph());
     // The manifest: this run's entries, plus earlier entries of stages this run did not touch.
     json manifest;
     {
-        std::lock_guard<std::mutex> g(manifestMutex);
-        manifest = failure ? manifestOf(finished, false, false) : manifestOf(entries, true, true);
+        std::lock_guard<std::mutex> g(mManifestMutex);
+        manifest = failure ? manifestOf(mFinished, false, false) : manifestOf(mEntries, true, true);
     }
-    writeJson(run.path("manifest.json"), manifest);
-    stamps.save();
+    writeJson(mRun.path("manifest.json"), manifest);
+    mStamps.save();
     if (failure) std::rethrow_exception(failure);
 
-    const uint64_t freed = store.evict(static_cast<uint64_t>(options.cacheMaxGb * 1e9), usedRecords);
-    if (freed > 0 && log)
-        log->message("cache: evicted " + std::to_string(freed / 1000000) + " MB of least recently used results");
+    const uint64_t freed = mStore.evict(static_cast<uint64_t>(mOptions.cacheMaxGb * 1e9), mUsedRecords);
+    if (freed > 0 && mLog)
+        mLog->message("cache: evicted " + std::to_string(freed / 1000000) + " MB of least recently used results");
     return manifest;
+}
+
+} // namespace
+
+nlohmann::json runStudy(const StudyPipeline& pipeline, StageRun& run)
+{
+    run.params.validate();
+    StageSelection sel = selectStages(pipeline, run.options);
+    std::error_code ec;
+    fs::create_directories(run.options.studyDir, ec);
+    if (ec) throw InputError(run.options.studyDir + ": cannot create the study folder: " + ec.message());
+    StudyLock lock(run.options.studyDir, run.options.waitForLock);
+    StudyRunner runner(pipeline, run, std::move(sel));
+    return runner.run();
 }
 
 std::vector<StageStatus> studyStatus(const StudyStatusOptions& options, const StatusParamText& text)
