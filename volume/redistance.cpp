@@ -276,145 +276,104 @@ bool sweepLeaf(float* v, const std::array<const float*, 6>& nb, const LeafMask& 
 
 } // namespace
 
-openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLeafSweeps)
+namespace {
+
+/// Step 1 for one leaf (OpenVDB's FastSweeping::InitSdf): active voxels next to a sign change
+/// get their distance to the linear zero crossings, 1 / sqrt(sum over axes of 1 / d^2), and are
+/// fixed; every other voxel gets +-FLT_MAX by its sign and, when active, is swept (set in
+/// `mask`). `src`: the input leaf, `nb` its face neighbours' buffers (null: read `inAcc`).
+void initialiseLeaf(const FloatLeaf& in, const std::array<const float*, 6>& nb,
+                    openvdb::tree::ValueAccessor<const FloatTree>& inAcc, float h, float* dst, LeafMask& mask,
+                    std::uint64_t& sweeping, std::uint64_t& boundary)
 {
-    if (skippedLeafSweeps) *skippedLeafSweeps = 0;
-    FloatTree& inTree = f.tree();
-    if (inTree.hasActiveTiles())
-        OPENVDB_THROW(openvdb::RuntimeError, "redistance: the input has active tiles (voxelize them first)");
-    {
-        // Exactly 0 reads as inside to the sign test below but as outside to the interface test
-        // (see segment_tools.h): make it the smallest positive float.
-        openvdb::tree::LeafManager<FloatTree> leaves(inTree);
-        leaves.foreach([](FloatLeaf& leaf, std::size_t) {
-            for (auto it = leaf.beginValueOn(); it; ++it)
-                if (*it == 0.0f) it.setValue(std::numeric_limits<float>::min());
-        });
-    }
-    openvdb::FloatGrid::Ptr out = f.deepCopy();
-    FloatTree& tree = out->tree();
-    const float h = static_cast<float>(out->voxelSize()[0]);
-    const float sqrt2h = std::sqrt(2.0f) * h;
-
-    LeafGraph graph(tree);
-    const std::size_t leafCount = graph.leaves.size();
-    std::vector<const FloatLeaf*> inLeaves(leafCount);
-    for (std::size_t n = 0; n < leafCount; ++n) inLeaves[n] = inTree.probeConstLeaf(graph.leaves[n]->origin());
-
-    // 1. Initialisation (OpenVDB's FastSweeping::InitSdf): active voxels next to a sign change
-    // get their distance to the linear zero crossings, 1 / sqrt(sum over axes of 1 / d^2), and
-    // are fixed; every other voxel gets +-FLT_MAX by its sign and, when active, is swept.
-    std::vector<LeafMask> sweepMask(leafCount);
-    std::atomic<std::uint64_t> sweepingVoxels{0}, boundaryVoxels{0};
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leafCount, 16), [&](const tbb::blocked_range<std::size_t>& r) {
-        openvdb::tree::ValueAccessor<const FloatTree> inAcc(inTree);
-        std::uint64_t sweeping = 0, boundary = 0;
-        for (std::size_t n = r.begin(); n != r.end(); ++n) {
-            const FloatLeaf& in = *inLeaves[n];
-            const float* src = in.buffer().data();
-            std::array<const float*, 6> nb{};
-            for (int s = 0; s < 6; ++s) {
-                const std::int32_t m = graph.neighbours[n][std::size_t(s)];
-                nb[std::size_t(s)] = m < 0 ? nullptr : inLeaves[std::size_t(m)]->buffer().data();
-            }
-            float* dst = graph.leaves[n]->buffer().data();
-            LeafMask& mask = sweepMask[n];
-            mask.setOff();
-            // The input leaf with a layer of its face neighbours' values around (padded 10^3;
-            // a missing neighbour: the tile or background value there), so that each voxel's
-            // six neighbours lie at fixed offsets.
-            constexpr int P = DIM + 2;
-            constexpr int PS[3] = {P * P, P, 1};
-            float pad[P * P * P];
-            auto at = [](int x, int y, int z) { return (x + 1) * P * P + (y + 1) * P + (z + 1); };
-            for (int x = 0; x < DIM; ++x)
-                for (int y = 0; y < DIM; ++y) std::memcpy(&pad[at(x, y, 0)], &src[(x << 6) | (y << 3)], DIM * sizeof(float));
-            for (int axis = 0; axis < 3; ++axis)
-                for (int side = 0; side < 2; ++side) {
-                    const float* other = nb[std::size_t(slot(axis, side == 1))];
-                    for (int a = 0; a < DIM; ++a)
-                        for (int b = 0; b < DIM; ++b) {
-                            int local[3];
-                            local[axis] = side ? DIM : -1;
-                            local[(axis + 1) % 3] = a;
-                            local[(axis + 2) % 3] = b;
-                            float value;
-                            if (other) {
-                                int from[3] = {local[0], local[1], local[2]};
-                                from[axis] = side ? 0 : DIM - 1;
-                                value = other[(from[0] << 6) | (from[1] << 3) | from[2]];
-                            } else {
-                                value = inAcc.getValue(in.origin().offsetBy(local[0], local[1], local[2]));  // a tile or the background
-                            }
-                            pad[at(local[0], local[1], local[2])] = value;
-                        }
-                }
-            const LeafMask& active = in.getValueMask();
-            for (int pos = 0; pos < int(FloatLeaf::SIZE); ++pos) {
-                const float value = src[pos];
-                const bool isAbove = value > 0.0f;
-                if (!active.isOn(openvdb::Index(pos))) {
-                    dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
-                    continue;
-                }
-                const int i = at(pos >> 6, (pos >> 3) & 7, pos & 7);
-                // Slots 2 axis (negative side) and 2 axis + 1 (positive side).
-                const float nbValue[6] = {pad[i - PS[0]], pad[i + PS[0]], pad[i - PS[1]],
-                                          pad[i + PS[1]], pad[i - PS[2]], pad[i + PS[2]]};
-                const bool less = value < 0.0f;
-                bool crossing[6];
-                bool any = false;
-                for (int k = 0; k < 6; ++k) any |= crossing[k] = less != (nbValue[k] < 0.0f);
-                if (!any) {
-                    dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
-                    mask.setOn(openvdb::Index(pos));
-                    ++sweeping;
-                    continue;
-                }
-                ++boundary;
-                const float delta = value;
-                if (!(delta > 1e-8f) && !(delta < -1e-8f)) {  // math::isApproxZero
-                    dst[pos] = 0.0f;
-                    continue;
-                }
-                float sum = 0.0f;
-                for (int axis = 0; axis < 3; ++axis) {
-                    float d = FLT_BIG;
-                    if (crossing[2 * axis]) d = std::abs(delta / (value - nbValue[2 * axis]));
-                    if (crossing[2 * axis + 1]) {
-                        const float d2 = std::abs(delta / (value - nbValue[2 * axis + 1]));
-                        if (d2 < d) d = d2;
+    const float* src = in.buffer().data();
+    mask.setOff();
+    // The input leaf with a layer of its face neighbours' values around (padded 10^3;
+    // a missing neighbour: the tile or background value there), so that each voxel's
+    // six neighbours lie at fixed offsets.
+    constexpr int P = DIM + 2;
+    constexpr int PS[3] = {P * P, P, 1};
+    float pad[P * P * P];
+    auto at = [](int x, int y, int z) { return (x + 1) * P * P + (y + 1) * P + (z + 1); };
+    for (int x = 0; x < DIM; ++x)
+        for (int y = 0; y < DIM; ++y) std::memcpy(&pad[at(x, y, 0)], &src[(x << 6) | (y << 3)], DIM * sizeof(float));
+    for (int axis = 0; axis < 3; ++axis)
+        for (int side = 0; side < 2; ++side) {
+            const float* other = nb[std::size_t(slot(axis, side == 1))];
+            for (int a = 0; a < DIM; ++a)
+                for (int b = 0; b < DIM; ++b) {
+                    int local[3];
+                    local[axis] = side ? DIM : -1;
+                    local[(axis + 1) % 3] = a;
+                    local[(axis + 2) % 3] = b;
+                    float value;
+                    if (other) {
+                        int from[3] = {local[0], local[1], local[2]};
+                        from[axis] = side ? 0 : DIM - 1;
+                        value = other[(from[0] << 6) | (from[1] << 3) | from[2]];
+                    } else {
+                        value = inAcc.getValue(in.origin().offsetBy(local[0], local[1], local[2]));  // a tile or the background
                     }
-                    if (d < FLT_BIG) sum += 1.0f / (d * d);
+                    pad[at(local[0], local[1], local[2])] = value;
                 }
-                dst[pos] = isAbove ? h / std::sqrt(sum) : -h / std::sqrt(sum);
-            }
         }
-        sweepingVoxels += sweeping;
-        boundaryVoxels += boundary;
-    });
-    // Tiles by their sign (there are no active ones), the background +FLT_MAX.
-    {
-        FloatTree::ValueAllIter it = tree.beginValueAll();
-        it.setMaxDepth(FloatTree::ValueAllIter::LEAF_DEPTH - 1);  // the root's and internal nodes' values
-        for (; it; ++it) it.setValue(*it > 0.0f ? FLT_BIG : -FLT_BIG);
+    const LeafMask& active = in.getValueMask();
+    for (int pos = 0; pos < int(FloatLeaf::SIZE); ++pos) {
+        const float value = src[pos];
+        const bool isAbove = value > 0.0f;
+        if (!active.isOn(openvdb::Index(pos))) {
+            dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
+            continue;
+        }
+        const int i = at(pos >> 6, (pos >> 3) & 7, pos & 7);
+        // Slots 2 axis (negative side) and 2 axis + 1 (positive side).
+        const float nbValue[6] = {pad[i - PS[0]], pad[i + PS[0]], pad[i - PS[1]],
+                                  pad[i + PS[1]], pad[i - PS[2]], pad[i + PS[2]]};
+        const bool less = value < 0.0f;
+        bool crossing[6];
+        bool any = false;
+        for (int k = 0; k < 6; ++k) any |= crossing[k] = less != (nbValue[k] < 0.0f);
+        if (!any) {
+            dst[pos] = isAbove ? FLT_BIG : -FLT_BIG;
+            mask.setOn(openvdb::Index(pos));
+            ++sweeping;
+            continue;
+        }
+        ++boundary;
+        const float delta = value;
+        if (!(delta > 1e-8f) && !(delta < -1e-8f)) {  // math::isApproxZero
+            dst[pos] = 0.0f;
+            continue;
+        }
+        float sum = 0.0f;
+        for (int axis = 0; axis < 3; ++axis) {
+            float d = FLT_BIG;
+            if (crossing[2 * axis]) d = std::abs(delta / (value - nbValue[2 * axis]));
+            if (crossing[2 * axis + 1]) {
+                const float d2 = std::abs(delta / (value - nbValue[2 * axis + 1]));
+                if (d2 < d) d = d2;
+            }
+            if (d < FLT_BIG) sum += 1.0f / (d * d);
+        }
+        dst[pos] = isAbove ? h / std::sqrt(sum) : -h / std::sqrt(sum);
     }
-    tree.root().setBackground(FLT_BIG, /*updateChildNodes=*/false);
-    // As sdfToSdf: with nothing to sweep or nothing to sweep from, the initialisation is returned.
-    if (sweepingVoxels == 0 || boundaryVoxels == 0) return out;
+}
 
-    // 2. The eight sweeps, in OpenVDB's order: +++, ---, ++-, --+, +-+, -+-, +--, -++
-    // (bit a of `dir` set: negative along axis a).
-    //
-    // A leaf is skipped in a sweep when sweeping it cannot change it. A voxel's update reads only
-    // its own value and its six face neighbours, in any sweep direction; so when every voxel of
-    // a leaf kept its value in a sweep (the leaf is "stable" on what it read), a later sweep
-    // that reads the same values changes nothing either, whatever its direction. The leaf read
-    // its upwind face-neighbour leaves after their sweep of that round, the downwind ones before
-    // theirs (a leaf starts when its upwind neighbours are done, and its downwind ones wait for
-    // it); each leaf records in which sweeps it changed, so that "has any neighbour changed
-    // between what the leaf read when it was last stable and what it would read now" is a test
-    // of a few bits. Skipping thus gives the values of the full sweeps, bit for bit.
+/// Step 2: the eight sweeps, in OpenVDB's order: +++, ---, ++-, --+, +-+, -+-, +--, -++ (bit a
+/// of `dir` set: negative along axis a). Returns the leaf sweeps skipped.
+///
+/// A leaf is skipped in a sweep when sweeping it cannot change it. A voxel's update reads only
+/// its own value and its six face neighbours, in any sweep direction; so when every voxel of a
+/// leaf kept its value in a sweep (the leaf is "stable" on what it read), a later sweep that
+/// reads the same values changes nothing either, whatever its direction. The leaf read its
+/// upwind face-neighbour leaves after their sweep of that round, the downwind ones before
+/// theirs (a leaf starts when its upwind neighbours are done, and its downwind ones wait for
+/// it); each leaf records in which sweeps it changed, so that "has any neighbour changed between
+/// what the leaf read when it was last stable and what it would read now" is a test of a few
+/// bits. Skipping thus gives the values of the full sweeps, bit for bit.
+std::size_t sweepAll(const LeafGraph& graph, const std::vector<LeafMask>& sweepMask, float h, float sqrt2h)
+{
+    const std::size_t leafCount = graph.leaves.size();
     static constexpr int DIRECTIONS[8] = {0, 7, 4, 3, 2, 5, 6, 1};
     std::vector<const float*> data(leafCount);
     for (std::size_t n = 0; n < leafCount; ++n) data[n] = graph.leaves[n]->buffer().data();
@@ -474,11 +433,15 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLe
         });
     }
 
-    if (skippedLeafSweeps) *skippedLeafSweeps = skipped.load();
+    return skipped.load();
+}
 
-    // 3. Finalisation (sweep(nIter, finalize = true)): the extrema of the active values that were
-    // reached; unreached active voxels take them, and the inactive values and the background
-    // become the outside (largest) and inside (smallest) value by their sign.
+/// Step 3 (sweep(nIter, finalize = true)): the extrema of the active values that were reached;
+/// unreached active voxels take them, and the inactive values and the background become the
+/// outside (largest) and inside (smallest) value by their sign.
+void finalise(const LeafGraph& graph, FloatTree& tree)
+{
+    const std::size_t leafCount = graph.leaves.size();
     using MinMax = std::pair<float, float>;
     const MinMax range = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, leafCount, 64), MinMax{FLT_BIG, -FLT_BIG},
@@ -500,6 +463,67 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLe
             }
     });
     openvdb::tools::changeAsymmetricLevelSetBackground(tree, range.second, range.first);
+}
+
+} // namespace
+
+openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& f, std::size_t* skippedLeafSweeps)
+{
+    if (skippedLeafSweeps) *skippedLeafSweeps = 0;
+    FloatTree& inTree = f.tree();
+    if (inTree.hasActiveTiles())
+        OPENVDB_THROW(openvdb::RuntimeError, "redistance: the input has active tiles (voxelize them first)");
+    {
+        // Exactly 0 reads as inside to the sign test below but as outside to the interface test
+        // (see segment_tools.h): make it the smallest positive float.
+        openvdb::tree::LeafManager<FloatTree> leaves(inTree);
+        leaves.foreach([](FloatLeaf& leaf, std::size_t) {
+            for (auto it = leaf.beginValueOn(); it; ++it)
+                if (*it == 0.0f) it.setValue(std::numeric_limits<float>::min());
+        });
+    }
+    openvdb::FloatGrid::Ptr out = f.deepCopy();
+    FloatTree& tree = out->tree();
+    const float h = static_cast<float>(out->voxelSize()[0]);
+    const float sqrt2h = std::sqrt(2.0f) * h;
+
+    LeafGraph graph(tree);
+    const std::size_t leafCount = graph.leaves.size();
+    std::vector<const FloatLeaf*> inLeaves(leafCount);
+    for (std::size_t n = 0; n < leafCount; ++n) inLeaves[n] = inTree.probeConstLeaf(graph.leaves[n]->origin());
+
+    // 1. Initialisation.
+    std::vector<LeafMask> sweepMask(leafCount);
+    std::atomic<std::uint64_t> sweepingVoxels{0}, boundaryVoxels{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leafCount, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        openvdb::tree::ValueAccessor<const FloatTree> inAcc(inTree);
+        std::uint64_t sweeping = 0, boundary = 0;
+        for (std::size_t n = r.begin(); n != r.end(); ++n) {
+            std::array<const float*, 6> nb{};
+            for (int s = 0; s < 6; ++s) {
+                const std::int32_t m = graph.neighbours[n][std::size_t(s)];
+                nb[std::size_t(s)] = m < 0 ? nullptr : inLeaves[std::size_t(m)]->buffer().data();
+            }
+            initialiseLeaf(*inLeaves[n], nb, inAcc, h, graph.leaves[n]->buffer().data(), sweepMask[n], sweeping,
+                           boundary);
+        }
+        sweepingVoxels += sweeping;
+        boundaryVoxels += boundary;
+    });
+    // Tiles by their sign (there are no active ones), the background +FLT_MAX.
+    {
+        FloatTree::ValueAllIter it = tree.beginValueAll();
+        it.setMaxDepth(FloatTree::ValueAllIter::LEAF_DEPTH - 1);  // the root's and internal nodes' values
+        for (; it; ++it) it.setValue(*it > 0.0f ? FLT_BIG : -FLT_BIG);
+    }
+    tree.root().setBackground(FLT_BIG, /*updateChildNodes=*/false);
+    // As sdfToSdf: with nothing to sweep or nothing to sweep from, the initialisation is returned.
+    if (sweepingVoxels == 0 || boundaryVoxels == 0) return out;
+
+    // 2. The sweeps; 3. finalisation.
+    const std::size_t skipped = sweepAll(graph, sweepMask, h, sqrt2h);
+    if (skippedLeafSweeps) *skippedLeafSweeps = skipped;
+    finalise(graph, tree);
     return out;
 }
 
