@@ -485,38 +485,19 @@ void finishLumen(FloatGrid::Ptr sdf, const SegmentParams& params, LumenSegmentat
 
 } // namespace detail
 
-LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams& params,
-                               Progress* progress)
+namespace {
+
+/// Step 3 of segmentLumen: measures the air components, cuts out a rectal tube (its voxels to
+/// `tubeCut`, null without one), gives each component its reason and fills result.components;
+/// `kept` receives the union of the kept components.
+/// @throw InputError when the seed lies in air touching the outside, or when no component is kept.
+void classifyComponents(std::vector<BoolTree::Ptr>& segments, const FloatTree& huTree,
+                        const openvdb::math::Transform& xf, double voxelMl, const SegmentParams& params,
+                        LumenSegmentation& result, BoolTree& kept, BoolTree::Ptr& tubeCut)
 {
-    validateSegmentParams(params);
-    validateGrid(hu);
-    const openvdb::math::Transform& xf = hu.transform();
-    const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
-    const FloatTree& huTree = hu.tree();
-    reportProgress(progress, 0.0, "air candidates");
-
-    // 1. Air candidates among the active (in-body) voxels.
-    BoolTree::Ptr air = airCandidates(huTree, static_cast<float>(params.airThresholdHu));
-    reportProgress(progress, 0.1, "connected air components");
-
-    // 2. Connected components under face (6-) connectivity, which is what we want: the colon
-    // wall, the small bowel wall and the diaphragm are often a single voxel thick at CT
-    // resolution, and partial volume thins them further, so diagonal (26-) connectivity would
-    // leak through two voxels that merely touch at an edge or corner and merge colon with
-    // small-bowel gas or lung. Under 6-connectivity a one-voxel wall separates; a truly open
-    // lumen is many voxels wide and stays one component either way.
-    std::vector<BoolTree::Ptr> segments = detail::connectedComponents(*air);
-    reportProgress(progress, 0.2, "classify air components");
-
-    // 3. Classify: border, small, lung, then fraction of the reference component (the largest
-    // remaining one, or the seeded one). Size is tested before the lung criterion because the
-    // mean HU of a small pocket is dominated by its partial-volume rim (a 3 mm gas bubble
-    // averages about -915 HU) and would read as lung.
-    LumenSegmentation result;
     std::vector<ComponentStats> stats;
     stats.reserve(segments.size());
     for (const auto& seg : segments) stats.push_back(measureComponent(*seg, huTree, xf, voxelMl));
-    BoolTree::Ptr tubeCut;  // the tube's voxels taken out of the colon's air (rectal_tube.h)
     cutRectalTube(segments, stats, huTree, xf, voxelMl, params, result.rectalTube, tubeCut);
     std::size_t seeded = segments.size();
     if (params.seedMm) {
@@ -547,30 +528,174 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
         s.info.reason = s.info.kept ? "colon" : "fraction";
     }
     for (const ComponentStats& s : stats) result.components.push_back(s.info);
-    BoolTree kept(false);
     for (std::size_t i = 0; i < segments.size(); ++i)
         if (stats[i].info.kept) kept.topologyUnion(*segments[i]);
     if (kept.empty()) throw InputError(describeComponents(result.components, params));
+}
+
+/// Step 4 of segmentLumen, after the fluid search: the lumen's voxels (the joined fluid, its rim,
+/// the kept air and the tube inside the rectum). Fills result's fluid fields and
+/// rectalTube.filledMl; `tubeFill` receives the tube's voxels given to the lumen (stays null
+/// without a tube).
+BoolTree::Ptr lumenVoxels(const detail::TaggedFluid& fluid, const BoolTree& kept, const BoolTree::Ptr& tubeCut,
+                          const openvdb::math::Transform& xf, double voxelMl, LumenSegmentation& result,
+                          BoolTree::Ptr& tubeFill)
+{
+    result.fluidPools = fluid.pools;
+    result.gravityDirection = fluid.gravityDirection;
+    auto lumen = std::make_shared<BoolTree>(*fluid.joined);
+    lumen->topologyUnion(*fluid.rim);
+    result.fluidVolumeMl = double(lumen->activeVoxelCount()) * voxelMl;
+    lumen->topologyUnion(kept);
+    // The tube is given to the lumen where the lumen surrounds it, tagged fluid included: from
+    // the air alone, a tube lying against the fluid stayed a hole in the rectum, and the path
+    // ran beside it, up to 18 mm off the rectum's axis (phantom --rectal-tube --fluid).
+    if (tubeCut) {
+        tubeFill = detail::rectalTubeFill(*lumen, *tubeCut, xf, result.rectalTube);
+        result.rectalTube.filledMl = double(tubeFill->activeVoxelCount()) * voxelMl;
+    }
+    if (tubeFill) lumen->topologyUnion(*tubeFill);
+    return lumen;
+}
+
+/// The voxels of step 5's field forced outside the lumen: dropped air components next to
+/// `region` and fluid candidates there that did not join, each with its partial-volume rim (one
+/// voxel), less the joined fluid.
+BoolTree::Ptr foreignVoxels(const BoolTree& region, const BoolTree& air, const BoolTree& kept,
+                            const detail::TaggedFluid& fluid)
+{
+    // Foreign air and fluid next to the region only (lungs can be far larger than the colon,
+    // the skeleton too).
+    BoolTree nextToRegion(region);
+    detail::dilateVoxels(nextToRegion, 1, Neighbours::All);
+    auto foreign = std::make_shared<BoolTree>(nextToRegion);
+    foreign->topologyIntersection(air);
+    foreign->topologyDifference(kept);
+    BoolTree foreignFluid(*fluid.rejected);
+    foreignFluid.topologyIntersection(nextToRegion);
+    foreign->topologyUnion(foreignFluid);
+    detail::dilateVoxels(*foreign, 1, Neighbours::All);
+    foreign->topologyDifference(*fluid.joined);
+    return foreign;
+}
+
+/// Step 5's field on `region` from the air reading (HU - iso): the value of pure air on the tube's
+/// fill (`tubeFill`, may be null) and the air-fluid rim, FORCED_OUTSIDE_HU outside the body and
+/// at least that on foreign voxels.
+FloatTree::Ptr airReading(const BoolTree& region, const FloatTree& huTree, const BoolTree& kept,
+                          const BoolTree& foreign, const BoolTree& rim, const BoolTree* tubeFill, float iso,
+                          float pureAir)
+{
+    auto f = std::make_shared<FloatTree>(region, FORCED_OUTSIDE_HU, openvdb::TopologyCopy());
+    forEachActive(*f, [&](FloatLeaf& leaf) {
+        FloatConstAccessor huAcc(huTree);
+        BoolConstAccessor keptAcc(kept), foreignAcc(foreign), rimAcc(rim);
+        std::optional<BoolConstAccessor> fillAcc;
+        if (tubeFill) fillAcc.emplace(*tubeFill);
+        for (auto it = leaf.beginValueOn(); it; ++it) {
+            const Coord ijk = it.getCoord();
+            float v;
+            if (fillAcc && fillAcc->isValueOn(ijk)) v = pureAir;
+            else if (keptAcc.isValueOn(ijk)) v = huAcc.getValue(ijk) - iso;
+            else if (rimAcc.isValueOn(ijk)) v = pureAir;
+            else if (!huAcc.isValueOn(ijk)) v = FORCED_OUTSIDE_HU;
+            else if (foreignAcc.isValueOn(ijk)) v = std::max(huAcc.getValue(ijk) - iso, FORCED_OUTSIDE_HU);
+            else v = huAcc.getValue(ijk) - iso;
+            it.setValue(v);
+        }
+    });
+    return f;
+}
+
+/// Lowers step 5's field `f` to the fluid reading where that is smaller, pool by pool, within
+/// two voxels of the pool (not on voxels outside the body, foreign ones or the rim).
+void addFluidReading(FloatTree& f, const BoolTree& region, const FloatTree& huTree, const BoolTree& foreign,
+                     const detail::TaggedFluid& fluid, float pureAir)
+{
+    for (std::size_t p = 0; p < fluid.poolTrees.size(); ++p) {
+        const FluidPool& pool = fluid.pools[p];
+        const double depthHu = pool.meanHu - pool.surfaceHu;
+        const float scale = depthHu > 1.0 ? static_cast<float>(-pureAir / depthHu) : 1.0f;
+        const float surfaceHu = static_cast<float>(pool.surfaceHu);
+        BoolTree near(*fluid.poolTrees[p]);
+        detail::dilateVoxels(near, 2, Neighbours::All);
+        near.topologyIntersection(region);
+        openvdb::tree::LeafManager<const BoolTree> leaves(near);
+        leaves.foreach([&](const BoolLeaf& leaf, std::size_t) {
+            FloatConstAccessor huAcc(huTree);
+            BoolConstAccessor foreignAcc(foreign), rimAcc(*fluid.rim);
+            FloatLeaf* target = f.probeLeaf(leaf.origin());
+            if (!target) return;
+            for (auto it = leaf.cbeginValueOn(); it; ++it) {
+                const Coord ijk = it.getCoord();
+                if (!huAcc.isValueOn(ijk) || foreignAcc.isValueOn(ijk) || rimAcc.isValueOn(ijk)) continue;
+                const float fluidReading = (surfaceHu - huAcc.getValue(ijk)) * scale;
+                const openvdb::Index pos = FloatLeaf::coordToOffset(ijk);
+                target->setValueOnly(pos, std::min(target->getValue(pos), fluidReading));
+            }
+        });
+    }
+}
+
+/// Sets the voxels of `f` below zero that do not connect to `lumen` through such voxels (within
+/// 4 * shellVoxels steps) to FORCED_OUTSIDE_HU: no negative islands.
+void dropNegativeIslands(FloatTree& f, const BoolTree& lumen, int shellVoxels)
+{
+    BoolTree below(f, false, true, openvdb::TopologyCopy());
+    openvdb::tree::LeafManager<BoolTree> belowLeaves(below);
+    belowLeaves.foreach([&](BoolLeaf& leaf, std::size_t) {
+        const FloatLeaf* src = f.probeConstLeaf(leaf.origin());
+        for (auto it = src->cbeginValueOn(); it; ++it)
+            if (!(*it < 0.0f)) leaf.setValueOff(it.pos(), false);
+    });
+    BoolTree::Ptr connected = detail::reachableWithin(lumen, below, 4 * shellVoxels);
+    forEachActive(f, [&](FloatLeaf& leaf) {
+        BoolConstAccessor connectedAcc(*connected);
+        for (auto it = leaf.beginValueOn(); it; ++it)
+            if (*it < 0.0f && !connectedAcc.isValueOn(it.getCoord())) it.setValue(FORCED_OUTSIDE_HU);
+    });
+}
+
+} // namespace
+
+LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams& params,
+                               Progress* progress)
+{
+    validateSegmentParams(params);
+    validateGrid(hu);
+    const openvdb::math::Transform& xf = hu.transform();
+    const double voxelMl = std::abs(xf.voxelVolume()) / 1000.0;
+    const FloatTree& huTree = hu.tree();
+    reportProgress(progress, 0.0, "air candidates");
+
+    // 1. Air candidates among the active (in-body) voxels.
+    BoolTree::Ptr air = airCandidates(huTree, static_cast<float>(params.airThresholdHu));
+    reportProgress(progress, 0.1, "connected air components");
+
+    // 2. Connected components under face (6-) connectivity, which is what we want: the colon
+    // wall, the small bowel wall and the diaphragm are often a single voxel thick at CT
+    // resolution, and partial volume thins them further, so diagonal (26-) connectivity would
+    // leak through two voxels that merely touch at an edge or corner and merge colon with
+    // small-bowel gas or lung. Under 6-connectivity a one-voxel wall separates; a truly open
+    // lumen is many voxels wide and stays one component either way.
+    std::vector<BoolTree::Ptr> segments = detail::connectedComponents(*air);
+    reportProgress(progress, 0.2, "classify air components");
+
+    // 3. Classify: border, small, lung, then fraction of the reference component (the largest
+    // remaining one, or the seeded one). Size is tested before the lung criterion because the
+    // mean HU of a small pocket is dominated by its partial-volume rim (a 3 mm gas bubble
+    // averages about -915 HU) and would read as lung.
+    LumenSegmentation result;
+    BoolTree kept(false);
+    BoolTree::Ptr tubeCut;  // the tube's voxels taken out of the colon's air (rectal_tube.h)
+    classifyComponents(segments, huTree, xf, voxelMl, params, result, kept, tubeCut);
     segments.clear();
     reportProgress(progress, 0.3, "tagged fluid");
 
     // 4. Tagged fluid under air-fluid levels, and the partial-volume rim between the two.
     detail::TaggedFluid fluid = detail::findTaggedFluid(hu, kept, params);
-    result.fluidPools = fluid.pools;
-    result.gravityDirection = fluid.gravityDirection;
-    BoolTree lumen(*fluid.joined);
-    lumen.topologyUnion(*fluid.rim);
-    result.fluidVolumeMl = double(lumen.activeVoxelCount()) * voxelMl;
-    lumen.topologyUnion(kept);
-    // The tube is given to the lumen where the lumen surrounds it, tagged fluid included: from
-    // the air alone, a tube lying against the fluid stayed a hole in the rectum, and the path
-    // ran beside it, up to 18 mm off the rectum's axis (phantom --rectal-tube --fluid).
     BoolTree::Ptr tubeFill;  // the tube inside the rectum, given to the lumen
-    if (tubeCut) {
-        tubeFill = detail::rectalTubeFill(lumen, *tubeCut, xf, result.rectalTube);
-        result.rectalTube.filledMl = double(tubeFill->activeVoxelCount()) * voxelMl;
-    }
-    if (tubeFill) lumen.topologyUnion(*tubeFill);
+    BoolTree::Ptr lumen = lumenVoxels(fluid, kept, tubeCut, xf, voxelMl, result, tubeFill);
     reportProgress(progress, 0.4, "lumen level set input");
 
     // 5. Sub-voxel surface: a field f, negative inside, on the lumen dilated by bandVoxels + 2
@@ -587,81 +712,16 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     // shell voxels below zero count only if they connect to the lumen through such voxels (no
     // negative islands).
     const int shellVoxels = params.bandVoxels + 2;
-    BoolTree region(lumen);
+    BoolTree region(*lumen);
     detail::dilateVoxels(region, shellVoxels, Neighbours::All);
-    // Foreign air and fluid next to the region only (lungs can be far larger than the colon,
-    // the skeleton too).
-    BoolTree nextToRegion(region);
-    detail::dilateVoxels(nextToRegion, 1, Neighbours::All);
-    BoolTree foreign(nextToRegion);
-    foreign.topologyIntersection(*air);
-    foreign.topologyDifference(kept);
-    BoolTree foreignFluid(*fluid.rejected);
-    foreignFluid.topologyIntersection(nextToRegion);
-    foreign.topologyUnion(foreignFluid);
-    detail::dilateVoxels(foreign, 1, Neighbours::All);
-    foreign.topologyDifference(*fluid.joined);
+    BoolTree::Ptr foreign = foreignVoxels(region, *air, kept, fluid);
     air.reset();
 
     const float iso = static_cast<float>(params.surfaceIsoHu);
     const float pureAir = static_cast<float>(AIR_HU - params.surfaceIsoHu);  // f of pure air (< 0)
-    auto f = std::make_shared<FloatTree>(region, FORCED_OUTSIDE_HU, openvdb::TopologyCopy());
-    forEachActive(*f, [&](FloatLeaf& leaf) {
-        FloatConstAccessor huAcc(huTree);
-        BoolConstAccessor keptAcc(kept), foreignAcc(foreign), rimAcc(*fluid.rim);
-        std::optional<BoolConstAccessor> fillAcc;
-        if (tubeFill) fillAcc.emplace(*tubeFill);
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const Coord ijk = it.getCoord();
-            float v;
-            if (fillAcc && fillAcc->isValueOn(ijk)) v = pureAir;
-            else if (keptAcc.isValueOn(ijk)) v = huAcc.getValue(ijk) - iso;
-            else if (rimAcc.isValueOn(ijk)) v = pureAir;
-            else if (!huAcc.isValueOn(ijk)) v = FORCED_OUTSIDE_HU;
-            else if (foreignAcc.isValueOn(ijk)) v = std::max(huAcc.getValue(ijk) - iso, FORCED_OUTSIDE_HU);
-            else v = huAcc.getValue(ijk) - iso;
-            it.setValue(v);
-        }
-    });
-    // The fluid reading, pool by pool, within two voxels of the pool.
-    for (std::size_t p = 0; p < fluid.poolTrees.size(); ++p) {
-        const FluidPool& pool = fluid.pools[p];
-        const double depthHu = pool.meanHu - pool.surfaceHu;
-        const float scale = depthHu > 1.0 ? static_cast<float>(-pureAir / depthHu) : 1.0f;
-        const float surfaceHu = static_cast<float>(pool.surfaceHu);
-        BoolTree near(*fluid.poolTrees[p]);
-        detail::dilateVoxels(near, 2, Neighbours::All);
-        near.topologyIntersection(region);
-        openvdb::tree::LeafManager<const BoolTree> leaves(near);
-        leaves.foreach([&](const BoolLeaf& leaf, std::size_t) {
-            FloatConstAccessor huAcc(huTree);
-            BoolConstAccessor foreignAcc(foreign), rimAcc(*fluid.rim);
-            FloatLeaf* target = f->probeLeaf(leaf.origin());
-            if (!target) return;
-            for (auto it = leaf.cbeginValueOn(); it; ++it) {
-                const Coord ijk = it.getCoord();
-                if (!huAcc.isValueOn(ijk) || foreignAcc.isValueOn(ijk) || rimAcc.isValueOn(ijk)) continue;
-                const float fluidReading = (surfaceHu - huAcc.getValue(ijk)) * scale;
-                const openvdb::Index pos = FloatLeaf::coordToOffset(ijk);
-                target->setValueOnly(pos, std::min(target->getValue(pos), fluidReading));
-            }
-        });
-    }
-    {
-        BoolTree below(*f, false, true, openvdb::TopologyCopy());
-        openvdb::tree::LeafManager<BoolTree> belowLeaves(below);
-        belowLeaves.foreach([&](BoolLeaf& leaf, std::size_t) {
-            const FloatLeaf* src = f->probeConstLeaf(leaf.origin());
-            for (auto it = src->cbeginValueOn(); it; ++it)
-                if (!(*it < 0.0f)) leaf.setValueOff(it.pos(), false);
-        });
-        BoolTree::Ptr connected = detail::reachableWithin(lumen, below, 4 * shellVoxels);
-        forEachActive(*f, [&](FloatLeaf& leaf) {
-            BoolConstAccessor connectedAcc(*connected);
-            for (auto it = leaf.beginValueOn(); it; ++it)
-                if (*it < 0.0f && !connectedAcc.isValueOn(it.getCoord())) it.setValue(FORCED_OUTSIDE_HU);
-        });
-    }
+    FloatTree::Ptr f = airReading(region, huTree, kept, *foreign, *fluid.rim, tubeFill.get(), iso, pureAir);
+    addFluidReading(*f, region, huTree, *foreign, fluid, pureAir);
+    dropNegativeIslands(*f, *lumen, shellVoxels);
     FloatGrid::Ptr fGrid = FloatGrid::create(f);
     fGrid->setTransform(xf.copy());
     reportProgress(progress, 0.5, "redistance lumen level set");
