@@ -173,45 +173,42 @@ double meanDihedralAngleDeg(const TriMesh& mesh, const std::vector<TriMesh::Poin
 
 namespace {
 
-/// checkMesh with the vertex positions `pointAt(v)` (a Vec3d) instead of the mesh's; without
-/// `nesting` every component's nestingDepth stays 0 (the area and volume do not depend on it).
-template<typename PointAt>
-MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
+/// Edge-connected face components (depth-first over face neighbours): `faceComponent` receives
+/// each face's component; returns each component's faces in the order reached.
+std::vector<std::vector<TriMesh::FaceHandle>> faceComponents(const TriMesh& mesh, std::vector<int>& faceComponent)
 {
-    MeshCheck check;
-    check.vertices = int64_t(mesh.n_vertices());
-    check.edges = int64_t(mesh.n_edges());
-    check.faces = int64_t(mesh.n_faces());
-
-    // Edge-connected face components (depth-first over face neighbours).
     constexpr int NONE = -1;
-    std::vector<int> faceComponent(mesh.n_faces(), NONE);
+    faceComponent.assign(mesh.n_faces(), NONE);
     std::vector<std::vector<TriMesh::FaceHandle>> componentFaces;
-    {
-        std::vector<TriMesh::FaceHandle> stack;
-        for (const auto f : mesh.faces()) {
-            if (faceComponent[std::size_t(f.idx())] != NONE) continue;
-            const int c = int(componentFaces.size());
-            componentFaces.emplace_back();
-            faceComponent[std::size_t(f.idx())] = c;
-            stack.push_back(f);
-            while (!stack.empty()) {
-                const TriMesh::FaceHandle g = stack.back();
-                stack.pop_back();
-                componentFaces[std::size_t(c)].push_back(g);
-                for (auto ff = mesh.cff_iter(g); ff.is_valid(); ++ff) {
-                    int& mark = faceComponent[std::size_t(ff->idx())];
-                    if (mark == NONE) {
-                        mark = c;
-                        stack.push_back(*ff);
-                    }
+    std::vector<TriMesh::FaceHandle> stack;
+    for (const auto f : mesh.faces()) {
+        if (faceComponent[std::size_t(f.idx())] != NONE) continue;
+        const int c = int(componentFaces.size());
+        componentFaces.emplace_back();
+        faceComponent[std::size_t(f.idx())] = c;
+        stack.push_back(f);
+        while (!stack.empty()) {
+            const TriMesh::FaceHandle g = stack.back();
+            stack.pop_back();
+            componentFaces[std::size_t(c)].push_back(g);
+            for (auto ff = mesh.cff_iter(g); ff.is_valid(); ++ff) {
+                int& mark = faceComponent[std::size_t(ff->idx())];
+                if (mark == NONE) {
+                    mark = c;
+                    stack.push_back(*ff);
                 }
             }
         }
     }
-    std::vector<ComponentWork> work(componentFaces.size());
+    return componentFaces;
+}
 
-    // Vertices and edges are counted in the component of any incident face.
+/// Counts the vertices and edges, each in the component of any incident face (with its box and
+/// probe), and the mesh's non-manifold and isolated vertices and boundary edges.
+template<typename PointAt>
+void countVerticesAndEdges(const TriMesh& mesh, const PointAt& pointAt, const std::vector<int>& faceComponent,
+                           std::vector<ComponentWork>& work, MeshCheck& check)
+{
     for (const auto v : mesh.vertices()) {
         if (!mesh.is_manifold(v)) ++check.nonManifoldVertices;
         TriMesh::FaceHandle f;
@@ -235,84 +232,93 @@ MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
         ++work[std::size_t(faceComponent[std::size_t(f.idx())])].info.edges;
         if (e.is_boundary()) ++check.boundaryEdges;
     }
+}
 
-    // Boundary loops: cycles of boundary halfedges. Each gets a cap, a fan to its centroid,
-    // wound against the adjacent faces (they use the edge b->a, the cap uses a->b).
-    {
-        std::vector<char> seen(mesh.n_halfedges(), 0);
-        for (const auto h : mesh.halfedges()) {
-            if (!h.is_boundary() || seen[std::size_t(h.idx())]) continue;
-            const TriMesh::FaceHandle f = mesh.face_handle(h.opp());
-            if (!f.is_valid()) {  // dangling edge, no face on either side
-                seen[std::size_t(h.idx())] = 1;
-                continue;
-            }
-            ComponentWork& w = work[std::size_t(faceComponent[std::size_t(f.idx())])];
-            std::vector<TriMesh::HalfedgeHandle> loop;
-            // The walk closes for any halfedge structure, but guard it against corrupted
-            // connectivity rather than loop forever.
-            for (TriMesh::HalfedgeHandle g = h; !seen[std::size_t(g.idx())] && loop.size() <= mesh.n_halfedges();
-                 g = mesh.next_halfedge_handle(g)) {
-                seen[std::size_t(g.idx())] = 1;
-                loop.push_back(g);
-            }
-            Vec3d centroid(0.0);
-            for (const auto g : loop) centroid += pointAt(mesh.from_vertex_handle(g));
-            centroid /= double(loop.size());
-            for (const auto g : loop)
-                w.caps.push_back({pointAt(mesh.from_vertex_handle(g)),
-                                  pointAt(mesh.to_vertex_handle(g)), centroid});
-            ++w.info.boundaryLoops;
+/// Boundary loops: cycles of boundary halfedges. Each gets a cap, a fan to its centroid,
+/// wound against the adjacent faces (they use the edge b->a, the cap uses a->b).
+template<typename PointAt>
+void capBoundaryLoops(const TriMesh& mesh, const PointAt& pointAt, const std::vector<int>& faceComponent,
+                      std::vector<ComponentWork>& work)
+{
+    std::vector<char> seen(mesh.n_halfedges(), 0);
+    for (const auto h : mesh.halfedges()) {
+        if (!h.is_boundary() || seen[std::size_t(h.idx())]) continue;
+        const TriMesh::FaceHandle f = mesh.face_handle(h.opp());
+        if (!f.is_valid()) {  // dangling edge, no face on either side
+            seen[std::size_t(h.idx())] = 1;
+            continue;
         }
+        ComponentWork& w = work[std::size_t(faceComponent[std::size_t(f.idx())])];
+        std::vector<TriMesh::HalfedgeHandle> loop;
+        // The walk closes for any halfedge structure, but guard it against corrupted
+        // connectivity rather than loop forever.
+        for (TriMesh::HalfedgeHandle g = h; !seen[std::size_t(g.idx())] && loop.size() <= mesh.n_halfedges();
+             g = mesh.next_halfedge_handle(g)) {
+            seen[std::size_t(g.idx())] = 1;
+            loop.push_back(g);
+        }
+        Vec3d centroid(0.0);
+        for (const auto g : loop) centroid += pointAt(mesh.from_vertex_handle(g));
+        centroid /= double(loop.size());
+        for (const auto g : loop)
+            w.caps.push_back({pointAt(mesh.from_vertex_handle(g)),
+                              pointAt(mesh.to_vertex_handle(g)), centroid});
+        ++w.info.boundaryLoops;
     }
+}
 
-    // Area, degenerate faces and capped volume per component.
-    for (std::size_t c = 0; c < work.size(); ++c) {
-        ComponentWork& w = work[c];
-        const std::vector<TriMesh::FaceHandle>& faces = componentFaces[c];
-        w.info.faces = int64_t(faces.size());
-        // A reference point near the component keeps float cancellation small.
-        const Vec3d ref = 0.5 * (w.box.lo + w.box.hi);
-        struct Sums {
-            double area = 0, volume6 = 0;
-            int64_t degenerate = 0;
-        };
-        const Sums s = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, faces.size(), 4096), Sums{},
-            [&](const tbb::blocked_range<std::size_t>& r, Sums acc) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                    Triangle t;
-                    int k = 0;
-                    for (const auto v : mesh.fv_range(faces[i])) t[std::size_t(k++)] = pointAt(v);
-                    acc.area += 0.5 * OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
-                    acc.volume6 += tripleProduct(t, ref);
-                    if (isDegenerate(t)) ++acc.degenerate;
-                }
-                return acc;
-            },
-            [](Sums a, const Sums& b) {
-                a.area += b.area;
-                a.volume6 += b.volume6;
-                a.degenerate += b.degenerate;
-                return a;
-            });
-        double volume6 = s.volume6;
-        for (const Triangle& t : w.caps) volume6 += tripleProduct(t, ref);
-        w.info.areaMm2 = s.area;
-        // The divergence theorem gives +V for outward normals; ours point inward.
-        w.info.enclosedVolumeMm3 = -volume6 / 6.0;
-        check.degenerateFaces += s.degenerate;
-        const int64_t chi = w.info.vertices - w.info.edges + w.info.faces;
-        w.info.genus = (2 - w.info.boundaryLoops - chi) / 2;
-    }
+/// Area, degenerate faces (added to check.degenerateFaces), capped volume and genus of one
+/// component with faces `faces`.
+template<typename PointAt>
+void measureComponent(const TriMesh& mesh, const PointAt& pointAt, const std::vector<TriMesh::FaceHandle>& faces,
+                      ComponentWork& w, MeshCheck& check)
+{
+    w.info.faces = int64_t(faces.size());
+    // A reference point near the component keeps float cancellation small.
+    const Vec3d ref = 0.5 * (w.box.lo + w.box.hi);
+    struct Sums {
+        double area = 0, volume6 = 0;
+        int64_t degenerate = 0;
+    };
+    const Sums s = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, faces.size(), 4096), Sums{},
+        [&](const tbb::blocked_range<std::size_t>& r, Sums acc) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                Triangle t;
+                int k = 0;
+                for (const auto v : mesh.fv_range(faces[i])) t[std::size_t(k++)] = pointAt(v);
+                acc.area += 0.5 * OpenMesh::cross(t[1] - t[0], t[2] - t[0]).norm();
+                acc.volume6 += tripleProduct(t, ref);
+                if (isDegenerate(t)) ++acc.degenerate;
+            }
+            return acc;
+        },
+        [](Sums a, const Sums& b) {
+            a.area += b.area;
+            a.volume6 += b.volume6;
+            a.degenerate += b.degenerate;
+            return a;
+        });
+    double volume6 = s.volume6;
+    for (const Triangle& t : w.caps) volume6 += tripleProduct(t, ref);
+    w.info.areaMm2 = s.area;
+    // The divergence theorem gives +V for outward normals; ours point inward.
+    w.info.enclosedVolumeMm3 = -volume6 / 6.0;
+    check.degenerateFaces += s.degenerate;
+    const int64_t chi = w.info.vertices - w.info.edges + w.info.faces;
+    w.info.genus = (2 - w.info.boundaryLoops - chi) / 2;
+}
 
-    // Nesting: component c lies inside d when one of its vertices has winding number +-1 with
-    // respect to d (capped). Only pairs whose bounding boxes nest are evaluated. A component
-    // that holds few others gets the solid-angle sum over its faces per probe; one that holds
-    // many (a part's outer surface around its voids) counts ray crossings instead
-    // (ray_winding.h: the same integer, O(faces) once plus a few faces per probe), and any
-    // probe whose rays are all too close to call gets the solid-angle sum.
-    for (std::size_t d = 0; nesting && d < work.size(); ++d) {
+/// Nesting: component c lies inside d when one of its vertices has winding number +-1 with
+/// respect to d (capped). Only pairs whose bounding boxes nest are evaluated. A component
+/// that holds few others gets the solid-angle sum over its faces per probe; one that holds
+/// many (a part's outer surface around its voids) counts ray crossings instead
+/// (ray_winding.h: the same integer, O(faces) once plus a few faces per probe), and any
+/// probe whose rays are all too close to call gets the solid-angle sum.
+void nestComponents(const TriMesh& mesh, const std::vector<std::vector<TriMesh::FaceHandle>>& componentFaces,
+                    std::vector<ComponentWork>& work)
+{
+    for (std::size_t d = 0; d < work.size(); ++d) {
         std::vector<std::size_t> inside;
         for (std::size_t c = 0; c < work.size(); ++c)
             if (c != d && work[d].box.contains(work[c].box)) inside.push_back(c);
@@ -342,7 +348,11 @@ MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
             if (std::fabs(wn) > 0.5) ++work[c].info.nestingDepth;
         }
     }
+}
 
+/// Adds the components to `check`'s totals and list, most faces first.
+void addComponents(const std::vector<ComponentWork>& work, MeshCheck& check)
+{
     std::vector<std::size_t> order(work.size());
     std::iota(order.begin(), order.end(), std::size_t(0));
     std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
@@ -359,6 +369,26 @@ MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
         if (!info.hasInwardVolumeSign()) ++check.misorientedComponents;
         check.componentList.push_back(info);
     }
+}
+
+/// checkMesh with the vertex positions `pointAt(v)` (a Vec3d) instead of the mesh's; without
+/// `nesting` every component's nestingDepth stays 0 (the area and volume do not depend on it).
+template<typename PointAt>
+MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
+{
+    MeshCheck check;
+    check.vertices = int64_t(mesh.n_vertices());
+    check.edges = int64_t(mesh.n_edges());
+    check.faces = int64_t(mesh.n_faces());
+
+    std::vector<int> faceComponent;
+    const std::vector<std::vector<TriMesh::FaceHandle>> componentFaces = faceComponents(mesh, faceComponent);
+    std::vector<ComponentWork> work(componentFaces.size());
+    countVerticesAndEdges(mesh, pointAt, faceComponent, work, check);
+    capBoundaryLoops(mesh, pointAt, faceComponent, work);
+    for (std::size_t c = 0; c < work.size(); ++c) measureComponent(mesh, pointAt, componentFaces[c], work[c], check);
+    if (nesting) nestComponents(mesh, componentFaces, work);
+    addComponents(work, check);
     return check;
 }
 
