@@ -316,9 +316,9 @@ private:
     std::vector<DicomFile> mFiles;  // in slice order
 };
 
-} // namespace
-
-std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const ImageReadOptions& options)
+/// The regular files under `dir` (recursively, sorted; no hidden files or folders, no DICOMDIR).
+/// @throw InputError when the folder cannot be listed or holds no file
+std::vector<std::string> listFolder(const std::string& dir)
 {
     std::vector<std::string> paths;
     std::error_code ec;
@@ -334,36 +334,51 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
     if (ec) throw InputError(dir + ": cannot list the folder: " + ec.message());
     std::sort(paths.begin(), paths.end());
     if (paths.empty()) throw InputError(dir + ": the folder is empty (expected a DICOM series)");
+    return paths;
+}
 
-    std::vector<DicomFile> files = scanDicomFiles(paths);
-
-    // Series by UID; files that are not DICOM images are ignored, DICOM ones that fail are
-    // reported when they matter.
+/// Series by UID (the indices of their files); files that are not DICOM images are ignored,
+/// DICOM ones that fail go to `broken`, to be reported when they matter.
+/// @throw InputError when there is no series
+std::map<std::string, std::vector<std::size_t>> groupSeries(const std::string& dir, const std::vector<DicomFile>& files,
+                                                            std::vector<std::size_t>& broken)
+{
     std::map<std::string, std::vector<std::size_t>> series;
-    std::vector<std::size_t> broken;
     for (std::size_t i = 0; i < files.size(); ++i) {
         if (files[i].readable) series[files[i].seriesUid].push_back(i);
         else if (hasDicmPreamble(files[i].path)) broken.push_back(i);
     }
-    auto brokenNote = [&]() -> std::string {
-        if (broken.empty()) return "";
-        const DicomFile& b = files[broken.front()];
-        return "; " + std::to_string(broken.size()) + " DICOM file(s) could not be read, e.g. " + b.path + ": " +
-               b.problem;
-    };
     if (series.empty()) {
         if (!broken.empty())
             throw InputError(files[broken.front()].path + ": unreadable DICOM file: " + files[broken.front()].problem);
         throw InputError(dir + ": no DICOM image found in the folder");
     }
+    return series;
+}
+
+/// The note on the DICOM files that could not be read ("" when none), for the messages.
+std::string brokenNote(const std::vector<DicomFile>& files, const std::vector<std::size_t>& broken)
+{
+    if (broken.empty()) return "";
+    const DicomFile& b = files[broken.front()];
+    return "; " + std::to_string(broken.size()) + " DICOM file(s) could not be read, e.g. " + b.path + ": " +
+           b.problem;
+}
+
+/// The UID of the series to read: options.dicomSeriesUid, or else the one with the most files
+/// (with a warning when there are several).
+/// @throw InputError when options.dicomSeriesUid is not in the folder
+std::string chooseSeries(const std::string& dir, const std::map<std::string, std::vector<std::size_t>>& series,
+                         const ImageReadOptions& options, std::vector<std::string>& warnings)
+{
     std::string chosen;
-    std::vector<std::string> warnings;
     std::string list;
     for (const auto& [uid, idx] : series)
         list += (list.empty() ? "" : ", ") + uidText(uid) + " (" + std::to_string(idx.size()) + " files)";
     if (!options.dicomSeriesUid.empty()) {
         if (!series.count(options.dicomSeriesUid))
-            throw InputError(dir + ": no DICOM series " + options.dicomSeriesUid + " in the folder (it holds: " + list + ")");
+            throw InputError(dir + ": no DICOM series " + options.dicomSeriesUid + " in the folder (it holds: " +
+                             list + ")");
         chosen = options.dicomSeriesUid;
     } else {
         std::size_t best = 0;
@@ -373,11 +388,15 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
             warnings.push_back(dir + " holds " + std::to_string(series.size()) + " series: " + list + "; reading " +
                                uidText(chosen) + ", the one with the most files (choose with --series UID)");
     }
-    std::vector<DicomFile> sl;
-    for (std::size_t i : series[chosen]) sl.push_back(files[i]);
+    return chosen;
+}
 
-    // One multi-frame file is a volume of its own.
-    if (sl.size() == 1 && sl.front().frames > 1) return openFile(sl.front().path, options);
+/// Checks that the slices of series `chosen` are complete single-frame scalar images placed in
+/// space, at least two, all of the first one's size, pixel spacing and orientation.
+/// @throw InputError otherwise (`note`: brokenNote)
+void checkSlices(const std::string& dir, const std::string& chosen, const std::vector<DicomFile>& sl,
+                 const std::string& note)
+{
     for (const auto& f : sl) {
         if (f.incomplete) throw InputError(f.path + ": pixel data is incomplete (the file is truncated)");
         if (f.frames > 1)
@@ -394,7 +413,7 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
     }
     if (sl.size() < 2)
         throw InputError(dir + ": DICOM series " + uidText(chosen) + " has a single slice (" + fileName(sl[0].path) +
-                         "); image is 2D, a 3D volume is needed" + brokenNote());
+                         "); image is 2D, a 3D volume is needed" + note);
 
     const DicomFile& ref = sl.front();
     for (const auto& f : sl) {
@@ -406,27 +425,44 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
             throw InputError(dir + ": series " + uidText(chosen) + " mixes slice sizes, pixel spacings or "
                              "orientations (" + fileName(ref.path) + " vs " + fileName(f.path) + ")");
     }
-    const Vec3d u = normalize(ref.rowDir), v = normalize(ref.colDir);
-    const Vec3d n = normalize(cross(u, v));
-    // Order by position along the slice normal: never by file name or Instance Number.
-    std::sort(sl.begin(), sl.end(),
-              [&](const DicomFile& a, const DicomFile& b) { return dot(a.positionMm, n) < dot(b.positionMm, n); });
-    const std::size_t count = sl.size();
-    std::vector<double> t(count), steps;
-    for (std::size_t k = 0; k < count; ++k) t[k] = dot(sl[k].positionMm - sl[0].positionMm, n);
-    auto where = [&](std::size_t k) {
-        return fileName(sl[k].path) + (sl[k].instance.empty() ? "" : " (#" + sl[k].instance + ")");
-    };
-    for (std::size_t k = 0; k + 1 < count; ++k) {
+}
+
+/// A slice's file name and Instance Number, for messages.
+std::string sliceName(const DicomFile& f)
+{
+    return fileName(f.path) + (f.instance.empty() ? "" : " (#" + f.instance + ")");
+}
+
+/// The steps between consecutive slices `sl` (in order along the normal, at positions `t` on it).
+/// @throw InputError when two slices are at the same position
+std::vector<double> sliceSteps(const std::string& dir, const std::vector<DicomFile>& sl, const std::vector<double>& t)
+{
+    std::vector<double> steps;
+    for (std::size_t k = 0; k + 1 < sl.size(); ++k) {
         const double d = t[k + 1] - t[k];
         if (!(d > 1e-3)) {
             std::ostringstream os;
-            os << dir << ": two slices at the same position along the slice normal: " << where(k) << " and "
-               << where(k + 1) << " (several acquisitions or time points in one series?)";
+            os << dir << ": two slices at the same position along the slice normal: " << sliceName(sl[k]) << " and "
+               << sliceName(sl[k + 1]) << " (several acquisitions or time points in one series?)";
             throw InputError(os.str());
         }
         steps.push_back(d);
     }
+    return steps;
+}
+
+/// The median slice step and how many steps differ from it.
+struct StepCheck {
+    double median = 0;
+    int uneven = 0;
+};
+
+/// Compares every step with the median: uneven steps (slices missing, uneven spacing) are
+/// refused, or with options.allowGaps a warning.
+/// @throw InputError on an uneven step without options.allowGaps (`note`: brokenNote)
+StepCheck checkSteps(const std::string& dir, const std::vector<DicomFile>& sl, const std::vector<double>& steps,
+                     const ImageReadOptions& options, const std::string& note, std::vector<std::string>& warnings)
+{
     std::vector<double> sorted = steps;
     std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
     const double median = sorted[sorted.size() / 2];
@@ -434,7 +470,7 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
     const double tolerance = std::max(0.02, 0.02 * median);
     int uneven = 0;
     std::ostringstream firstUneven;
-    for (std::size_t k = 0; k + 1 < count; ++k) {
+    for (std::size_t k = 0; k + 1 < sl.size(); ++k) {
         const double d = steps[k];
         if (std::fabs(d - median) <= tolerance) continue;
         if (uneven++ > 0) continue;
@@ -442,22 +478,30 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
         const long whole = std::lround(ratio);
         firstUneven.precision(4);
         if (whole >= 2 && std::fabs(d - double(whole) * median) <= tolerance)
-            firstUneven << (whole - 1) << " slice(s) missing between " << where(k) << " and " << where(k + 1)
-                        << " (" << d << " mm apart; the series steps " << median << " mm)";
+            firstUneven << (whole - 1) << " slice(s) missing between " << sliceName(sl[k]) << " and "
+                        << sliceName(sl[k + 1]) << " (" << d << " mm apart; the series steps " << median << " mm)";
         else
-            firstUneven << "uneven slice spacing: " << d << " mm between " << where(k) << " and " << where(k + 1)
-                        << ", " << median << " mm elsewhere";
+            firstUneven << "uneven slice spacing: " << d << " mm between " << sliceName(sl[k]) << " and "
+                        << sliceName(sl[k + 1]) << ", " << median << " mm elsewhere";
     }
     std::string unevenText = firstUneven.str();
     if (uneven > 1) unevenText += " (and " + std::to_string(uneven - 1) + " more uneven step(s))";
     if (uneven > 0 && !options.allowGaps)
         throw InputError(dir + ": " + unevenText + "; refusing to guess the geometry (--allow-gaps interpolates "
-                         "across gaps at the true slice positions)" + brokenNote());
+                         "across gaps at the true slice positions)" + note);
     if (uneven > 0)
         warnings.push_back(dir + ": " + unevenText + "; accepted (--allow-gaps): voxels between these slices are "
                            "interpolated linearly at the true slice positions");
+    return {median, uneven};
+}
 
-    // Gantry tilt: slice positions drift sideways of the slice normal.
+/// Gantry tilt: whether the slice positions drift sideways of the slice normal `n` (with a
+/// warning); `t`: their positions along it.
+bool checkTilt(const std::string& dir, const std::vector<DicomFile>& sl, const std::vector<double>& t, const Vec3d& n,
+               std::vector<std::string>& warnings)
+{
+    const DicomFile& ref = sl.front();
+    const std::size_t count = sl.size();
     double lateralMax = 0;
     for (std::size_t k = 0; k < count; ++k) {
         const Vec3d e = (sl[k].positionMm - sl[0].positionMm) - t[k] * n;
@@ -476,14 +520,48 @@ std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const Image
            << "): corrected by sampling every slice at its true position on a grid aligned with the slice planes";
         warnings.push_back(os.str());
     }
+    return tilted;
+}
+
+} // namespace
+
+std::unique_ptr<ImageSource> openDicomFolder(const std::string& dir, const ImageReadOptions& options)
+{
+    const std::vector<std::string> paths = listFolder(dir);
+    std::vector<DicomFile> files = scanDicomFiles(paths);
+
+    std::vector<std::size_t> broken;
+    std::map<std::string, std::vector<std::size_t>> series = groupSeries(dir, files, broken);
+    std::vector<std::string> warnings;
+    const std::string chosen = chooseSeries(dir, series, options, warnings);
+    std::vector<DicomFile> sl;
+    for (std::size_t i : series[chosen]) sl.push_back(files[i]);
+
+    // One multi-frame file is a volume of its own.
+    if (sl.size() == 1 && sl.front().frames > 1) return openFile(sl.front().path, options);
+    const std::string note = brokenNote(files, broken);
+    checkSlices(dir, chosen, sl, note);
+
+    const Vec3d u = normalize(sl.front().rowDir), v = normalize(sl.front().colDir);
+    const Vec3d n = normalize(cross(u, v));
+    // Order by position along the slice normal: never by file name or Instance Number.
+    std::sort(sl.begin(), sl.end(),
+              [&](const DicomFile& a, const DicomFile& b) { return dot(a.positionMm, n) < dot(b.positionMm, n); });
+    const DicomFile& ref = sl.front();
+    const std::size_t count = sl.size();
+    std::vector<double> t(count);
+    for (std::size_t k = 0; k < count; ++k) t[k] = dot(sl[k].positionMm - sl[0].positionMm, n);
+    const std::vector<double> steps = sliceSteps(dir, sl, t);
+    const StepCheck stepCheck = checkSteps(dir, sl, steps, options, note, warnings);
+    const bool tilted = checkTilt(dir, sl, t, n, warnings);
 
     ImageGeometry g;
     g.size = {ref.nx, ref.ny, static_cast<int64_t>(count)};
-    const bool regular = uneven == 0 && !tilted;
+    const bool regular = stepCheck.uneven == 0 && !tilted;
     // The mean step, rounded to 1 nm: positions are decimal strings, and the rounding keeps
     // a 1.5 mm series at exactly 1.5 (as NIfTI or NRRD would hold it), not 1.4999999999.
     const double meanStep = std::round(t[count - 1] / double(count - 1) * 1e6) / 1e6;
-    g.spacingMm = {ref.spacingI, ref.spacingJ, regular ? meanStep : median};
+    g.spacingMm = {ref.spacingI, ref.spacingJ, regular ? meanStep : stepCheck.median};
     g.originMm = sl[0].positionMm;
     for (int r = 0; r < 3; ++r) {
         g.direction[r][0] = u[r];
