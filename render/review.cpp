@@ -234,6 +234,148 @@ double gainOf(const std::vector<uint32_t>& shows, const std::vector<uint8_t>& se
     return g;
 }
 
+/// Why the regions are left when the review reached its target.
+std::string notNeededText(const ReviewParams& params)
+{
+    std::ostringstream s;
+    s << "not needed: fly-over plus review reached the target of " << params.targetFraction * 100.0
+      << "% of the wall";
+    return s.str();
+}
+
+/// The fly-over's own regions (same order as flyover.flyover.missed), to say which one each
+/// review view serves: per triangle, the index of its region, or -1.
+std::vector<long> flyoverLabels(const RayScene& scene, const Centerline& cl, const CoverageParams& cov,
+                                const CoverageResult& flyover)
+{
+    std::vector<long> flyoverLabel(scene.triangleCount(), -1);
+    MethodCoverage alone;
+    alone.seen = flyover.flyover.seen;
+    std::vector<std::vector<uint32_t>> tris;
+    summariseCoverage(alone, scene, cl, cov.minRegionMm2, &tris);
+    for (std::size_t k = 0; k < tris.size(); ++k)
+        for (const uint32_t f : tris[k]) flyoverLabel[f] = long(k);
+    return flyoverLabel;
+}
+
+/// Scratch of the task marking one candidate's rays.
+struct Worker {
+    ViewMarker marker;
+    std::vector<uint32_t> shown;
+    uint64_t rays = 0;
+};
+
+/// Each candidate's rays, marked as the coverage marks the fly-over's: its `shows` receive the
+/// triangles it shows that are not `seen` yet. Reports progress within review round `round`.
+void markCandidates(std::vector<Candidate>& cands, ObjectPool<Worker>& workers, const std::vector<uint8_t>& seen,
+                    const Centerline& cl, const CoverageParams& cov, const ReviewParams& params, int round,
+                    Progress* progress)
+{
+    std::atomic<std::size_t> done{0};
+    tbb::parallel_for(std::size_t(0), cands.size(), [&](std::size_t k) {
+        const auto lease = workers.take();
+        Worker& w = *lease;
+        w.shown.clear();
+        const LoopWindow loop = cov.loopAt(cands[k].view.centerlineIndex, cl.stepMm);
+        for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown, loop);
+        std::vector<uint32_t>& s = cands[k].shows;
+        for (const uint32_t f : w.shown)
+            if (!seen[f]) s.push_back(f);
+        std::sort(s.begin(), s.end());
+        s.erase(std::unique(s.begin(), s.end()), s.end());
+        const std::size_t n = ++done;
+        if (n % 64 == 0)
+            reportProgress(progress, std::min(0.95, (double(round - 1) + double(n) / double(cands.size())) /
+                                                        double(params.maxRounds)),
+                           "review candidates");
+    });
+}
+
+/// Greedy with lazy gains (a view's gain only shrinks as others are picked): picks candidates
+/// into `views` while one gains at least params.minGainMm2, the target (`total` area times
+/// params.targetFraction) is not reached and the budget is not spent; updates `seen` and
+/// `seenArea`. Returns the number picked.
+std::size_t pickViews(const std::vector<Candidate>& cands, const TriangleGeometry& geo,
+                      const std::vector<long>& flyoverLabel, const ReviewParams& params, double total,
+                      std::vector<uint8_t>& seen, double& seenArea, std::vector<ReviewView>& views)
+{
+    using Entry = std::pair<double, std::size_t>;
+    std::priority_queue<Entry> queue;
+    for (std::size_t k = 0; k < cands.size(); ++k) {
+        const double g = gainOf(cands[k].shows, seen, geo.areaMm2);
+        if (g >= params.minGainMm2) queue.push({g, k});
+    }
+    std::size_t picked = 0;
+    while (!queue.empty() && seenArea < params.targetFraction * total && int(views.size()) < params.maxViews) {
+        const std::size_t k = queue.top().second;
+        queue.pop();
+        const double g = gainOf(cands[k].shows, seen, geo.areaMm2);
+        if (g < params.minGainMm2) continue;
+        if (!queue.empty() && g < queue.top().first) {
+            queue.push({g, k});
+            continue;
+        }
+        std::unordered_map<long, double> perRegion;
+        for (const uint32_t f : cands[k].shows)
+            if (!seen[f]) {
+                seen[f] = 1;
+                if (flyoverLabel[f] >= 0) perRegion[flyoverLabel[f]] += geo.areaMm2[f];
+            }
+        seenArea += g;
+        ReviewView v = cands[k].view;
+        v.addedAreaMm2 = g;
+        double best = 0;
+        for (const auto& [label, a] : perRegion)
+            if (a > best || (a == best && label < v.flyoverRegion)) best = a, v.flyoverRegion = label;
+        views.push_back(std::move(v));
+        ++picked;
+    }
+    return picked;
+}
+
+/// What the last review round left, for the reasons of the regions still missed.
+struct LastRound {
+    std::vector<Candidate> candidates;
+    std::vector<uint8_t> targets;  ///< per triangle: in a region the last round planned for
+    std::size_t picked = 0;
+};
+
+/// One UnreachedRegion per region of result.withReview.missed (triangles `finalTris`): the
+/// most of it a candidate of the last round showed, and why it is still missed.
+void explainUnreached(const RayScene& scene, const Centerline& cl, const TriangleGeometry& geo,
+                      const ReviewParams& params, const std::vector<std::vector<uint32_t>>& finalTris,
+                      const LastRound& last, const std::string& stopReason, std::vector<uint8_t>& inRegion,
+                      ReviewResult& result)
+{
+    for (std::size_t r = 0; r < result.withReview.missed.size(); ++r) {
+        UnreachedRegion u;
+        u.region = result.withReview.missed[r];
+        for (const uint32_t f : finalTris[r]) inRegion[f] = 1;
+        for (const Candidate& c : last.candidates) {
+            double a = 0;
+            for (const uint32_t f : c.shows)
+                if (inRegion[f]) a += geo.areaMm2[f];
+            u.bestCandidateAreaMm2 = std::max(u.bestCandidateAreaMm2, a);
+        }
+        for (const uint32_t f : finalTris[r]) inRegion[f] = 0;
+        std::string why = stopReason;
+        if (why.empty() && result.targetReached) {
+            why = notNeededText(params);
+        } else if (why.empty() && u.region.areaMm2 < params.minRegionMm2) {
+            why = "smaller than the review's minimum region of " + std::to_string(params.minRegionMm2) + " mm^2";
+        } else if (why.empty() && last.candidates.empty()) {
+            why = "no review round was run";
+        } else if (why.empty() && !last.targets[finalTris[r].front()]) {
+            why = "not planned: each round plans views for the " + std::to_string(params.maxRegionsPerRound) +
+                  " largest regions only";
+        } else if (why.empty() && last.picked > 0 && u.bestCandidateAreaMm2 >= params.minGainMm2) {
+            why = "the review stopped after its " + std::to_string(params.maxRounds) + " rounds";
+        }
+        u.reason = reasonFor(scene, cl, u.region, finalTris[r], inRegion, u.bestCandidateAreaMm2, params, why);
+        result.unreached.push_back(std::move(u));
+    }
+}
+
 } // namespace
 
 double centredRollDeg(const CenterlinePoint& point, const Vec3d& directionMm)
@@ -270,45 +412,23 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
     double seenArea = 0;
     for (std::size_t f = 0; f < nf; ++f)
         if (seen[f]) seenArea += geo.areaMm2[f];
-    auto notNeeded = [&] {
-        std::ostringstream s;
-        s << "not needed: fly-over plus review reached the target of " << params.targetFraction * 100.0
-          << "% of the wall";
-        return s.str();
-    };
     if (seenArea >= params.targetFraction * total) {
         // The fly-over alone meets the target: its own regions are the answer (no mesh walks).
         result.withReview = flyover.flyover;
         result.targetReached = true;
-        for (const MissedRegion& r : result.withReview.missed) result.unreached.push_back({r, notNeeded(), 0.0});
+        for (const MissedRegion& r : result.withReview.missed)
+            result.unreached.push_back({r, notNeededText(params), 0.0});
         reportProgress(progress, 1.0, "review");
         return result;
     }
 
-    // The fly-over's own regions (same order as flyover.flyover.missed), to say which one each
-    // review view serves.
-    std::vector<long> flyoverLabel(nf, -1);
-    {
-        MethodCoverage alone;
-        alone.seen = flyover.flyover.seen;
-        std::vector<std::vector<uint32_t>> tris;
-        summariseCoverage(alone, scene, cl, cov.minRegionMm2, &tris);
-        for (std::size_t k = 0; k < tris.size(); ++k)
-            for (const uint32_t f : tris[k]) flyoverLabel[f] = long(k);
-    }
+    const std::vector<long> flyoverLabel = flyoverLabels(scene, cl, cov, flyover);
 
     const ViewMarker prototype(scene, cov.viewPx, cov.footprint);
-    struct Worker {
-        ViewMarker marker;
-        std::vector<uint32_t> shown;
-        uint64_t rays = 0;
-    };
     // One worker per candidate at a time (see ObjectPool: nested ray tiles).
     ObjectPool<Worker> workers([&] { return Worker{prototype, {}, 0}; });
     std::vector<uint8_t> inRegion(nf, 0);
-    std::vector<Candidate> last;        // the last round's candidates, for the reasons
-    std::vector<uint8_t> lastTargets;   // per triangle: in a region the last round planned for
-    std::size_t lastPicked = 0;
+    LastRound last;  // the last round's candidates, targets and picks, for the reasons
     std::string stopReason;
     int roundsRun = 0;
     for (int round = 1; round <= params.maxRounds; ++round) {
@@ -327,65 +447,15 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
                                    round);
             for (auto& x : c) cands.push_back(std::move(x));
         }
-        // Each candidate's rays, marked as the coverage marks the fly-over's.
-        std::atomic<std::size_t> done{0};
-        tbb::parallel_for(std::size_t(0), cands.size(), [&](std::size_t k) {
-            const auto lease = workers.take();
-            Worker& w = *lease;
-            w.shown.clear();
-            const LoopWindow loop = cov.loopAt(cands[k].view.centerlineIndex, cl.stepMm);
-            for (const Camera& cam : cands[k].view.cameras) w.rays += w.marker.mark(cam, cov.ost, w.shown, loop);
-            std::vector<uint32_t>& s = cands[k].shows;
-            for (const uint32_t f : w.shown)
-                if (!seen[f]) s.push_back(f);
-            std::sort(s.begin(), s.end());
-            s.erase(std::unique(s.begin(), s.end()), s.end());
-            const std::size_t n = ++done;
-            if (n % 64 == 0)
-                reportProgress(progress, std::min(0.95, (double(round - 1) + double(n) / double(cands.size())) /
-                                                            double(params.maxRounds)),
-                               "review candidates");
-        });
+        markCandidates(cands, workers, seen, cl, cov, params, round, progress);
         result.candidatesEvaluated += cands.size();
-        lastTargets.assign(nf, 0);
+        last.targets.assign(nf, 0);
         for (std::size_t r = 0; r < nRegions; ++r)
-            for (const uint32_t f : regionTris[r]) lastTargets[f] = 1;
+            for (const uint32_t f : regionTris[r]) last.targets[f] = 1;
 
-        // Greedy with lazy gains (a view's gain only shrinks as others are picked).
-        using Entry = std::pair<double, std::size_t>;
-        std::priority_queue<Entry> queue;
-        for (std::size_t k = 0; k < cands.size(); ++k) {
-            const double g = gainOf(cands[k].shows, seen, geo.areaMm2);
-            if (g >= params.minGainMm2) queue.push({g, k});
-        }
-        std::size_t picked = 0;
-        while (!queue.empty() && seenArea < params.targetFraction * total &&
-               int(result.views.size()) < params.maxViews) {
-            const std::size_t k = queue.top().second;
-            queue.pop();
-            const double g = gainOf(cands[k].shows, seen, geo.areaMm2);
-            if (g < params.minGainMm2) continue;
-            if (!queue.empty() && g < queue.top().first) {
-                queue.push({g, k});
-                continue;
-            }
-            std::unordered_map<long, double> perRegion;
-            for (const uint32_t f : cands[k].shows)
-                if (!seen[f]) {
-                    seen[f] = 1;
-                    if (flyoverLabel[f] >= 0) perRegion[flyoverLabel[f]] += geo.areaMm2[f];
-                }
-            seenArea += g;
-            ReviewView v = cands[k].view;
-            v.addedAreaMm2 = g;
-            double best = 0;
-            for (const auto& [label, a] : perRegion)
-                if (a > best || (a == best && label < v.flyoverRegion)) best = a, v.flyoverRegion = label;
-            result.views.push_back(std::move(v));
-            ++picked;
-        }
-        last = std::move(cands);
-        lastPicked = picked;
+        const std::size_t picked = pickViews(cands, geo, flyoverLabel, params, total, seen, seenArea, result.views);
+        last.candidates = std::move(cands);
+        last.picked = picked;
         if (picked == 0) break;
     }
     if (int(result.views.size()) >= params.maxViews && seenArea < params.targetFraction * total)
@@ -397,33 +467,7 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
     summariseCoverage(result.withReview, scene, cl, cov.minRegionMm2, &finalTris);
     result.targetReached = result.withReview.fraction >= params.targetFraction;
     result.rounds = roundsRun;
-    for (std::size_t r = 0; r < result.withReview.missed.size(); ++r) {
-        UnreachedRegion u;
-        u.region = result.withReview.missed[r];
-        for (const uint32_t f : finalTris[r]) inRegion[f] = 1;
-        for (const Candidate& c : last) {
-            double a = 0;
-            for (const uint32_t f : c.shows)
-                if (inRegion[f]) a += geo.areaMm2[f];
-            u.bestCandidateAreaMm2 = std::max(u.bestCandidateAreaMm2, a);
-        }
-        for (const uint32_t f : finalTris[r]) inRegion[f] = 0;
-        std::string why = stopReason;
-        if (why.empty() && result.targetReached) {
-            why = notNeeded();
-        } else if (why.empty() && u.region.areaMm2 < params.minRegionMm2) {
-            why = "smaller than the review's minimum region of " + std::to_string(params.minRegionMm2) + " mm^2";
-        } else if (why.empty() && last.empty()) {
-            why = "no review round was run";
-        } else if (why.empty() && !lastTargets[finalTris[r].front()]) {
-            why = "not planned: each round plans views for the " + std::to_string(params.maxRegionsPerRound) +
-                  " largest regions only";
-        } else if (why.empty() && lastPicked > 0 && u.bestCandidateAreaMm2 >= params.minGainMm2) {
-            why = "the review stopped after its " + std::to_string(params.maxRounds) + " rounds";
-        }
-        u.reason = reasonFor(scene, cl, u.region, finalTris[r], inRegion, u.bestCandidateAreaMm2, params, why);
-        result.unreached.push_back(std::move(u));
-    }
+    explainUnreached(scene, cl, geo, params, finalTris, last, stopReason, inRegion, result);
     reportProgress(progress, 1.0, "review");
     return result;
 }
