@@ -449,6 +449,123 @@ RectalTube cutMaskRectalTube(FloatTree& indicator, const ImageGeometry& g, const
     return tube;
 }
 
+/// The number of label voxels (mask index space, lattice `g`) beyond the reference CT's active
+/// box, on the output lattice `xf`.
+/// @throw InputError when no label voxel lies within it (the mask does not overlap the CT)
+int64_t voxelsOutsideReference(const BoolTree& label, const ImageGeometry& g, const openvdb::math::Transform& xf,
+                               const FloatGrid& reference, const std::string& name)
+{
+    const openvdb::CoordBBox box = reference.evalActiveVoxelBoundingBox();
+    openvdb::Index64 outside = 0;
+    for (auto it = label.cbeginValueOn(); it; ++it) {
+        const Coord m = it.getCoord();
+        const Vec3d w = g.worldFromIndex({double(m.x()), double(m.y()), double(m.z())});
+        const openvdb::Vec3d ijk = xf.worldToIndex(toVdb(w));
+        bool in = true;
+        for (int c = 0; c < 3; ++c) in = in && ijk[c] >= box.min()[c] - 0.5 && ijk[c] <= box.max()[c] + 0.5;
+        outside += in ? 0 : 1;
+    }
+    if (outside == label.activeVoxelCount()) {
+        const openvdb::Vec3d lo = xf.indexToWorld(box.min()), hi = xf.indexToWorld(box.max());
+        std::ostringstream msg;
+        msg << std::fixed << std::setprecision(1) << name
+            << ": the mask does not overlap the CT (no label voxel lies within the CT's box, "
+            << "LPS mm from (" << std::min(lo[0], hi[0]) << ", " << std::min(lo[1], hi[1]) << ", "
+            << std::min(lo[2], hi[2]) << ") to (" << std::max(lo[0], hi[0]) << ", "
+            << std::max(lo[1], hi[1]) << ", " << std::max(lo[2], hi[2])
+            << ")); are they from the same scan?";
+        throw InputError(msg.str());
+    }
+    return static_cast<int64_t>(outside);
+}
+
+/// f0 = 0.5 - indicator on the indicator's active voxels dilated by `shellVoxels`
+/// (background 0.5).
+FloatTree::Ptr initialField(const FloatTree& indicator, int shellVoxels)
+{
+    BoolTree region(indicator, false, true, openvdb::TopologyCopy());
+    detail::dilateVoxels(region, shellVoxels, Neighbours::All);
+    auto f = std::make_shared<FloatTree>(region, 0.5f, openvdb::TopologyCopy());
+    openvdb::tree::LeafManager<FloatTree> leaves(*f);
+    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+        FloatConstAccessor indAcc(indicator);
+        const FloatLeaf* indLeaf = indicator.probeConstLeaf(leaf.origin());
+        for (auto it = leaf.beginValueOn(); it; ++it)
+            it.setValue(0.5f - (indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord())));
+    });
+    return f;
+}
+
+/// Deactivates the voxels of `f` deeper inside than reachMm + 3 voxels (of h mm), their values
+/// kept; returns them.
+BoolTree::Ptr leaveOutDeepVoxels(FloatTree& f, float reachMm, double h)
+{
+    auto deep = std::make_shared<BoolTree>(f, false, openvdb::TopologyCopy());
+    openvdb::tree::LeafManager<BoolTree> leaves(*deep);
+    leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
+        const FloatLeaf* src = f.probeConstLeaf(leaf.origin());
+        if (!src) return;
+        for (auto it = src->cbeginValueOn(); it; ++it)
+            if (!(*it < 0.0f)) leaf.setValueOff(it.pos(), false);
+    });
+    detail::erodeVoxels(*deep, int(std::ceil(reachMm / h)) + 3, Neighbours::All);
+    openvdb::tree::LeafManager<const BoolTree> deepLeaves(*deep);
+    deepLeaves.foreach([&](const BoolLeaf& leaf, std::size_t) {
+        FloatLeaf* target = f.probeLeaf(leaf.origin());
+        if (!target) return;
+        for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOff(it.pos());
+    });
+    return deep;
+}
+
+/// Constrained smoothing of the distance `phi` within reachMm of the surface, then the final
+/// sweep over the whole region of `fGrid` (the field phi was swept from, less the `deep`
+/// voxels); returns its distance.
+FloatGrid::Ptr smoothAndRedistance(FloatTree& phi, FloatGrid& fGrid, const BoolTree& deep, const FloatTree& indicator,
+                                   int iterations, float reachMm, float marginMm, Progress* progress)
+{
+    FloatTree& f = fGrid.tree();
+    BoolTree work(phi, false, true, openvdb::TopologyCopy());
+    {
+        openvdb::tree::LeafManager<BoolTree> leaves(work);
+        leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
+            const FloatLeaf* src = phi.probeConstLeaf(leaf.origin());
+            for (auto it = src->cbeginValueOn(); it; ++it)
+                if (!(std::abs(*it) < reachMm)) leaf.setValueOff(it.pos(), false);
+        });
+    }
+    reportProgress(progress, 0.5, "constrained smoothing");
+    constrainedSmoothing(phi, work, indicator, iterations, marginMm);
+    // The final sweep over the whole region: the band's values (the smoothed surface),
+    // the deep voxels back in with their sign.
+    openvdb::tree::LeafManager<const FloatTree> bandLeaves(phi);
+    bandLeaves.foreach([&](const FloatLeaf& leaf, std::size_t) {
+        FloatLeaf* target = f.probeLeaf(leaf.origin());
+        if (!target) return;
+        for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOnly(it.pos(), *it);
+    });
+    f.topologyUnion(deep);
+    reportProgress(progress, 0.6, "mask level set: whole lumen distance");
+    return detail::redistance(fGrid);
+}
+
+/// Shifts `phi` by the constant offset (bisection, within one voxel of h mm) at which its
+/// sub-voxel volume is targetVoxels, the constraints applied after it.
+void restoreVolume(FloatTree& phi, const FloatTree& indicator, double targetVoxels, double h, float marginMm)
+{
+    VolumeOfOffset volume(phi, indicator, h, h, marginMm);
+    const float volumeOffsetMm = static_cast<float>(volume.solve(targetVoxels, -h, h, 40));
+    openvdb::tree::LeafManager<FloatTree> leaves(phi);
+    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+        FloatConstAccessor indAcc(indicator);
+        const FloatLeaf* indLeaf = indicator.probeConstLeaf(leaf.origin());
+        for (auto it = leaf.beginValueOn(); it; ++it)
+            it.setValue(constrained(*it - volumeOffsetMm,
+                                    indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord()),
+                                    marginMm));
+    });
+}
+
 } // namespace
 
 LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params,
@@ -473,31 +590,8 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     const openvdb::math::Transform::Ptr xf = outputTransform(g, reference);
     const double h = xf->voxelSize()[0];
     const double voxelMl = std::abs(xf->voxelVolume()) / 1000.0;
-    if (reference) {
-        // The mask must overlap the CT; label voxels beyond the CT's active box are counted.
-        const openvdb::CoordBBox box = reference->evalActiveVoxelBoundingBox();
-        openvdb::Index64 outside = 0;
-        for (auto it = label->cbeginValueOn(); it; ++it) {
-            const Coord m = it.getCoord();
-            const Vec3d w = g.worldFromIndex({double(m.x()), double(m.y()), double(m.z())});
-            const openvdb::Vec3d ijk = xf->worldToIndex(toVdb(w));
-            bool in = true;
-            for (int c = 0; c < 3; ++c) in = in && ijk[c] >= box.min()[c] - 0.5 && ijk[c] <= box.max()[c] + 0.5;
-            outside += in ? 0 : 1;
-        }
-        summary.voxelsOutsideReference = static_cast<int64_t>(outside);
-        if (outside == label->activeVoxelCount()) {
-            const openvdb::Vec3d lo = xf->indexToWorld(box.min()), hi = xf->indexToWorld(box.max());
-            std::ostringstream msg;
-            msg << std::fixed << std::setprecision(1) << mask.name()
-                << ": the mask does not overlap the CT (no label voxel lies within the CT's box, "
-                << "LPS mm from (" << std::min(lo[0], hi[0]) << ", " << std::min(lo[1], hi[1]) << ", "
-                << std::min(lo[2], hi[2]) << ") to (" << std::max(lo[0], hi[0]) << ", "
-                << std::max(lo[1], hi[1]) << ", " << std::max(lo[2], hi[2])
-                << ")); are they from the same scan?";
-            throw InputError(msg.str());
-        }
-    }
+    // The mask must overlap the CT; label voxels beyond the CT's active box are counted.
+    if (reference) summary.voxelsOutsideReference = voxelsOutsideReference(*label, g, *xf, *reference, mask.name());
     const std::optional<Coord> offset = latticeOffset(g, *xf);
     summary.resampled = !offset;
     reportProgress(progress, 0.25, "mask on the output grid");
@@ -519,18 +613,7 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     const double sigmaMm = params.maskSmoothingVoxels * maxSpacing;
     const int iterations = int(std::ceil(3.0 * sigmaMm * sigmaMm / (h * h)));
     const int shellVoxels = params.bandVoxels + 3;
-    BoolTree region(*indicator, false, true, openvdb::TopologyCopy());
-    detail::dilateVoxels(region, shellVoxels, Neighbours::All);
-    auto f = std::make_shared<FloatTree>(region, 0.5f, openvdb::TopologyCopy());
-    {
-        openvdb::tree::LeafManager<FloatTree> leaves(*f);
-        leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-            FloatConstAccessor indAcc(*indicator);
-            const FloatLeaf* indLeaf = indicator->probeConstLeaf(leaf.origin());
-            for (auto it = leaf.beginValueOn(); it; ++it)
-                it.setValue(0.5f - (indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord())));
-        });
-    }
+    FloatTree::Ptr f = initialField(*indicator, shellVoxels);
     FloatGrid::Ptr fGrid = FloatGrid::create(f);
     fGrid->setTransform(xf->copy());
     reportProgress(progress, 0.35, "mask level set");
@@ -543,51 +626,13 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     // the surface, so the distances within the band are those of a sweep over the whole
     // region; the final sweep below covers the whole region again.
     auto deep = std::make_shared<BoolTree>(false);
-    if (iterations > 0) {
-        deep = std::make_shared<BoolTree>(*f, false, openvdb::TopologyCopy());
-        openvdb::tree::LeafManager<BoolTree> leaves(*deep);
-        leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
-            const FloatLeaf* src = f->probeConstLeaf(leaf.origin());
-            if (!src) return;
-            for (auto it = src->cbeginValueOn(); it; ++it)
-                if (!(*it < 0.0f)) leaf.setValueOff(it.pos(), false);
-        });
-        detail::erodeVoxels(*deep, int(std::ceil(reachMm / h)) + 3, Neighbours::All);
-        openvdb::tree::LeafManager<const BoolTree> deepLeaves(*deep);
-        deepLeaves.foreach([&](const BoolLeaf& leaf, std::size_t) {
-            FloatLeaf* target = f->probeLeaf(leaf.origin());
-            if (!target) return;
-            for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOff(it.pos());
-        });
-    }
+    if (iterations > 0) deep = leaveOutDeepVoxels(*f, reachMm, h);
     reportProgress(progress, 0.4, "mask level set: distance near the surface");
     FloatGrid::Ptr phi = detail::redistance(*fGrid);
 
     const float marginMm = static_cast<float>(CONSTRAINT_MARGIN_VOXELS * h);
-    if (iterations > 0) {
-        BoolTree work(phi->tree(), false, true, openvdb::TopologyCopy());
-        {
-            openvdb::tree::LeafManager<BoolTree> leaves(work);
-            leaves.foreach([&](BoolLeaf& leaf, std::size_t) {
-                const FloatLeaf* src = phi->tree().probeConstLeaf(leaf.origin());
-                for (auto it = src->cbeginValueOn(); it; ++it)
-                    if (!(std::abs(*it) < reachMm)) leaf.setValueOff(it.pos(), false);
-            });
-        }
-        reportProgress(progress, 0.5, "constrained smoothing");
-        constrainedSmoothing(phi->tree(), work, *indicator, iterations, marginMm);
-        // The final sweep over the whole region: the band's values (the smoothed surface),
-        // the deep voxels back in with their sign.
-        openvdb::tree::LeafManager<const FloatTree> bandLeaves(phi->tree());
-        bandLeaves.foreach([&](const FloatLeaf& leaf, std::size_t) {
-            FloatLeaf* target = f->probeLeaf(leaf.origin());
-            if (!target) return;
-            for (auto it = leaf.cbeginValueOn(); it; ++it) target->setValueOnly(it.pos(), *it);
-        });
-        f->topologyUnion(*deep);
-        reportProgress(progress, 0.6, "mask level set: whole lumen distance");
-        phi = detail::redistance(*fGrid);
-    }
+    if (iterations > 0)
+        phi = smoothAndRedistance(phi->tree(), *fGrid, *deep, *indicator, iterations, reachMm, marginMm, progress);
     fGrid.reset();
     f.reset();
     reportProgress(progress, 0.75, "restore the mask's volume");
@@ -596,19 +641,7 @@ LumenSegmentation segmentFromMask(ImageSource& mask, const SegmentParams& params
     // the level set equals the mask's voxel-count volume (no shrinking, no growing), with the
     // constraints applied after it, so that no mask centre changes side.
     const double targetVoxels = maskVolumeMl / voxelMl;
-    VolumeOfOffset volume(phi->tree(), *indicator, h, h, marginMm);
-    const float volumeOffsetMm = static_cast<float>(volume.solve(targetVoxels, -h, h, 40));
-    {
-        openvdb::tree::LeafManager<FloatTree> leaves(phi->tree());
-        leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-            FloatConstAccessor indAcc(*indicator);
-            const FloatLeaf* indLeaf = indicator->probeConstLeaf(leaf.origin());
-            for (auto it = leaf.beginValueOn(); it; ++it)
-                it.setValue(constrained(*it - volumeOffsetMm,
-                                        indLeaf ? indLeaf->getValue(it.pos()) : indAcc.getValue(it.getCoord()),
-                                        marginMm));
-        });
-    }
+    restoreVolume(phi->tree(), *indicator, targetVoxels, h, marginMm);
     indicator.reset();
     phi->setTransform(xf->copy());
     reportProgress(progress, 0.9, "trim band and build mask");
