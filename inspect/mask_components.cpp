@@ -23,6 +23,16 @@ using openvdb::Index64;
 
 namespace {
 
+using Leaf = BoolTree::LeafNodeType;
+constexpr int D = static_cast<int>(Leaf::DIM);
+constexpr int N = static_cast<int>(Leaf::SIZE);
+constexpr uint16_t NONE = 0xFFFF;
+static_assert(D == 8 && N == 512, "offsets below assume 8^3 leaves (offset = x*64 + y*8 + z)");
+/// Voxels along an edge of a tile at depth 0, 1, 2 (a root child, an internal node, a leaf).
+const std::array<int, 3> TILE_DIM = {static_cast<int>(BoolTree::RootNodeType::ChildNodeType::DIM),
+                                     static_cast<int>(BoolTree::RootNodeType::ChildNodeType::ChildNodeType::DIM), D};
+using Edge = std::pair<uint32_t, uint32_t>;  // two units joined across a face
+
 std::string num(double v)
 {
     std::ostringstream o;
@@ -31,209 +41,256 @@ std::string num(double v)
     return o.str();
 }
 
-} // namespace
-
-MaskComponents faceConnectedComponents(const BoolTree& mask, const CoordBBox& box)
+/// Whether b reaches a face of box.
+bool onBorder(const CoordBBox& b, const CoordBBox& box)
 {
-    using Leaf = BoolTree::LeafNodeType;
-    constexpr int D = static_cast<int>(Leaf::DIM);
-    constexpr int N = static_cast<int>(Leaf::SIZE);
-    constexpr uint16_t NONE = 0xFFFF;
-    static_assert(D == 8 && N == 512, "offsets below assume 8^3 leaves (offset = x*64 + y*8 + z)");
+    for (int a = 0; a < 3; ++a)
+        if (b.min()[a] <= box.min()[a] || b.max()[a] >= box.max()[a]) return true;
+    return false;
+}
 
-    // Units: the components within each leaf, then the active tiles (each connected whole).
-    std::vector<const Leaf*> leaves;
-    mask.getNodes(leaves);
-    std::sort(leaves.begin(), leaves.end(), [](const Leaf* a, const Leaf* b) { return a->origin() < b->origin(); });
-    std::vector<Coord> leafOrigins(leaves.size());
-    for (std::size_t i = 0; i < leaves.size(); ++i) leafOrigins[i] = leaves[i]->origin();
-    std::vector<CoordBBox> tiles;
+/// The components within one leaf: units base .. base + count - 1.
+struct LeafUnits {
+    uint32_t base = 0;
+    uint16_t count = 0;
+    std::unique_ptr<uint16_t[]> local;  // per offset: local unit, NONE if inactive (only when count > 1)
+    std::vector<uint8_t> touches;       // per local unit
+};
+
+/// The units of a mask: the components within each leaf, then the active tiles (each connected
+/// whole), numbered leaf by leaf (by origin), then tile by tile (by min corner).
+struct MaskUnits {
+    std::vector<const Leaf*> leaves;  // by origin
+    std::vector<Coord> leafOrigins;
+    std::vector<CoordBBox> tiles;     // by min corner
+    std::vector<LeafUnits> units;     // per leaf
+    uint32_t tileBase = 0, nUnits = 0;
+
+    /// The unit of voxel `off` of leaf `leaf`, uint32 max if inactive.
+    uint32_t unitOf(std::size_t leaf, int off) const
     {
-        auto it = mask.cbeginValueOn();
-        it.setMaxDepth(BoolTree::ValueOnCIter::LEAF_DEPTH - 1);
-        for (; it; ++it) {
-            CoordBBox tb;
-            it.getBoundingBox(tb);
-            tiles.push_back(tb);
-        }
-        std::sort(tiles.begin(), tiles.end(), [](const CoordBBox& a, const CoordBBox& b) { return a.min() < b.min(); });
-    }
-    auto onBorder = [&box](const CoordBBox& b) {
-        for (int a = 0; a < 3; ++a)
-            if (b.min()[a] <= box.min()[a] || b.max()[a] >= box.max()[a]) return true;
-        return false;
-    };
-
-    struct LeafUnits {
-        uint32_t base = 0;
-        uint16_t count = 0;
-        std::unique_ptr<uint16_t[]> local;  // per offset: local unit, NONE if inactive (only when count > 1)
-        std::vector<uint8_t> touches;       // per local unit
-    };
-    std::vector<LeafUnits> units(leaves.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const tbb::blocked_range<std::size_t>& r) {
-        std::array<uint16_t, N> parent;
-        std::array<uint16_t, N> label;
-        for (std::size_t n = r.begin(); n < r.end(); ++n) {
-            const Leaf& leaf = *leaves[n];
-            const auto& on = leaf.getValueMask();
-            auto find = [&parent](uint16_t i) {
-                while (parent[i] != i) { parent[i] = parent[parent[i]]; i = parent[i]; }
-                return i;
-            };
-            auto unite = [&](uint16_t a, uint16_t b) {
-                a = find(a); b = find(b);
-                if (a < b) parent[b] = a; else if (b < a) parent[a] = b;
-            };
-            for (int off = 0; off < N; ++off) {
-                parent[off] = static_cast<uint16_t>(off);
-                if (!on.isOn(off)) continue;
-                if ((off & 7) && on.isOn(off - 1)) unite(off, off - 1);
-                if ((off & 56) && on.isOn(off - 8)) unite(off, off - 8);
-                if ((off & 448) && on.isOn(off - 64)) unite(off, off - 64);
-            }
-            LeafUnits& u = units[n];
-            uint16_t count = 0;
-            label.fill(NONE);
-            for (int off = 0; off < N; ++off) {
-                if (!on.isOn(off)) continue;
-                const uint16_t root = find(static_cast<uint16_t>(off));
-                if (label[root] == NONE) {
-                    label[root] = count++;
-                    u.touches.push_back(0);
-                }
-                const uint16_t l = label[root];
-                label[off] = l;
-                const Coord c = leaf.offsetToGlobalCoord(static_cast<openvdb::Index>(off));
-                if (onBorder(CoordBBox(c, c))) u.touches[l] = 1;
-            }
-            u.count = count;
-            if (count > 1) {
-                u.local.reset(new uint16_t[N]);
-                for (int off = 0; off < N; ++off) u.local[off] = on.isOn(off) ? label[off] : NONE;
-            }
-        }
-    });
-    uint32_t nUnits = 0;
-    for (LeafUnits& u : units) {
-        u.base = nUnits;
-        nUnits += u.count;
-    }
-    const uint32_t tileBase = nUnits;
-    nUnits += static_cast<uint32_t>(tiles.size());
-    auto unitOf = [&units, &leaves](std::size_t leaf, int off) -> uint32_t {
         const LeafUnits& u = units[leaf];
         if (u.count == 0 || !leaves[leaf]->isValueOn(static_cast<openvdb::Index>(off)))
             return std::numeric_limits<uint32_t>::max();
         if (u.count == 1) return u.base;
         const uint16_t l = u.local[off];
         return l == NONE ? std::numeric_limits<uint32_t>::max() : u.base + l;
-    };
-    auto leafIndex = [&leafOrigins](const Coord& origin) -> std::ptrdiff_t {
+    }
+    /// The index of the leaf at `origin`, -1 if none.
+    std::ptrdiff_t leafIndex(const Coord& origin) const
+    {
         auto it = std::lower_bound(leafOrigins.begin(), leafOrigins.end(), origin);
         return it != leafOrigins.end() && *it == origin ? it - leafOrigins.begin() : -1;
-    };
-    // the active tile holding c (c in no leaf), by its depth's origin
-    static const std::array<int, 3> tileDim = {static_cast<int>(BoolTree::RootNodeType::ChildNodeType::DIM),
-                                              static_cast<int>(BoolTree::RootNodeType::ChildNodeType::ChildNodeType::DIM),
-                                              D};
-    auto tileIndex = [&tiles](const openvdb::tree::ValueAccessor<const BoolTree>& acc, const Coord& c) -> std::ptrdiff_t {
+    }
+    /// The active tile holding c (c in no leaf), by its depth's origin; -1 if none.
+    std::ptrdiff_t tileIndex(const openvdb::tree::ValueAccessor<const BoolTree>& acc, const Coord& c) const
+    {
         if (!acc.isValueOn(c)) return -1;
         const int depth = acc.getValueDepth(c);
         if (depth < 0 || depth > 2) return -1;
-        const int dim = tileDim[static_cast<std::size_t>(depth)];
+        const int dim = TILE_DIM[static_cast<std::size_t>(depth)];
         const Coord origin(c.x() & ~(dim - 1), c.y() & ~(dim - 1), c.z() & ~(dim - 1));
         auto it = std::lower_bound(tiles.begin(), tiles.end(), origin,
                                    [](const CoordBBox& t, const Coord& o) { return t.min() < o; });
         return it != tiles.end() && it->min() == origin ? it - tiles.begin() : -1;
-    };
+    }
+};
 
-    // Joins across faces, collected in parallel (each leaf: its + neighbours, and tiles on any
-    // side; each tile: tiles on any side), then united in one pass.
-    using Edge = std::pair<uint32_t, uint32_t>;
-    std::vector<std::vector<Edge>> leafEdges(leaves.size()), tileEdges(tiles.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const tbb::blocked_range<std::size_t>& r) {
-        openvdb::tree::ValueAccessor<const BoolTree> acc(mask);
-        for (std::size_t n = r.begin(); n < r.end(); ++n) {
-            if (units[n].count == 0) continue;
-            std::vector<Edge>& edges = leafEdges[n];
-            const Leaf& leaf = *leaves[n];
-            for (int axis = 0; axis < 3; ++axis)
-                for (int side = -1; side <= 1; side += 2) {
-                    Coord o = leaf.origin();
-                    o[axis] += side * D;
-                    const int strideAxis = axis == 0 ? 64 : (axis == 1 ? 8 : 1);
-                    const int faceHere = side > 0 ? (D - 1) : 0, faceThere = side > 0 ? 0 : (D - 1);
-                    const int a1 = axis == 0 ? 1 : 0, a2 = axis == 2 ? 1 : 2;  // the two other axes
-                    const int s1 = a1 == 0 ? 64 : (a1 == 1 ? 8 : 1), s2 = a2 == 0 ? 64 : (a2 == 1 ? 8 : 1);
-                    const std::ptrdiff_t other = side > 0 ? leafIndex(o) : -1;
-                    if (other >= 0) {
-                        for (int i = 0; i < D; ++i)
-                            for (int j = 0; j < D; ++j) {
-                                const int here = faceHere * strideAxis + i * s1 + j * s2;
-                                const int there = faceThere * strideAxis + i * s1 + j * s2;
-                                const uint32_t ua = unitOf(n, here), ub = unitOf(static_cast<std::size_t>(other), there);
-                                if (ua != std::numeric_limits<uint32_t>::max() && ub != std::numeric_limits<uint32_t>::max())
-                                    edges.emplace_back(ua, ub);
-                            }
-                    } else if (side < 0 && leafIndex(o) >= 0) {
-                        continue;  // that leaf joins this one through its + side
-                    } else {
-                        const std::ptrdiff_t t = tileIndex(acc, o);
-                        if (t < 0) continue;
-                        for (int i = 0; i < D; ++i)
-                            for (int j = 0; j < D; ++j) {
-                                const uint32_t ua = unitOf(n, faceHere * strideAxis + i * s1 + j * s2);
-                                if (ua != std::numeric_limits<uint32_t>::max())
-                                    edges.emplace_back(ua, tileBase + static_cast<uint32_t>(t));
-                            }
+/// The mask's leaves sorted by origin and its active tiles sorted by min corner.
+void collectNodes(const BoolTree& mask, MaskUnits& m)
+{
+    mask.getNodes(m.leaves);
+    std::sort(m.leaves.begin(), m.leaves.end(), [](const Leaf* a, const Leaf* b) { return a->origin() < b->origin(); });
+    m.leafOrigins.resize(m.leaves.size());
+    for (std::size_t i = 0; i < m.leaves.size(); ++i) m.leafOrigins[i] = m.leaves[i]->origin();
+    auto it = mask.cbeginValueOn();
+    it.setMaxDepth(BoolTree::ValueOnCIter::LEAF_DEPTH - 1);
+    for (; it; ++it) {
+        CoordBBox tb;
+        it.getBoundingBox(tb);
+        m.tiles.push_back(tb);
+    }
+    std::sort(m.tiles.begin(), m.tiles.end(), [](const CoordBBox& a, const CoordBBox& b) { return a.min() < b.min(); });
+}
+
+/// The face-connected components within one leaf (a union-find over its offsets), numbered in
+/// the order of their first voxel, and which of them touch a face of box.
+void findLeafUnits(const Leaf& leaf, const CoordBBox& box, LeafUnits& u)
+{
+    std::array<uint16_t, N> parent;
+    std::array<uint16_t, N> label;
+    const auto& on = leaf.getValueMask();
+    auto find = [&parent](uint16_t i) {
+        while (parent[i] != i) { parent[i] = parent[parent[i]]; i = parent[i]; }
+        return i;
+    };
+    auto unite = [&](uint16_t a, uint16_t b) {
+        a = find(a); b = find(b);
+        if (a < b) parent[b] = a; else if (b < a) parent[a] = b;
+    };
+    for (int off = 0; off < N; ++off) {
+        parent[off] = static_cast<uint16_t>(off);
+        if (!on.isOn(off)) continue;
+        if ((off & 7) && on.isOn(off - 1)) unite(off, off - 1);
+        if ((off & 56) && on.isOn(off - 8)) unite(off, off - 8);
+        if ((off & 448) && on.isOn(off - 64)) unite(off, off - 64);
+    }
+    uint16_t count = 0;
+    label.fill(NONE);
+    for (int off = 0; off < N; ++off) {
+        if (!on.isOn(off)) continue;
+        const uint16_t root = find(static_cast<uint16_t>(off));
+        if (label[root] == NONE) {
+            label[root] = count++;
+            u.touches.push_back(0);
+        }
+        const uint16_t l = label[root];
+        label[off] = l;
+        const Coord c = leaf.offsetToGlobalCoord(static_cast<openvdb::Index>(off));
+        if (onBorder(CoordBBox(c, c), box)) u.touches[l] = 1;
+    }
+    u.count = count;
+    if (count > 1) {
+        u.local.reset(new uint16_t[N]);
+        for (int off = 0; off < N; ++off) u.local[off] = on.isOn(off) ? label[off] : NONE;
+    }
+}
+
+/// Units: the components within each leaf (in parallel), then the active tiles.
+MaskUnits findUnits(const BoolTree& mask, const CoordBBox& box)
+{
+    MaskUnits m;
+    collectNodes(mask, m);
+    m.units.resize(m.leaves.size());
+    using Range = tbb::blocked_range<std::size_t>;
+    tbb::parallel_for(Range(0, m.leaves.size()), [&](const Range& r) {
+        for (std::size_t n = r.begin(); n < r.end(); ++n) findLeafUnits(*m.leaves[n], box, m.units[n]);
+    });
+    uint32_t nUnits = 0;
+    for (LeafUnits& u : m.units) {
+        u.base = nUnits;
+        nUnits += u.count;
+    }
+    m.tileBase = nUnits;
+    nUnits += static_cast<uint32_t>(m.tiles.size());
+    m.nUnits = nUnits;
+    return m;
+}
+
+/// The joins of leaf n's units across its faces: to the leaf on each + side, and to an active
+/// tile on any side; sorted, without duplicates.
+std::vector<Edge> leafJoins(const MaskUnits& m, const openvdb::tree::ValueAccessor<const BoolTree>& acc, std::size_t n)
+{
+    std::vector<Edge> edges;
+    const Leaf& leaf = *m.leaves[n];
+    for (int axis = 0; axis < 3; ++axis)
+        for (int side = -1; side <= 1; side += 2) {
+            Coord o = leaf.origin();
+            o[axis] += side * D;
+            const int strideAxis = axis == 0 ? 64 : (axis == 1 ? 8 : 1);
+            const int faceHere = side > 0 ? (D - 1) : 0, faceThere = side > 0 ? 0 : (D - 1);
+            const int a1 = axis == 0 ? 1 : 0, a2 = axis == 2 ? 1 : 2;  // the two other axes
+            const int s1 = a1 == 0 ? 64 : (a1 == 1 ? 8 : 1), s2 = a2 == 0 ? 64 : (a2 == 1 ? 8 : 1);
+            const std::ptrdiff_t other = side > 0 ? m.leafIndex(o) : -1;
+            if (other >= 0) {
+                for (int i = 0; i < D; ++i)
+                    for (int j = 0; j < D; ++j) {
+                        const int here = faceHere * strideAxis + i * s1 + j * s2;
+                        const int there = faceThere * strideAxis + i * s1 + j * s2;
+                        const uint32_t ua = m.unitOf(n, here), ub = m.unitOf(static_cast<std::size_t>(other), there);
+                        if (ua != std::numeric_limits<uint32_t>::max() && ub != std::numeric_limits<uint32_t>::max())
+                            edges.emplace_back(ua, ub);
                     }
-                }
-            std::sort(edges.begin(), edges.end());
-            edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-            edges.shrink_to_fit();
+            } else if (side < 0 && m.leafIndex(o) >= 0) {
+                continue;  // that leaf joins this one through its + side
+            } else {
+                const std::ptrdiff_t t = m.tileIndex(acc, o);
+                if (t < 0) continue;
+                for (int i = 0; i < D; ++i)
+                    for (int j = 0; j < D; ++j) {
+                        const uint32_t ua = m.unitOf(n, faceHere * strideAxis + i * s1 + j * s2);
+                        if (ua != std::numeric_limits<uint32_t>::max())
+                            edges.emplace_back(ua, m.tileBase + static_cast<uint32_t>(t));
+                    }
+            }
         }
-    });
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tiles.size()), [&](const tbb::blocked_range<std::size_t>& r) {
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    edges.shrink_to_fit();
+    return edges;
+}
+
+/// The joins of tile n to the active tiles on any side; sorted, without duplicates.
+std::vector<Edge> tileJoins(const MaskUnits& m, const openvdb::tree::ValueAccessor<const BoolTree>& acc, std::size_t n)
+{
+    std::vector<Edge> edges;
+    const CoordBBox& tb = m.tiles[n];
+    for (int axis = 0; axis < 3; ++axis)
+        for (int side = -1; side <= 1; side += 2) {
+            const int a1 = axis == 0 ? 1 : 0, a2 = axis == 2 ? 1 : 2;
+            for (int i = tb.min()[a1]; i <= tb.max()[a1]; i += D)
+                for (int j = tb.min()[a2]; j <= tb.max()[a2]; j += D) {
+                    Coord c;
+                    c[axis] = side > 0 ? tb.max()[axis] + 1 : tb.min()[axis] - 1;
+                    c[a1] = i;
+                    c[a2] = j;
+                    if (acc.probeConstLeaf(c)) continue;  // the leaf joins this tile
+                    const std::ptrdiff_t t = m.tileIndex(acc, c);
+                    if (t >= 0 && static_cast<std::size_t>(t) != n)
+                        edges.emplace_back(m.tileBase + static_cast<uint32_t>(n),
+                                           m.tileBase + static_cast<uint32_t>(t));
+                }
+        }
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    return edges;
+}
+
+/// Joins across faces, collected in parallel (each leaf: its + neighbours, and tiles on any
+/// side; each tile: tiles on any side), then united in one pass.
+UnionFind<uint32_t> joinUnits(const BoolTree& mask, const MaskUnits& m)
+{
+    using Range = tbb::blocked_range<std::size_t>;
+    std::vector<std::vector<Edge>> leafEdges(m.leaves.size()), tileEdges(m.tiles.size());
+    tbb::parallel_for(Range(0, m.leaves.size()), [&](const Range& r) {
         openvdb::tree::ValueAccessor<const BoolTree> acc(mask);
         for (std::size_t n = r.begin(); n < r.end(); ++n) {
-            const CoordBBox& tb = tiles[n];
-            std::vector<Edge>& edges = tileEdges[n];
-            for (int axis = 0; axis < 3; ++axis)
-                for (int side = -1; side <= 1; side += 2) {
-                    const int a1 = axis == 0 ? 1 : 0, a2 = axis == 2 ? 1 : 2;
-                    for (int i = tb.min()[a1]; i <= tb.max()[a1]; i += D)
-                        for (int j = tb.min()[a2]; j <= tb.max()[a2]; j += D) {
-                            Coord c;
-                            c[axis] = side > 0 ? tb.max()[axis] + 1 : tb.min()[axis] - 1;
-                            c[a1] = i;
-                            c[a2] = j;
-                            if (acc.probeConstLeaf(c)) continue;  // the leaf joins this tile
-                            const std::ptrdiff_t t = tileIndex(acc, c);
-                            if (t >= 0 && static_cast<std::size_t>(t) != n)
-                                edges.emplace_back(tileBase + static_cast<uint32_t>(n), tileBase + static_cast<uint32_t>(t));
-                        }
-                }
-            std::sort(edges.begin(), edges.end());
-            edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+            if (m.units[n].count == 0) continue;
+            leafEdges[n] = leafJoins(m, acc, n);
         }
     });
-    UnionFind<uint32_t> joined(nUnits);  // the root is the smallest unit
-    auto find = [&joined](uint32_t i) { return joined.find(i); };
+    tbb::parallel_for(Range(0, m.tiles.size()), [&](const Range& r) {
+        openvdb::tree::ValueAccessor<const BoolTree> acc(mask);
+        for (std::size_t n = r.begin(); n < r.end(); ++n) tileEdges[n] = tileJoins(m, acc, n);
+    });
+    UnionFind<uint32_t> joined(m.nUnits);  // the root is the smallest unit
     auto unite = [&joined](const Edge& e) { joined.unite(e.first, e.second); };
     for (auto& edges : leafEdges) { for (const Edge& e : edges) unite(e); std::vector<Edge>().swap(edges); }
     for (auto& edges : tileEdges) { for (const Edge& e : edges) unite(e); std::vector<Edge>().swap(edges); }
-    std::vector<uint8_t> touches(nUnits, 0);
-    for (std::size_t n = 0; n < leaves.size(); ++n)
-        for (uint16_t l = 0; l < units[n].count; ++l)
-            if (units[n].touches[l]) touches[find(units[n].base + l)] = 1;
-    for (std::size_t t = 0; t < tiles.size(); ++t)
-        if (onBorder(tiles[t])) touches[find(tileBase + static_cast<uint32_t>(t))] = 1;
+    return joined;
+}
+
+/// Per root unit: whether its component touches a face of box.
+std::vector<uint8_t> touchingRoots(const MaskUnits& m, UnionFind<uint32_t>& joined, const CoordBBox& box)
+{
+    std::vector<uint8_t> touches(m.nUnits, 0);
+    for (std::size_t n = 0; n < m.leaves.size(); ++n)
+        for (uint16_t l = 0; l < m.units[n].count; ++l)
+            if (m.units[n].touches[l]) touches[joined.find(m.units[n].base + l)] = 1;
+    for (std::size_t t = 0; t < m.tiles.size(); ++t)
+        if (onBorder(m.tiles[t], box)) touches[joined.find(m.tileBase + static_cast<uint32_t>(t))] = 1;
+    return touches;
+}
+
+/// Per unit: its enclosed component's index, -1 for a touching one; creates the enclosed
+/// components' empty masks in out.
+std::vector<int32_t> numberEnclosed(const MaskUnits& m, UnionFind<uint32_t>& joined,
+                                    const std::vector<uint8_t>& touches, MaskComponents& out)
+{
     // enclosed components, numbered by their root (the smallest unit: deterministic)
-    std::vector<int32_t> componentOf(nUnits, -1);
-    MaskComponents out;
-    for (uint32_t i = 0; i < nUnits; ++i) {
-        const uint32_t root = find(i);
+    std::vector<int32_t> componentOf(m.nUnits, -1);
+    for (uint32_t i = 0; i < m.nUnits; ++i) {
+        const uint32_t root = joined.find(i);
         if (touches[root]) continue;
         if (componentOf[root] < 0) {
             componentOf[root] = static_cast<int32_t>(out.enclosed.size());
@@ -241,31 +298,48 @@ MaskComponents faceConnectedComponents(const BoolTree& mask, const CoordBBox& bo
         }
         componentOf[i] = componentOf[root];
     }
-    out.touching.reset(new BoolTree(mask, false, openvdb::TopologyCopy()));
-    if (!out.enclosed.empty()) {
-        openvdb::tree::ValueAccessor<BoolTree> outAcc(*out.touching);
-        for (std::size_t n = 0; n < leaves.size(); ++n) {
-            const LeafUnits& u = units[n];
-            bool any = false;
-            for (uint16_t l = 0; l < u.count && !any; ++l) any = componentOf[u.base + l] >= 0;
-            if (!any) continue;
-            for (auto it = leaves[n]->cbeginValueOn(); it; ++it) {
-                const int32_t k = componentOf[unitOf(n, static_cast<int>(it.pos()))];
-                if (k < 0) continue;
-                out.enclosed[static_cast<std::size_t>(k)]->setActiveState(it.getCoord(), true);
-                outAcc.setValueOff(it.getCoord());
-            }
-        }
-        for (std::size_t t = 0; t < tiles.size(); ++t) {
-            const int32_t k = componentOf[tileBase + static_cast<uint32_t>(t)];
+    return componentOf;
+}
+
+/// Moves the enclosed components' voxels and tiles from out.touching (a copy of the mask) into
+/// their own masks.
+void assembleEnclosed(const MaskUnits& m, const std::vector<int32_t>& componentOf, MaskComponents& out)
+{
+    openvdb::tree::ValueAccessor<BoolTree> outAcc(*out.touching);
+    for (std::size_t n = 0; n < m.leaves.size(); ++n) {
+        const LeafUnits& u = m.units[n];
+        bool any = false;
+        for (uint16_t l = 0; l < u.count && !any; ++l) any = componentOf[u.base + l] >= 0;
+        if (!any) continue;
+        for (auto it = m.leaves[n]->cbeginValueOn(); it; ++it) {
+            const int32_t k = componentOf[m.unitOf(n, static_cast<int>(it.pos()))];
             if (k < 0) continue;
-            out.enclosed[static_cast<std::size_t>(k)]->fill(tiles[t], false, true);
-            out.touching->fill(tiles[t], false, false);
+            out.enclosed[static_cast<std::size_t>(k)]->setActiveState(it.getCoord(), true);
+            outAcc.setValueOff(it.getCoord());
         }
-        openvdb::tools::pruneInactive(*out.touching);
-        for (auto& comp : out.enclosed)
-            if (comp->hasActiveTiles()) comp->voxelizeActiveTiles();  // voxel iterators visit every voxel
     }
+    for (std::size_t t = 0; t < m.tiles.size(); ++t) {
+        const int32_t k = componentOf[m.tileBase + static_cast<uint32_t>(t)];
+        if (k < 0) continue;
+        out.enclosed[static_cast<std::size_t>(k)]->fill(m.tiles[t], false, true);
+        out.touching->fill(m.tiles[t], false, false);
+    }
+    openvdb::tools::pruneInactive(*out.touching);
+    for (auto& comp : out.enclosed)
+        if (comp->hasActiveTiles()) comp->voxelizeActiveTiles();  // voxel iterators visit every voxel
+}
+
+} // namespace
+
+MaskComponents faceConnectedComponents(const BoolTree& mask, const CoordBBox& box)
+{
+    const MaskUnits units = findUnits(mask, box);
+    UnionFind<uint32_t> joined = joinUnits(mask, units);
+    const std::vector<uint8_t> touches = touchingRoots(units, joined, box);
+    MaskComponents out;
+    const std::vector<int32_t> componentOf = numberEnclosed(units, joined, touches, out);
+    out.touching.reset(new BoolTree(mask, false, openvdb::TopologyCopy()));
+    if (!out.enclosed.empty()) assembleEnclosed(units, componentOf, out);
     return out;
 }
 
