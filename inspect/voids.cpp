@@ -508,6 +508,225 @@ void measureVoid(VoidWork& w, const FloatTree& ct, const BoolTree& air, double a
     w.areaVoxels = area;
 }
 
+/// Checks the parameters and the grid (not empty, cubic voxels, at least 3 voxels along each
+/// axis); returns B, the grid's active bounding box.
+CoordBBox checkedScanBox(const openvdb::FloatGrid& ct, const VoidParams& params, const std::string& sourceName)
+{
+    if (!(params.minDiameterVoxels >= 0) || !std::isfinite(params.minDiameterVoxels))
+        throw ParameterError("min_diameter_voxels: must be >= 0 (got " + num(params.minDiameterVoxels) + ")");
+    if (std::isinf(params.threshold))
+        throw ParameterError("threshold: must be a finite grey value (or unset for Otsu)");
+    const CoordBBox box = ct.evalActiveVoxelBoundingBox();
+    if (box.empty() || ct.activeVoxelCount() == 0) throw InputError(sourceName + ": the CT grid is empty");
+    const openvdb::Vec3d vs = ct.voxelSize();
+    if (std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] || std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
+        throw InputError(sourceName + ": voxels are not cubic (" + num(vs[0]) + " x " + num(vs[1]) + " x " +
+                         num(vs[2]) + " mm); resample first");
+    for (int a = 0; a < 3; ++a)
+        if (box.dim()[a] < 3) throw InputError(sourceName + ": not a 3D volume (" + std::to_string(box.dim()[a]) +
+                                               " voxels along axis " + std::to_string(a) + ")");
+    return box;
+}
+
+/// Otsu's threshold over the histogram of B's grey values gMin..gMax; refuses a volume of one
+/// phase (separability below MIN_SEPARABILITY).
+double otsuThreshold(const FloatTree& tree, const CoordBBox& box, double gMin, double gMax,
+                     const std::string& sourceName)
+{
+    if (!(gMax > gMin))
+        throw InputError(sourceName + ": every voxel has the grey value " + num(gMin) +
+                         ": no material or all material (nothing to tell air from material)");
+    HistAcc proto;
+    proto.lo = gMin;
+    proto.scale = HISTOGRAM_BINS / (gMax - gMin) * (1 - 1e-12);
+    auto add = [&proto](HistAcc& acc, double v, Index64 n) {
+        acc.lo = proto.lo;
+        acc.scale = proto.scale;
+        acc.add(v, n);
+    };
+    HistAcc hist = reduceOverBox<HistAcc>(tree, box, add, add);
+    const OtsuResult o = otsu(hist.bins, gMin, (gMax - gMin) / HISTOGRAM_BINS);
+    if (o.separability < MIN_SEPARABILITY)
+        throw InputError(sourceName + ": no air/material contrast: the grey values (" + num(gMin) + ".." +
+                         num(gMax) + ") form one phase (Otsu separability " + num(o.separability) + " < " +
+                         num(MIN_SEPARABILITY) + "): no material or all material");
+    return o.threshold;
+}
+
+/// Step 1: the grey-value statistics over B and the threshold (out.threshold, Otsu's unless
+/// given), checked to leave both material and air in B.
+StatsAcc chooseThreshold(const FloatTree& tree, const CoordBBox& box, const VoidParams& params,
+                         const std::string& sourceName, PartAnalysis& out)
+{
+    const StatsAcc stats = reduceOverBox<StatsAcc>(
+        tree, box, [](StatsAcc& acc, double v, Index64 n) { acc.add(v, n); },
+        [](StatsAcc& acc, double v, Index64 n) { acc.add(v, n); });
+    if (!stats.s.finite) throw InputError(sourceName + ": grey values include NaN or infinity");
+    const double gMin = stats.s.minV, gMax = stats.s.maxV;
+    if (std::isnan(params.threshold)) {
+        out.threshold = otsuThreshold(tree, box, gMin, gMax, sourceName);
+        out.thresholdSource = "otsu";
+    } else {
+        out.threshold = params.threshold;
+        out.thresholdSource = "given";
+    }
+    const double thr = out.threshold;
+    if (gMax < thr)
+        throw InputError(sourceName + ": no material: no voxel at or above the threshold " + num(thr) + " (" +
+                         out.thresholdSource + "; grey values " + num(gMin) + ".." + num(gMax) + ")");
+    if (gMin >= thr)
+        throw InputError(sourceName + ": all material: no voxel below the threshold " + num(thr) + " (" +
+                         out.thresholdSource + "; grey values " + num(gMin) + ".." + num(gMax) + ")");
+    return stats;
+}
+
+/// Step 2: air = B minus material.
+BoolTree::Ptr airOf(const BoolTree& material, const CoordBBox& box)
+{
+    BoolTree::Ptr air(new BoolTree(false));
+    air->fill(box, true, true);
+    air->topologyDifference(material);
+    openvdb::tools::pruneInactive(*air);
+    return air;
+}
+
+/// Step 3: the air's face-connected components: returns those touching a face of B (the
+/// outside air), refused when there are none; each other one, an internal void, into `work`.
+BoolTree::Ptr splitAir(const BoolTree& air, const CoordBBox& box, double thr, const std::string& sourceName,
+                       std::vector<VoidWork>& work)
+{
+    MaskComponents components = faceConnectedComponents(air, box);
+    BoolTree::Ptr outside = components.touching;
+    for (BoolTree::Ptr& comp : components.enclosed) {
+        VoidWork w;
+        w.mask = comp;
+        comp->evalActiveVoxelBoundingBox(w.bbox);
+        w.voxels = comp->activeVoxelCount();
+        work.push_back(std::move(w));
+        comp.reset();
+    }
+    components.enclosed.clear();
+    if (outside->activeVoxelCount() == 0)
+        throw InputError(sourceName + ": all material at the border of the scan: no outside air to tell the part's "
+                                      "surface from (threshold " + num(thr) + ")");
+    return outside;
+}
+
+/// The grey levels of air and material away from any surface, and the material volume.
+struct GreyLevels {
+    double airGrey = 0, materialGrey = 0;
+    double materialVoxels = 0;  // sum of the material fractions over the part and its rim
+};
+
+/// Step 4: the air grey value A (outside the part dilated by SHELL_VOXELS), the material grey
+/// value M (the material eroded by SHELL_VOXELS) and the material volume over the dilated part.
+GreyLevels partialVolumeLevels(const FloatTree& tree, const CoordBBox& box, const BoolTree& material,
+                               const std::vector<VoidWork>& work, const StatsAcc& stats,
+                               const std::string& sourceName)
+{
+    BoolTree filled(material);  // the part: material and its internal voids
+    for (const VoidWork& w : work) filled.topologyUnion(*w.mask);
+    openvdb::tools::prune(filled);
+    openvdb::tools::dilateActiveValues(filled, SHELL_VOXELS, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::PRESERVE_TILES);
+    filled.topologyIntersection(*[&] { BoolTree::Ptr b(new BoolTree(false)); b->fill(box, true, true); return b; }());
+    const Moments part = greyOverMask(tree, filled);  // the part and a rim of 2 voxels
+    const double deepAirCount = static_cast<double>(stats.s.count) - static_cast<double>(part.n);
+    if (!(deepAirCount > 0))
+        throw InputError(sourceName + ": the part fills the scan: no outside air farther than " +
+                         std::to_string(SHELL_VOXELS) + " voxels from it to measure the air grey value");
+    GreyLevels g;
+    g.airGrey = (stats.s.sum - part.sum) / deepAirCount;
+    BoolTree deep(material);
+    openvdb::tools::prune(deep);
+    openvdb::tools::erodeActiveValues(deep, SHELL_VOXELS, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                      openvdb::tools::PRESERVE_TILES);
+    const Moments deepMaterial = greyOverMask(tree, deep);
+    deep.clear();
+    g.materialGrey = deepMaterial.n > 0 ? deepMaterial.sum / static_cast<double>(deepMaterial.n) : stats.s.maxV;
+    if (!(g.materialGrey > g.airGrey))
+        throw InputError(sourceName + ": material grey value " + num(g.materialGrey) + " is not above air " +
+                         num(g.airGrey));
+    g.materialVoxels = (part.sum - static_cast<double>(part.n) * g.airGrey) / (g.materialGrey - g.airGrey);
+    return g;
+}
+
+/// Step 5a: measures every void (in parallel), then sorts them by volume, largest first (ties
+/// by their box's min corner).
+void measureVoids(std::vector<VoidWork>& work, const FloatTree& tree, const BoolTree& air, const GreyLevels& g,
+                  double minVoxels)
+{
+    tbb::parallel_for(std::size_t(0), work.size(), [&](std::size_t i) {
+        // listed or not is decided on the partial volume; measure first without the mesh
+        measureVoid(work[i], tree, air, g.airGrey, g.materialGrey, false);
+        if (work[i].volumeVoxels >= minVoxels && work[i].measuredByPartialVolume)
+            measureVoid(work[i], tree, air, g.airGrey, g.materialGrey, true);
+    });
+    std::sort(work.begin(), work.end(), [](const VoidWork& a, const VoidWork& b) {
+        if (a.volumeVoxels != b.volumeVoxels) return a.volumeVoxels > b.volumeVoxels;
+        return a.bbox.min() < b.bbox.min();
+    });
+}
+
+/// The listed void `w` with id `id`, in mm (voxelMm: a voxel's edge, voxelVolume: its volume).
+VoidInfo voidInfo(const VoidWork& w, int id, const openvdb::FloatGrid& ct, NearestActive& nearest, double voxelMm,
+                  double voxelVolume)
+{
+    VoidInfo v;
+    v.id = id;
+    v.voxels = static_cast<int64_t>(w.voxels);
+    v.volumeMm3 = w.volumeVoxels * voxelVolume;
+    v.equivalentDiameterMm = equivalentDiameter(v.volumeMm3);
+    v.maxExtentMm = w.extentVoxels * voxelMm;
+    // Sphericity of the iso-surface, its area against its own enclosed volume: on a blurred
+    // scan the 0.5 iso-surface of a small pore lies inside its true surface, so pairing its
+    // area with the partial volume would give values above 1.
+    v.sphericity = w.areaVoxels > 0
+                       ? std::cbrt(PI) * std::pow(6.0 * w.isoVolumeVoxels, 2.0 / 3.0) / w.areaVoxels
+                       : 0.0;
+    v.kind = w.flatness < CRACK_FLATNESS ? "crack" : "pore";
+    const openvdb::Vec3d world = ct.transform().indexToWorld(w.centroid);
+    v.centroidLps = Vec3d{world[0], world[1], world[2]};
+    v.distanceToSurfaceMm = std::max(0.0, nearest.distance(w.centroid) - 0.5) * voxelMm;
+    return v;
+}
+
+/// Step 5b: lists the voids of at least minVoxels (out.voids, ids 1.. in work's order) and
+/// labels their voxels (out.voidLabels); counts the others as small. Returns the volume of all
+/// voids (voxels).
+double listVoids(const std::vector<VoidWork>& work, const openvdb::FloatGrid& ct, const BoolTree& outside,
+                 double minVoxels, double voxelMm, double voxelVolume, PartAnalysis& out)
+{
+    out.voidLabels = openvdb::Int32Grid::create(0);
+    out.voidLabels->setTransform(ct.transform().copy());
+    out.voidLabels->setName("void_labels");
+    openvdb::Int32Grid::Accessor labelAcc = out.voidLabels->getAccessor();
+    NearestActive nearest(outside);
+    double voidVoxels = 0;
+    for (const VoidWork& w : work) {
+        voidVoxels += w.volumeVoxels;
+        if (w.volumeVoxels < minVoxels) {
+            ++out.smallVoidCount;
+            out.smallVoidVolumeMm3 += w.volumeVoxels * voxelVolume;
+            continue;
+        }
+        const VoidInfo v = voidInfo(w, static_cast<int>(out.voids.size()) + 1, ct, nearest, voxelMm, voxelVolume);
+        for (auto it = w.mask->cbeginValueOn(); it; ++it) labelAcc.setValueOn(it.getCoord(), v.id);
+        out.voids.push_back(v);
+    }
+    return voidVoxels;
+}
+
+/// `mask`, pruned, as a grid with the CT's transform and the given name.
+openvdb::BoolGrid::Ptr maskGrid(const BoolTree::Ptr& mask, const openvdb::FloatGrid& ct, const std::string& name)
+{
+    openvdb::tools::prune(*mask);
+    openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(mask);
+    grid->setTransform(ct.transform().copy());
+    grid->setName(name);
+    return grid;
+}
+
 } // namespace
 
 double equivalentDiameter(double volume)
@@ -553,175 +772,43 @@ double maxVoxelDistance(const std::vector<openvdb::Vec3d>& voxelsIn)
 PartAnalysis analysePart(const openvdb::FloatGrid& ct, const VoidParams& params, const std::string& sourceName,
                          Progress* progress)
 {
-    if (!(params.minDiameterVoxels >= 0) || !std::isfinite(params.minDiameterVoxels))
-        throw ParameterError("min_diameter_voxels: must be >= 0 (got " + num(params.minDiameterVoxels) + ")");
-    if (std::isinf(params.threshold))
-        throw ParameterError("threshold: must be a finite grey value (or unset for Otsu)");
+    const CoordBBox box = checkedScanBox(ct, params, sourceName);
     const FloatTree& tree = ct.tree();
-    const CoordBBox box = ct.evalActiveVoxelBoundingBox();
-    if (box.empty() || ct.activeVoxelCount() == 0) throw InputError(sourceName + ": the CT grid is empty");
     const openvdb::Vec3d vs = ct.voxelSize();
-    if (std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] || std::abs(vs[0] - vs[2]) > 1e-6 * vs[0])
-        throw InputError(sourceName + ": voxels are not cubic (" + num(vs[0]) + " x " + num(vs[1]) + " x " +
-                         num(vs[2]) + " mm); resample first");
-    for (int a = 0; a < 3; ++a)
-        if (box.dim()[a] < 3) throw InputError(sourceName + ": not a 3D volume (" + std::to_string(box.dim()[a]) +
-                                               " voxels along axis " + std::to_string(a) + ")");
     const double voxelMm = vs[0], voxelVolume = vs[0] * vs[1] * vs[2];
     reportProgress(progress, 0.0, "histogram");
 
     // ---- 1. histogram and threshold
-    const StatsAcc stats = reduceOverBox<StatsAcc>(
-        tree, box, [](StatsAcc& acc, double v, Index64 n) { acc.add(v, n); },
-        [](StatsAcc& acc, double v, Index64 n) { acc.add(v, n); });
-    if (!stats.s.finite) throw InputError(sourceName + ": grey values include NaN or infinity");
-    const double gMin = stats.s.minV, gMax = stats.s.maxV;
     PartAnalysis out;
-    if (std::isnan(params.threshold)) {
-        if (!(gMax > gMin))
-            throw InputError(sourceName + ": every voxel has the grey value " + num(gMin) +
-                             ": no material or all material (nothing to tell air from material)");
-        HistAcc proto;
-        proto.lo = gMin;
-        proto.scale = HISTOGRAM_BINS / (gMax - gMin) * (1 - 1e-12);
-        auto add = [&proto](HistAcc& acc, double v, Index64 n) {
-            acc.lo = proto.lo;
-            acc.scale = proto.scale;
-            acc.add(v, n);
-        };
-        HistAcc hist = reduceOverBox<HistAcc>(tree, box, add, add);
-        const OtsuResult o = otsu(hist.bins, gMin, (gMax - gMin) / HISTOGRAM_BINS);
-        if (o.separability < MIN_SEPARABILITY)
-            throw InputError(sourceName + ": no air/material contrast: the grey values (" + num(gMin) + ".." +
-                             num(gMax) + ") form one phase (Otsu separability " + num(o.separability) + " < " +
-                             num(MIN_SEPARABILITY) + "): no material or all material");
-        out.threshold = o.threshold;
-        out.thresholdSource = "otsu";
-    } else {
-        out.threshold = params.threshold;
-        out.thresholdSource = "given";
-    }
+    const StatsAcc stats = chooseThreshold(tree, box, params, sourceName, out);
     const double thr = out.threshold;
-    if (gMax < thr)
-        throw InputError(sourceName + ": no material: no voxel at or above the threshold " + num(thr) + " (" +
-                         out.thresholdSource + "; grey values " + num(gMin) + ".." + num(gMax) + ")");
-    if (gMin >= thr)
-        throw InputError(sourceName + ": all material: no voxel below the threshold " + num(thr) + " (" +
-                         out.thresholdSource + "; grey values " + num(gMin) + ".." + num(gMax) + ")");
     reportProgress(progress, 0.1, "material and air");
 
     // ---- 2. material, air
     BoolTree::Ptr material = maskFromGrey(tree, box, [thr](float v) { return v >= thr; });
-    BoolTree::Ptr air(new BoolTree(false));
-    air->fill(box, true, true);
-    air->topologyDifference(*material);
-    openvdb::tools::pruneInactive(*air);
+    BoolTree::Ptr air = airOf(*material, box);
 
     // ---- 3. air components: border-touching ones are outside air
     reportProgress(progress, 0.2, "air components");
-    MaskComponents components = faceConnectedComponents(*air, box);
-    BoolTree::Ptr outside = components.touching;
     std::vector<VoidWork> work;
-    for (BoolTree::Ptr& comp : components.enclosed) {
-        VoidWork w;
-        w.mask = comp;
-        comp->evalActiveVoxelBoundingBox(w.bbox);
-        w.voxels = comp->activeVoxelCount();
-        work.push_back(std::move(w));
-        comp.reset();
-    }
-    components.enclosed.clear();
-    if (outside->activeVoxelCount() == 0)
-        throw InputError(sourceName + ": all material at the border of the scan: no outside air to tell the part's "
-                                      "surface from (threshold " + num(thr) + ")");
+    BoolTree::Ptr outside = splitAir(*air, box, thr, sourceName, work);
 
     // ---- 4. partial volume: air and material grey levels away from any surface
     reportProgress(progress, 0.4, "partial volume");
-    BoolTree filled(*material);  // the part: material and its internal voids
-    for (const VoidWork& w : work) filled.topologyUnion(*w.mask);
-    openvdb::tools::prune(filled);
-    openvdb::tools::dilateActiveValues(filled, SHELL_VOXELS, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                       openvdb::tools::PRESERVE_TILES);
-    filled.topologyIntersection(*[&] { BoolTree::Ptr b(new BoolTree(false)); b->fill(box, true, true); return b; }());
-    const Moments part = greyOverMask(tree, filled);  // the part and a rim of 2 voxels
-    const double deepAirCount = static_cast<double>(stats.s.count) - static_cast<double>(part.n);
-    if (!(deepAirCount > 0))
-        throw InputError(sourceName + ": the part fills the scan: no outside air farther than " +
-                         std::to_string(SHELL_VOXELS) + " voxels from it to measure the air grey value");
-    const double airGrey = (stats.s.sum - part.sum) / deepAirCount;
-    BoolTree deep(*material);
-    openvdb::tools::prune(deep);
-    openvdb::tools::erodeActiveValues(deep, SHELL_VOXELS, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                      openvdb::tools::PRESERVE_TILES);
-    const Moments deepMaterial = greyOverMask(tree, deep);
-    deep.clear();
-    const double materialGrey =
-        deepMaterial.n > 0 ? deepMaterial.sum / static_cast<double>(deepMaterial.n) : stats.s.maxV;
-    if (!(materialGrey > airGrey))
-        throw InputError(sourceName + ": material grey value " + num(materialGrey) + " is not above air " + num(airGrey));
-    const double materialVoxels =
-        (part.sum - static_cast<double>(part.n) * airGrey) / (materialGrey - airGrey);
-    filled.clear();
+    const GreyLevels grey = partialVolumeLevels(tree, box, *material, work, stats, sourceName);
 
     // ---- 5. per void
     reportProgress(progress, 0.6, "voids");
     const double minVoxels = PI / 6.0 * std::pow(params.minDiameterVoxels, 3);
-    tbb::parallel_for(std::size_t(0), work.size(), [&](std::size_t i) {
-        // listed or not is decided on the partial volume; measure first without the mesh
-        measureVoid(work[i], tree, *air, airGrey, materialGrey, false);
-        if (work[i].volumeVoxels >= minVoxels && work[i].measuredByPartialVolume)
-            measureVoid(work[i], tree, *air, airGrey, materialGrey, true);
-    });
-    std::sort(work.begin(), work.end(), [](const VoidWork& a, const VoidWork& b) {
-        if (a.volumeVoxels != b.volumeVoxels) return a.volumeVoxels > b.volumeVoxels;
-        return a.bbox.min() < b.bbox.min();
-    });
+    measureVoids(work, tree, *air, grey, minVoxels);
     air.reset();
-
-    out.voidLabels = openvdb::Int32Grid::create(0);
-    out.voidLabels->setTransform(ct.transform().copy());
-    out.voidLabels->setName("void_labels");
-    openvdb::Int32Grid::Accessor labelAcc = out.voidLabels->getAccessor();
-    NearestActive nearest(*outside);
-    double voidVoxels = 0;
-    for (const VoidWork& w : work) {
-        voidVoxels += w.volumeVoxels;
-        if (w.volumeVoxels < minVoxels) {
-            ++out.smallVoidCount;
-            out.smallVoidVolumeMm3 += w.volumeVoxels * voxelVolume;
-            continue;
-        }
-        VoidInfo v;
-        v.id = static_cast<int>(out.voids.size()) + 1;
-        v.voxels = static_cast<int64_t>(w.voxels);
-        v.volumeMm3 = w.volumeVoxels * voxelVolume;
-        v.equivalentDiameterMm = equivalentDiameter(v.volumeMm3);
-        v.maxExtentMm = w.extentVoxels * voxelMm;
-        // Sphericity of the iso-surface, its area against its own enclosed volume: on a blurred
-        // scan the 0.5 iso-surface of a small pore lies inside its true surface, so pairing its
-        // area with the partial volume would give values above 1.
-        v.sphericity = w.areaVoxels > 0
-                           ? std::cbrt(PI) * std::pow(6.0 * w.isoVolumeVoxels, 2.0 / 3.0) / w.areaVoxels
-                           : 0.0;
-        v.kind = w.flatness < CRACK_FLATNESS ? "crack" : "pore";
-        const openvdb::Vec3d world = ct.transform().indexToWorld(w.centroid);
-        v.centroidLps = Vec3d{world[0], world[1], world[2]};
-        v.distanceToSurfaceMm = std::max(0.0, nearest.distance(w.centroid) - 0.5) * voxelMm;
-        for (auto it = w.mask->cbeginValueOn(); it; ++it) labelAcc.setValueOn(it.getCoord(), v.id);
-        out.voids.push_back(v);
-    }
-    out.materialVolumeMm3 = materialVoxels * voxelVolume;
+    const double voidVoxels = listVoids(work, ct, *outside, minVoxels, voxelMm, voxelVolume, out);
+    out.materialVolumeMm3 = grey.materialVoxels * voxelVolume;
     out.voidVolumeMm3 = voidVoxels * voxelVolume;
     out.porosityPercent = 100.0 * out.voidVolumeMm3 / (out.materialVolumeMm3 + out.voidVolumeMm3);
 
-    openvdb::tools::prune(*material);
-    out.material = openvdb::BoolGrid::create(material);
-    out.material->setTransform(ct.transform().copy());
-    out.material->setName("material");
-    openvdb::tools::prune(*outside);
-    out.outsideAir = openvdb::BoolGrid::create(outside);
-    out.outsideAir->setTransform(ct.transform().copy());
-    out.outsideAir->setName("outside_air");
+    out.material = maskGrid(material, ct, "material");
+    out.outsideAir = maskGrid(outside, ct, "outside_air");
     reportProgress(progress, 1.0, "voids done");
     return out;
 }
