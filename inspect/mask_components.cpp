@@ -11,7 +11,6 @@
 
 #include <algorithm>
 #include <array>
-#include <sstream>
 #include <vector>
 
 namespace flyover {
@@ -32,14 +31,6 @@ static_assert(D == 8 && N == 512, "offsets below assume 8^3 leaves (offset = x*6
 const std::array<int, 3> TILE_DIM = {static_cast<int>(BoolTree::RootNodeType::ChildNodeType::DIM),
                                      static_cast<int>(BoolTree::RootNodeType::ChildNodeType::ChildNodeType::DIM), D};
 using Edge = std::pair<uint32_t, uint32_t>;  // two units joined across a face
-
-std::string num(double v)
-{
-    std::ostringstream o;
-    o.precision(6);
-    o << v;
-    return o.str();
-}
 
 /// Whether b reaches a face of box.
 bool onBorder(const CoordBBox& b, const CoordBBox& box)
