@@ -31,15 +31,10 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <functional>
 #include <limits>
-#include <sstream>
+#include <optional>
 #include <utility>
 #include <vector>
-#include <cstdio>
-#include <chrono>
-#include <ctime>
-#include <cstdlib>
 
 namespace flyover {
 
@@ -588,6 +583,25 @@ std::vector<Vec3d> axisFrom(const std::vector<Vec3d>& pts, std::size_t from)
     return axis;
 }
 
+/// The chain's last piece: its index, whether it is travelled backwards, and its path in
+/// travel order.
+struct LastPiece {
+    std::size_t index = 0;
+    bool reversed = false;
+    std::vector<Vec3d> pointsMm;
+};
+
+LastPiece lastPiece(const TracedPieces& t, const PieceChain& chain)
+{
+    LastPiece lp;
+    const std::size_t lastPos = chain.order.size() - 1;
+    lp.index = std::size_t(chain.order[lastPos]);
+    lp.reversed = chain.reversed[lastPos];
+    lp.pointsMm = t.paths[lp.index].pointsMm;
+    if (lp.reversed) std::reverse(lp.pointsMm.begin(), lp.pointsMm.end());
+    return lp;
+}
+
 /// Step 4b (centerline_far_end.h): when the last piece's path ends in a narrow tube off a wide
 /// lumen (the terminal ileum off the cecum), the tube is plugged past its mouth and the farthest
 /// voxel from the piece's near end is searched again. When that lies well beyond the mouth
@@ -599,11 +613,10 @@ FarEnd traceBelowIleum(TracedPieces& t, const PieceChain& chain, PieceTracer& tr
                        DepthProbe& depthAt, double voxelMm, double fineMm)
 {
     FarEnd far;
-    const std::size_t lastPos = chain.order.size() - 1;
-    const std::size_t last = std::size_t(chain.order[lastPos]);
-    const bool reversed = chain.reversed[lastPos];
-    std::vector<Vec3d> pts = t.paths[last].pointsMm;
-    if (reversed) std::reverse(pts.begin(), pts.end());
+    LastPiece lp = lastPiece(t, chain);
+    const std::size_t last = lp.index;
+    const bool reversed = lp.reversed;
+    std::vector<Vec3d>& pts = lp.pointsMm;
     const auto narrow = narrowFarEnd(pts, [&](const Vec3d& p) { return depthAt(p); });
     if (!narrow) return far;
     const std::int32_t label = t.paths[last].label;
@@ -658,11 +671,10 @@ FarEnd traceBelowIleum(TracedPieces& t, const PieceChain& chain, PieceTracer& tr
 FarEnd stopAtAppendix(TracedPieces& t, const PieceChain& chain, DepthProbe& depthAt, double voxelMm, double fineMm)
 {
     FarEnd far;
-    const std::size_t lastPos = chain.order.size() - 1;
-    const std::size_t last = std::size_t(chain.order[lastPos]);
-    const bool reversed = chain.reversed[lastPos];
-    std::vector<Vec3d> pts = t.paths[last].pointsMm;
-    if (reversed) std::reverse(pts.begin(), pts.end());
+    LastPiece lp = lastPiece(t, chain);
+    const std::size_t last = lp.index;
+    const bool reversed = lp.reversed;
+    std::vector<Vec3d>& pts = lp.pointsMm;
     const auto mouth = thinFarEnd(pts, depthAt, fineMm);
     if (!mouth) return far;
     CenterlineFarBranch info;
@@ -759,49 +771,6 @@ Centerline resampleChain(const ChainedPath& c, double stepMm, DepthProbe& depthA
     }
     computeTangentsAndNormals(cl);
     return cl;
-}
-
-/// Stretches of the path closer to the wall than nearWallMm outside bridges.
-std::vector<CenterlineNearWall> nearWallStretches(const Centerline& cl, const CenterlineParams& params)
-{
-    std::vector<CenterlineNearWall> nearWall;
-    for (std::size_t i = 0; i < cl.points.size(); ++i) {
-        const CenterlinePoint& p = cl.points[i];
-        if (p.bridged || !(p.radiusMm < params.nearWallMm)) continue;
-        const double arc = double(i) * params.stepMm;
-        if (!nearWall.empty() && nearWall.back().toArcMm + 1.5 * params.stepMm >= arc) {
-            CenterlineNearWall& w = nearWall.back();
-            w.toArcMm = arc;
-            if (p.radiusMm < w.minRadiusMm) {
-                w.minRadiusMm = p.radiusMm;
-                w.positionMm = p.positionMm;
-            }
-        } else {
-            nearWall.push_back({arc, arc, p.radiusMm, p.positionMm});
-        }
-    }
-    return nearWall;
-}
-
-/// The turns between consecutive steps and the normal's steps, into the report.
-void reportTurns(const Centerline& cl, CenterlineReport& report)
-{
-    auto degrees = [](const Vec3d& a, const Vec3d& b) {
-        const double la = length(a), lb = length(b);
-        if (la == 0 || lb == 0) return 0.0;
-        return std::acos(std::clamp(dot(a, b) / (la * lb), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
-    };
-    const auto& cp = cl.points;
-    for (std::size_t i = 1; i < cp.size(); ++i) {
-        if (i + 1 < cp.size()) {
-            const double t = degrees(cp[i].positionMm - cp[i - 1].positionMm, cp[i + 1].positionMm - cp[i].positionMm);
-            report.maxTurnDeg = std::max(report.maxTurnDeg, t);
-            report.turnsOver30 += t > 30.0;
-        }
-        const double nrm = degrees(cp[i - 1].normal, cp[i].normal);
-        report.maxNormalStepDeg = std::max(report.maxNormalStepDeg, nrm);
-        report.normalStepsOver15 += nrm > 15.0;
-    }
 }
 
 /// Every piece (by size, as UsedPieces::bySize) with what the path made of it; bridges name

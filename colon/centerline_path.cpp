@@ -694,4 +694,47 @@ Vec3d frontOutward(const std::vector<Vec3d>& path, double voxelMm)
     return backOutward(r, voxelMm);
 }
 
+/// Stretches of the path closer to the wall than nearWallMm outside bridges.
+std::vector<CenterlineNearWall> nearWallStretches(const Centerline& cl, const CenterlineParams& params)
+{
+    std::vector<CenterlineNearWall> nearWall;
+    for (std::size_t i = 0; i < cl.points.size(); ++i) {
+        const CenterlinePoint& p = cl.points[i];
+        if (p.bridged || !(p.radiusMm < params.nearWallMm)) continue;
+        const double arc = double(i) * params.stepMm;
+        if (!nearWall.empty() && nearWall.back().toArcMm + 1.5 * params.stepMm >= arc) {
+            CenterlineNearWall& w = nearWall.back();
+            w.toArcMm = arc;
+            if (p.radiusMm < w.minRadiusMm) {
+                w.minRadiusMm = p.radiusMm;
+                w.positionMm = p.positionMm;
+            }
+        } else {
+            nearWall.push_back({arc, arc, p.radiusMm, p.positionMm});
+        }
+    }
+    return nearWall;
+}
+
+/// The turns between consecutive steps and the normal's steps, into the report.
+void reportTurns(const Centerline& cl, CenterlineReport& report)
+{
+    auto degrees = [](const Vec3d& a, const Vec3d& b) {
+        const double la = length(a), lb = length(b);
+        if (la == 0 || lb == 0) return 0.0;
+        return std::acos(std::clamp(dot(a, b) / (la * lb), -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+    };
+    const auto& cp = cl.points;
+    for (std::size_t i = 1; i < cp.size(); ++i) {
+        if (i + 1 < cp.size()) {
+            const double t = degrees(cp[i].positionMm - cp[i - 1].positionMm, cp[i + 1].positionMm - cp[i].positionMm);
+            report.maxTurnDeg = std::max(report.maxTurnDeg, t);
+            report.turnsOver30 += t > 30.0;
+        }
+        const double nrm = degrees(cp[i - 1].normal, cp[i].normal);
+        report.maxNormalStepDeg = std::max(report.maxNormalStepDeg, nrm);
+        report.normalStepsOver15 += nrm > 15.0;
+    }
+}
+
 } // namespace flyover::centerline_path

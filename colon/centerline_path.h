@@ -61,4 +61,9 @@ std::vector<Vec3d> removeKinks(const std::vector<Vec3d>& fine, const openvdb::Fl
 Vec3d backOutward(const std::vector<Vec3d>& path, double voxelMm);
 Vec3d frontOutward(const std::vector<Vec3d>& path, double voxelMm);
 
+/// Stretches of the path closer to the wall than nearWallMm outside bridges.
+std::vector<CenterlineNearWall> nearWallStretches(const Centerline& cl, const CenterlineParams& params);
+/// The turns between consecutive steps and the normal's steps, into the report.
+void reportTurns(const Centerline& cl, CenterlineReport& report);
+
 } // namespace flyover::centerline_path
