@@ -1,4 +1,5 @@
 #include "colon/anatomy_segments.h"
+#include "volume/vec3.h"
 
 #include <algorithm>
 #include <array>
@@ -9,8 +10,6 @@
 namespace flyover {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 struct Extent {
     double lo = 1e300, hi = -1e300;

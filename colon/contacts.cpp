@@ -14,6 +14,7 @@
 // in parallel, and so do the region flood's large batches (contact_regions.h) and the ways round
 // of 5a up to the first cut.
 #include "colon/contacts.h"
+#include "volume/vec3.h"
 
 #include "colon/contact_regions.h"
 #include "volume/threads.h"
@@ -47,7 +48,6 @@ using namespace lumen_index;
 /// every voxel visits each neighbouring pair once.
 constexpr int HALF_STEPS = 13;
 
-constexpr double PI = 3.14159265358979323846;
 
 
 /// Two touching regions: the saddle of D across their interface.

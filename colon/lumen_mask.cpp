@@ -1,6 +1,7 @@
 // External masks -> lumen level set (constrained smoothing of the binary surface, volume
 // restored by a constant offset), and lumen level set -> mask image on any lattice.
 #include "colon/lumen_mask.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 #include "volume/ingest.h"
@@ -663,7 +664,6 @@ LumenSegmentation segmentFromMask(const Image3<float>& mask, const SegmentParams
 
 void checkPlausibleColon(const LumenSegmentation& seg, const SegmentParams& params, const std::string& name)
 {
-    constexpr double PI = 3.14159265358979323846;
     double bigMl = 0, largestMl = 0;
     for (const LumenPiece& p : seg.pieces) {
         if (p.volumeMl >= params.minComponentMl) bigMl += p.volumeMl;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "colon/phantom_anatomy.h"
+#include "volume/vec3.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,8 +15,6 @@
 #include <vector>
 
 namespace flyover::phantom::detail {
-
-inline constexpr double PI = 3.14159265358979323846;
 
 /// Arc clearance (mm) of polyps, folds and collapsed stretches from the loops at a contact.
 inline constexpr double POLYP_CONTACT_CLEARANCE_MM = 30.0;

@@ -1,5 +1,6 @@
 // Polyp candidates from the shape of the lumen's level set (polyp_detect.h lists the steps).
 #include "colon/polyp_detect.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 #include "volume/seconds_since.h"
@@ -22,8 +23,6 @@ namespace {
 
 using openvdb::Coord;
 using openvdb::FloatGrid;
-
-constexpr double PI = 3.14159265358979323846;
 
 /// The quadric fit's stencil: offsets -2..2 on each axis, Gaussian weights of this sigma (voxels).
 constexpr int FIT_RADIUS = 2;

@@ -1,6 +1,7 @@
 // Rectal tube: thin pieces left out by a morphological opening, measured along their
 // geodesic axis, followed into the rectum by their ring, cut out (see rectal_tube.h).
 #include "colon/rectal_tube.h"
+#include "volume/vec3.h"
 
 #include "volume/segment_tools.h"
 
@@ -20,7 +21,6 @@ using openvdb::Coord;
 using BoolConstAccessor = openvdb::tree::ValueAccessor<const BoolTree>;
 using FloatConstAccessor = openvdb::tree::ValueAccessor<const openvdb::FloatTree>;
 
-constexpr double PI = 3.14159265358979323846;
 /// Width of the geodesic distance bins whose centroids make the tube's axis (mm).
 constexpr double AXIS_BIN_MM = 2.0;
 /// Largest piece looked at (mL): a 10 mm tube 500 mm long.

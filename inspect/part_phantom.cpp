@@ -2,6 +2,7 @@
 /// @brief The industrial part phantom (see part_phantom.h): analytic shapes, exact partial
 ///        volume near surfaces, separable Gaussian blur over a ring of slices, noise per row.
 #include "inspect/part_phantom.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 #include "inspect/voids.h"
@@ -18,7 +19,6 @@ namespace flyover {
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 /// Half the diagonal of a voxel: a surface farther than this from the centre misses the cube.
 constexpr double HALF_DIAGONAL = 0.8660254037844386;
 constexpr int SUPERSAMPLE = 4;    // 4 x 4 x 4 point samples per boundary voxel

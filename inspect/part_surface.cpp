@@ -28,7 +28,7 @@ template <typename GridT, typename Pred> void markVoxels(const GridT& grid, open
     }
 }
 
-struct GreyStats {
+struct MaterialAirStats {
     double materialSum = 0, airSum = 0;
     int64_t material = 0, air = 0;
 };
@@ -107,11 +107,11 @@ PartField makePartField(const openvdb::FloatGrid& ct, const PartAnalysis& analys
     // Half the contrast between material and air, from the band's voxels.
     const double threshold = analysis.threshold;
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(field->tree());
-    tbb::combinable<GreyStats> stats;
+    tbb::combinable<MaterialAirStats> stats;
     leaves.foreach([&](const openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
         auto ctAcc = ct.getConstAccessor();
         auto solidAcc = solid->getConstAccessor();
-        GreyStats& s = stats.local();
+        MaterialAirStats& s = stats.local();
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
             if (!box.isInside(ijk)) continue;
@@ -125,8 +125,8 @@ PartField makePartField(const openvdb::FloatGrid& ct, const PartAnalysis& analys
             }
         }
     }, true);
-    const GreyStats total = stats.combine([](const GreyStats& a, const GreyStats& b) {
-        return GreyStats{a.materialSum + b.materialSum, a.airSum + b.airSum, a.material + b.material, a.air + b.air};
+    const MaterialAirStats total = stats.combine([](const MaterialAirStats& a, const MaterialAirStats& b) {
+        return MaterialAirStats{a.materialSum + b.materialSum, a.airSum + b.airSum, a.material + b.material, a.air + b.air};
     });
     const double materialMean = total.material > 0 ? total.materialSum / double(total.material) : threshold + 1;
     const double airMean = total.air > 0 ? total.airSum / double(total.air) : threshold - 1;

@@ -29,6 +29,7 @@
 ///    dilated by 2 voxels (26-neighbours): beyond that m is 0 up to noise, and A is the mean
 ///    there, so nothing is lost or added.
 #include "inspect/voids.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 #include "volume/union_find.h"
@@ -60,7 +61,6 @@ using openvdb::Index64;
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 constexpr int HISTOGRAM_BINS = 4096;
 constexpr double MIN_SEPARABILITY = 0.8;
 constexpr int SHELL_VOXELS = 2;         // partial-volume shell and rim width (Chebyshev)
@@ -98,7 +98,7 @@ std::vector<TileBlock> tileBlocks(const FloatTree& tree, const CoordBBox& b, Ind
     return blocks;
 }
 
-struct GreyStats {
+struct ValueStats {
     double minV = std::numeric_limits<double>::infinity(), maxV = -std::numeric_limits<double>::infinity();
     double sum = 0;
     Index64 count = 0;
@@ -139,7 +139,7 @@ Acc reduceOverBox(const FloatTree& tree, const CoordBBox& b, const LeafFn& leafF
 }
 
 struct StatsAcc {
-    GreyStats s;
+    ValueStats s;
     void add(double v, Index64 n)
     {
         if (!std::isfinite(v)) { s.finite = false; return; }

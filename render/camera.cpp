@@ -1,4 +1,5 @@
 #include "render/camera.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 
@@ -9,8 +10,6 @@
 namespace flyover {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 double radians(double deg) { return deg * PI / 180.0; }
 

@@ -1,4 +1,5 @@
 #include "render/flyover_path.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 
@@ -13,8 +14,6 @@
 namespace flyover {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 /// tan(fov/2) of the checked parameters.
 double checkedTanHalf(const FlyoverParams& params, const FrameRadiusOptions& options)

@@ -28,7 +28,7 @@ constexpr double SLACK_MM = 60.0;        ///< stretches farther than nearest + t
 constexpr double GROUP_CELL_MM = 4.0;    ///< triangles grouped by centroid cell for candidates
 constexpr float NO_OWNER = std::numeric_limits<float>::quiet_NaN();
 
-struct Candidate {
+struct PointCandidate {
     float d2;
     uint32_t point;  ///< index into the sampled path points
 };
@@ -58,24 +58,24 @@ PathSamples samplePath(const Centerline& cl)
 
 /// For a group of triangles round `centre`: the nearest sampled point of each stretch, the
 /// MAX_STRETCHES nearest stretches within SLACK_MM of the nearest, nearest first.
-std::vector<Candidate> groupCandidates(const PathSamples& s, const Vec3d& centre)
+std::vector<PointCandidate> groupCandidates(const PathSamples& s, const Vec3d& centre)
 {
-    std::vector<Candidate> best(s.stretches, Candidate{std::numeric_limits<float>::infinity(), 0});
+    std::vector<PointCandidate> best(s.stretches, PointCandidate{std::numeric_limits<float>::infinity(), 0});
     for (uint32_t i = 0; i < s.position.size(); ++i) {
         const Vec3d d = s.position[i] - centre;
         const float d2 = float(dot(d, d));
-        Candidate& b = best[s.stretch[i]];
-        if (d2 < b.d2) b = Candidate{d2, i};
+        PointCandidate& b = best[s.stretch[i]];
+        if (d2 < b.d2) b = PointCandidate{d2, i};
     }
-    const auto last = std::remove_if(best.begin(), best.end(), [](const Candidate& c) { return !std::isfinite(c.d2); });
+    const auto last = std::remove_if(best.begin(), best.end(), [](const PointCandidate& c) { return !std::isfinite(c.d2); });
     best.erase(last, best.end());
     const std::size_t keep = std::min<std::size_t>(MAX_STRETCHES, best.size());
     std::partial_sort(best.begin(), best.begin() + std::ptrdiff_t(keep), best.end(),
-                      [](const Candidate& a, const Candidate& b) { return a.d2 < b.d2 || (a.d2 == b.d2 && a.point < b.point); });
+                      [](const PointCandidate& a, const PointCandidate& b) { return a.d2 < b.d2 || (a.d2 == b.d2 && a.point < b.point); });
     best.resize(keep);
     if (!best.empty()) {
         const float limit = std::sqrt(best.front().d2) + float(SLACK_MM);
-        best.erase(std::remove_if(best.begin(), best.end(), [&](const Candidate& c) { return c.d2 > limit * limit; }),
+        best.erase(std::remove_if(best.begin(), best.end(), [&](const PointCandidate& c) { return c.d2 > limit * limit; }),
                    best.end());
     }
     return best;
@@ -192,11 +192,11 @@ TriangleOwners triangleOwners(const RayScene& scene, const Centerline& cl)
             Vec3d centre{0, 0, 0};
             for (const uint32_t f : tris) centre = centre + centroid[f];
             centre = centre / double(tris.size());
-            const std::vector<Candidate> candidates = groupCandidates(samples, centre);
+            const std::vector<PointCandidate> candidates = groupCandidates(samples, centre);
             // Nearest stretch first: each candidate traces to the group's triangles still
             // without an owner whose front side faces it, 16 rays from one point at a time.
             std::vector<uint32_t> pending(tris), facing, rest;
-            for (const Candidate& c : candidates) {
+            for (const PointCandidate& c : candidates) {
                 if (pending.empty()) break;
                 const Vec3d& p = samples.position[c.point];
                 facing.clear();

@@ -1,4 +1,5 @@
 #include "render/overview.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 
@@ -8,8 +9,6 @@
 namespace flyover {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 /// Blends `colour` into pixel (x, y) with weight a in [0, 1].
 void blend(RgbImage& image, int x, int y, double a, const std::array<uint8_t, 3>& colour)

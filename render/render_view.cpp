@@ -1,4 +1,5 @@
 #include "render/render_view.h"
+#include "volume/vec3.h"
 
 #include "render/headlight_shade.h"
 #include "render/ray_scene_impl.h"
@@ -20,7 +21,6 @@ namespace flyover {
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 constexpr int TILES_PER_TASK = 8;  ///< a task renders up to 8 x 8 tiles (32 x 32 pixels)
 constexpr double GAMMA = 2.2;
 constexpr uint32_t NO_HIT = std::numeric_limits<uint32_t>::max();

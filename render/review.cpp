@@ -1,4 +1,5 @@
 #include "render/review.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 #include "volume/object_pool.h"
@@ -15,8 +16,6 @@
 namespace flyover {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 void validate(const ReviewParams& p)
 {
@@ -42,7 +41,7 @@ void validate(const ReviewParams& p)
 }
 
 /// A candidate view and the triangles it shows that were unseen when its round began.
-struct Candidate {
+struct ViewCandidate {
     ReviewView view;
     std::vector<uint32_t> shows;  ///< sorted, unique
 };
@@ -97,16 +96,16 @@ bool inLumen(const RayScene& scene, const Centerline& cl, std::size_t i0, const 
 }
 
 /// The candidates for one region (see the file comment of review.h).
-std::vector<Candidate> candidatesFor(const RayScene& scene, const Centerline& cl, const CoverageParams& cov,
+std::vector<ViewCandidate> candidatesFor(const RayScene& scene, const Centerline& cl, const CoverageParams& cov,
                                      const std::vector<double>& frameRadii, const ReviewParams& params,
                                      const TriangleGeometry& geo, const MissedRegion& region,
                                      const std::vector<uint32_t>& tris, std::vector<uint8_t>& inRegion, int round)
 {
-    std::vector<Candidate> out;
+    std::vector<ViewCandidate> out;
     const double step = cl.stepMm > 0 ? cl.stepMm : 1.0;
     const std::size_t i0 = region.nearestCenterlineIndex;
     auto base = [&](const char* kind) {
-        Candidate c;
+        ViewCandidate c;
         c.view.kind = kind;
         c.view.round = round;
         c.view.regionCentroidMm = region.centroidMm;
@@ -114,7 +113,7 @@ std::vector<Candidate> candidatesFor(const RayScene& scene, const Centerline& cl
         return c;
     };
     auto addPair = [&](const char* kind, std::size_t j, double rollDeg, double elevation) {
-        Candidate c = base(kind);
+        ViewCandidate c = base(kind);
         FlyoverParams fp = cov.flyover;
         fp.rollDeg = rollDeg;
         const double frame = frameRadii[j] * elevation;
@@ -165,7 +164,7 @@ std::vector<Candidate> candidatesFor(const RayScene& scene, const Centerline& cl
         for (int k = 0; k < 4 && dist > 1.0; ++k, dist *= 0.5) {
             const Vec3d eye = region.centroidMm + n * dist;
             if (blocked(scene, eye, region.centroidMm, inRegion) || !inLumen(scene, cl, i0, eye)) continue;
-            Candidate c = base("targeted_normal");
+            ViewCandidate c = base("targeted_normal");
             c.view.cameras.push_back(aimedCamera(eye, region.centroidMm, upHint, cov.flyover.fovDeg));
             c.view.centerlineIndex = i0;
             c.view.arcMm = double(i0) * step;
@@ -179,7 +178,7 @@ std::vector<Candidate> candidatesFor(const RayScene& scene, const Centerline& cl
         if (!(distance(eye, region.centroidMm) > 1.0) || blocked(scene, eye, region.centroidMm, inRegion) ||
             !inLumen(scene, cl, i0, eye))
             continue;
-        Candidate c = base("targeted_centerline");
+        ViewCandidate c = base("targeted_centerline");
         c.view.cameras.push_back(aimedCamera(eye, region.centroidMm, upHint, cov.flyover.fovDeg));
         c.view.centerlineIndex = i0;
         c.view.arcMm = double(i0) * step;
@@ -267,7 +266,7 @@ struct Worker {
 
 /// Each candidate's rays, marked as the coverage marks the fly-over's: its `shows` receive the
 /// triangles it shows that are not `seen` yet. Reports progress within review round `round`.
-void markCandidates(std::vector<Candidate>& cands, ObjectPool<Worker>& workers, const std::vector<uint8_t>& seen,
+void markCandidates(std::vector<ViewCandidate>& cands, ObjectPool<Worker>& workers, const std::vector<uint8_t>& seen,
                     const Centerline& cl, const CoverageParams& cov, const ReviewParams& params, int round,
                     Progress* progress)
 {
@@ -295,7 +294,7 @@ void markCandidates(std::vector<Candidate>& cands, ObjectPool<Worker>& workers, 
 /// into `views` while one gains at least params.minGainMm2, the target (`total` area times
 /// params.targetFraction) is not reached and the budget is not spent; updates `seen` and
 /// `seenArea`. Returns the number picked.
-std::size_t pickViews(const std::vector<Candidate>& cands, const TriangleGeometry& geo,
+std::size_t pickViews(const std::vector<ViewCandidate>& cands, const TriangleGeometry& geo,
                       const std::vector<long>& flyoverLabel, const ReviewParams& params, double total,
                       std::vector<uint8_t>& seen, double& seenArea, std::vector<ReviewView>& views)
 {
@@ -335,7 +334,7 @@ std::size_t pickViews(const std::vector<Candidate>& cands, const TriangleGeometr
 
 /// What the last review round left, for the reasons of the regions still missed.
 struct LastRound {
-    std::vector<Candidate> candidates;
+    std::vector<ViewCandidate> candidates;
     std::vector<uint8_t> targets;  ///< per triangle: in a region the last round planned for
     std::size_t picked = 0;
 };
@@ -351,7 +350,7 @@ void explainUnreached(const RayScene& scene, const Centerline& cl, const Triangl
         UnreachedRegion u;
         u.region = result.withReview.missed[r];
         for (const uint32_t f : finalTris[r]) inRegion[f] = 1;
-        for (const Candidate& c : last.candidates) {
+        for (const ViewCandidate& c : last.candidates) {
             double a = 0;
             for (const uint32_t f : c.shows)
                 if (inRegion[f]) a += geo.areaMm2[f];
@@ -441,7 +440,7 @@ ReviewResult planReview(const RayScene& scene, const Centerline& cl, const Cover
         if (current.missed.empty()) break;
         roundsRun = round;
         const std::size_t nRegions = std::min(current.missed.size(), params.maxRegionsPerRound);
-        std::vector<Candidate> cands;
+        std::vector<ViewCandidate> cands;
         for (std::size_t r = 0; r < nRegions; ++r) {
             auto c = candidatesFor(scene, cl, cov, frameRadii, params, geo, current.missed[r], regionTris[r], inRegion,
                                    round);

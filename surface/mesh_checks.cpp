@@ -1,4 +1,5 @@
 #include "surface/mesh_checks.h"
+#include "volume/vec3.h"
 
 #include "surface/ray_winding.h"
 
@@ -18,25 +19,23 @@ namespace flyover {
 
 namespace {
 
-using Vec3d = OpenMesh::Vec3d;
-
-constexpr double PI = 3.14159265358979323846;
+using Point3d = OpenMesh::Vec3d;
 
 /// Below this many (probes x faces) a container's probes get the solid-angle sum directly.
 constexpr std::size_t RAY_NESTING_MIN_WORK = std::size_t(1) << 22;
 
-Vec3d pointOf(const TriMesh& mesh, TriMesh::VertexHandle v)
+Point3d pointOf(const TriMesh& mesh, TriMesh::VertexHandle v)
 {
-    return OpenMesh::vector_cast<Vec3d>(mesh.point(v));
+    return OpenMesh::vector_cast<Point3d>(mesh.point(v));
 }
 
 /// A triangle as three points, for the volume and winding sums (mesh faces and loop caps).
-using Triangle = std::array<Vec3d, 3>;
+using Triangle = std::array<Point3d, 3>;
 
 struct Box {
-    Vec3d lo{std::numeric_limits<double>::max()};
-    Vec3d hi{-std::numeric_limits<double>::max()};
-    void add(const Vec3d& p)
+    Point3d lo{std::numeric_limits<double>::max()};
+    Point3d hi{-std::numeric_limits<double>::max()};
+    void add(const Point3d& p)
     {
         lo.minimize(p);
         hi.maximize(p);
@@ -54,14 +53,14 @@ struct ComponentWork {
     MeshComponent info;
     std::vector<Triangle> caps;  ///< fans closing its boundary loops
     Box box;
-    Vec3d probe{0.0};            ///< a vertex of the component, for the nesting test
+    Point3d probe{0.0};            ///< a vertex of the component, for the nesting test
 };
 
 /// Solid angle (steradians, signed by winding) of triangle t seen from p
 /// (Van Oosterom and Strackee's formula).
-double solidAngle(const Triangle& t, const Vec3d& p)
+double solidAngle(const Triangle& t, const Point3d& p)
 {
-    const Vec3d a = t[0] - p, b = t[1] - p, c = t[2] - p;
+    const Point3d a = t[0] - p, b = t[1] - p, c = t[2] - p;
     const double la = a.norm(), lb = b.norm(), lc = c.norm();
     const double numerator = OpenMesh::dot(a, OpenMesh::cross(b, c));
     const double denominator = la * lb * lc + OpenMesh::dot(a, b) * lc + OpenMesh::dot(a, c) * lb +
@@ -71,7 +70,7 @@ double solidAngle(const Triangle& t, const Vec3d& p)
 
 /// Generalised winding number of p with respect to the faces of one component (and its caps).
 double windingNumber(const TriMesh& mesh, const std::vector<TriMesh::FaceHandle>& faces,
-                     const std::vector<Triangle>& caps, const Vec3d& p)
+                     const std::vector<Triangle>& caps, const Point3d& p)
 {
     const double sum = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, faces.size(), 4096), 0.0,
@@ -91,7 +90,7 @@ double windingNumber(const TriMesh& mesh, const std::vector<TriMesh::FaceHandle>
 }
 
 /// det(p0 - ref, p1 - ref, p2 - ref): six times the signed volume of the tetrahedron.
-double tripleProduct(const Triangle& t, const Vec3d& ref)
+double tripleProduct(const Triangle& t, const Point3d& ref)
 {
     return OpenMesh::dot(t[0] - ref, OpenMesh::cross(t[1] - ref, t[2] - ref));
 }
@@ -116,7 +115,7 @@ bool isDegenerateFace(const TriMesh& mesh, TriMesh::FaceHandle face)
 
 namespace {
 
-/// meanDihedralAngleDeg with the vertex positions `pointAt(v)` (a Vec3d) instead of the mesh's.
+/// meanDihedralAngleDeg with the vertex positions `pointAt(v)` (a Point3d) instead of the mesh's.
 template<typename PointAt>
 double meanDihedralAngleDegAt(const TriMesh& mesh, const PointAt& pointAt)
 {
@@ -124,7 +123,7 @@ double meanDihedralAngleDegAt(const TriMesh& mesh, const PointAt& pointAt)
         double angle = 0;
         int64_t count = 0;
     };
-    auto unitNormal = [&](TriMesh::FaceHandle f, Vec3d& n) {
+    auto unitNormal = [&](TriMesh::FaceHandle f, Point3d& n) {
         Triangle t;
         int k = 0;
         for (const auto v : mesh.fv_range(f)) t[std::size_t(k++)] = pointAt(v);
@@ -140,7 +139,7 @@ double meanDihedralAngleDegAt(const TriMesh& mesh, const PointAt& pointAt)
                 const TriMesh::EdgeHandle e{int(i)};
                 const TriMesh::FaceHandle f0 = mesh.face_handle(mesh.halfedge_handle(e, 0));
                 const TriMesh::FaceHandle f1 = mesh.face_handle(mesh.halfedge_handle(e, 1));
-                Vec3d n0, n1;
+                Point3d n0, n1;
                 if (!f0.is_valid() || !f1.is_valid() || !unitNormal(f0, n0) || !unitNormal(f1, n1))
                     continue;
                 // atan2 of |cross| and dot stays accurate for nearly parallel normals.
@@ -167,7 +166,7 @@ double meanDihedralAngleDeg(const TriMesh& mesh)
 double meanDihedralAngleDeg(const TriMesh& mesh, const std::vector<TriMesh::Point>& points)
 {
     return meanDihedralAngleDegAt(mesh, [&](TriMesh::VertexHandle v) {
-        return OpenMesh::vector_cast<Vec3d>(points[std::size_t(v.idx())]);
+        return OpenMesh::vector_cast<Point3d>(points[std::size_t(v.idx())]);
     });
 }
 
@@ -257,7 +256,7 @@ void capBoundaryLoops(const TriMesh& mesh, const PointAt& pointAt, const std::ve
             seen[std::size_t(g.idx())] = 1;
             loop.push_back(g);
         }
-        Vec3d centroid(0.0);
+        Point3d centroid(0.0);
         for (const auto g : loop) centroid += pointAt(mesh.from_vertex_handle(g));
         centroid /= double(loop.size());
         for (const auto g : loop)
@@ -275,7 +274,7 @@ void measureComponent(const TriMesh& mesh, const PointAt& pointAt, const std::ve
 {
     w.info.faces = int64_t(faces.size());
     // A reference point near the component keeps float cancellation small.
-    const Vec3d ref = 0.5 * (w.box.lo + w.box.hi);
+    const Point3d ref = 0.5 * (w.box.lo + w.box.hi);
     struct Sums {
         double area = 0, volume6 = 0;
         int64_t degenerate = 0;
@@ -371,7 +370,7 @@ void addComponents(const std::vector<ComponentWork>& work, MeshCheck& check)
     }
 }
 
-/// checkMesh with the vertex positions `pointAt(v)` (a Vec3d) instead of the mesh's; without
+/// checkMesh with the vertex positions `pointAt(v)` (a Point3d) instead of the mesh's; without
 /// `nesting` every component's nestingDepth stays 0 (the area and volume do not depend on it).
 template<typename PointAt>
 MeshCheck checkMeshAt(const TriMesh& mesh, const PointAt& pointAt, bool nesting)
@@ -402,7 +401,7 @@ MeshCheck checkMesh(const TriMesh& mesh)
 MeshMeasures measureMesh(const TriMesh& mesh, const std::vector<TriMesh::Point>& points)
 {
     const MeshCheck check = checkMeshAt(
-        mesh, [&](TriMesh::VertexHandle v) { return OpenMesh::vector_cast<Vec3d>(points[std::size_t(v.idx())]); },
+        mesh, [&](TriMesh::VertexHandle v) { return OpenMesh::vector_cast<Point3d>(points[std::size_t(v.idx())]); },
         false);
     return {check.areaMm2, check.enclosedVolumeMm3};
 }

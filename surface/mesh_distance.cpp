@@ -19,19 +19,19 @@ namespace flyover {
 
 namespace {
 
-using Vec3d = OpenMesh::Vec3d;
-using Triangle = std::array<Vec3d, 3>;
+using Point3d = OpenMesh::Vec3d;
+using Triangle = std::array<Point3d, 3>;
 
 /// Squared distance from p to the closest point of triangle t: the closest point lies in
 /// one of seven regions (the face, three edges, three vertices), found from the signs of
 /// the barycentric-like dot products.
-double squaredDistanceToTriangle(const Vec3d& p, const Triangle& t)
+double squaredDistanceToTriangle(const Point3d& p, const Triangle& t)
 {
-    const Vec3d ab = t[1] - t[0], ac = t[2] - t[0], ap = p - t[0];
+    const Point3d ab = t[1] - t[0], ac = t[2] - t[0], ap = p - t[0];
     const double d1 = OpenMesh::dot(ab, ap), d2 = OpenMesh::dot(ac, ap);
     if (d1 <= 0 && d2 <= 0) return ap.sqrnorm();  // vertex a
 
-    const Vec3d bp = p - t[1];
+    const Point3d bp = p - t[1];
     const double d3 = OpenMesh::dot(ab, bp), d4 = OpenMesh::dot(ac, bp);
     if (d3 >= 0 && d4 <= d3) return bp.sqrnorm();  // vertex b
 
@@ -41,7 +41,7 @@ double squaredDistanceToTriangle(const Vec3d& p, const Triangle& t)
         return (p - (t[0] + s * ab)).sqrnorm();
     }
 
-    const Vec3d cp = p - t[2];
+    const Point3d cp = p - t[2];
     const double d5 = OpenMesh::dot(ab, cp), d6 = OpenMesh::dot(ac, cp);
     if (d6 >= 0 && d5 <= d6) return cp.sqrnorm();  // vertex c
 
@@ -77,8 +77,8 @@ public:
         for (const auto f : mesh.faces()) {
             Triangle t;
             int k = 0;
-            for (const auto v : mesh.fv_range(f)) t[std::size_t(k++)] = OpenMesh::vector_cast<Vec3d>(mesh.point(v));
-            for (const Vec3d& p : t) {
+            for (const auto v : mesh.fv_range(f)) t[std::size_t(k++)] = OpenMesh::vector_cast<Point3d>(mesh.point(v));
+            for (const Point3d& p : t) {
                 mLo.minimize(p);
                 mHi.maximize(p);
             }
@@ -87,7 +87,7 @@ public:
         }
         // Cells about twice the mean edge: a few triangles per cell, few cells per triangle.
         const double meanEdge = edgeSum / (3.0 * double(std::max<std::size_t>(1, mTriangles.size())));
-        const Vec3d extent = mHi - mLo;
+        const Point3d extent = mHi - mLo;
         mCell = std::max(2.0 * meanEdge, 1e-9 * std::max({extent[0], extent[1], extent[2], 1.0}));
         // Keep the cell count bounded (a few large triangles spread far apart).
         while (cellCountFor(mCell) > 64.0 * double(mTriangles.size()) + 1e6) mCell *= 1.5;
@@ -95,8 +95,8 @@ public:
 
         for (std::size_t i = 0; i < mTriangles.size(); ++i) {
             const Triangle& t = mTriangles[i];
-            Vec3d lo = t[0], hi = t[0];
-            for (const Vec3d& p : t) {
+            Point3d lo = t[0], hi = t[0];
+            for (const Point3d& p : t) {
                 lo.minimize(p);
                 hi.maximize(p);
             }
@@ -126,7 +126,7 @@ public:
     bool empty() const { return mTriangles.empty(); }
 
     /// Distance (mm) from p to the nearest triangle.
-    double distance(const Vec3d& p) const
+    double distance(const Point3d& p) const
     {
         const std::array<int64_t, 3> c = cellOf(p);  // clamped into the grid
         const int64_t maxRing = std::max({mDims[0], mDims[1], mDims[2]});
@@ -179,7 +179,7 @@ private:
         return n;
     }
 
-    std::array<int64_t, 3> cellOf(const Vec3d& p) const
+    std::array<int64_t, 3> cellOf(const Point3d& p) const
     {
         std::array<int64_t, 3> c;
         for (int a = 0; a < 3; ++a) {
@@ -216,7 +216,7 @@ private:
     std::vector<Triangle> mTriangles;
     std::vector<std::pair<uint64_t, uint32_t>> mEntries;  ///< (cell key, triangle), sorted
     std::vector<Slot> mSlots;
-    Vec3d mLo{std::numeric_limits<double>::max()}, mHi{-std::numeric_limits<double>::max()};
+    Point3d mLo{std::numeric_limits<double>::max()}, mHi{-std::numeric_limits<double>::max()};
     double mCell = 1;
     int64_t mDims[3] = {1, 1, 1};
 };
@@ -255,7 +255,7 @@ SurfaceDistance surfaceDistance(const TriMesh& from, const TriMesh& to, double s
         tbb::blocked_range<std::size_t>(0, from.n_vertices(), 1024), DistanceSum{},
         [&](const tbb::blocked_range<std::size_t>& r, DistanceSum acc) {
             for (std::size_t i = r.begin(); i != r.end(); ++i)
-                acc.add(grid.distance(OpenMesh::vector_cast<Vec3d>(from.point(TriMesh::VertexHandle(int(i))))));
+                acc.add(grid.distance(OpenMesh::vector_cast<Point3d>(from.point(TriMesh::VertexHandle(int(i))))));
             return acc;
         },
         DistanceSum::join);
@@ -266,11 +266,11 @@ SurfaceDistance surfaceDistance(const TriMesh& from, const TriMesh& to, double s
                 Triangle t;
                 int k = 0;
                 for (const auto v : from.fv_range(TriMesh::FaceHandle(int(i))))
-                    t[std::size_t(k++)] = OpenMesh::vector_cast<Vec3d>(from.point(v));
+                    t[std::size_t(k++)] = OpenMesh::vector_cast<Point3d>(from.point(v));
                 const double longest =
                     std::sqrt(std::max({(t[1] - t[0]).sqrnorm(), (t[2] - t[1]).sqrnorm(), (t[0] - t[2]).sqrnorm()}));
                 const int n = std::max(1, int(std::ceil(longest / sampleSpacingMm)));
-                const Vec3d u = (t[1] - t[0]) / double(n), v = (t[2] - t[0]) / double(n);
+                const Point3d u = (t[1] - t[0]) / double(n), v = (t[2] - t[0]) / double(n);
                 // Centroids of the n^2 sub-triangles: "up" ones at (i + 1/3, j + 1/3), "down"
                 // ones at (i + 2/3, j + 2/3) in units of u and v.
                 for (int a = 0; a < n; ++a)

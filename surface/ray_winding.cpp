@@ -14,17 +14,17 @@ namespace flyover {
 
 namespace {
 
-using Vec3d = RayWindingCounter::Vec3d;
+using Point3d = RayWindingCounter::Vec3d;
 
-Vec3d unit(const Vec3d& v) { return v / v.norm(); }
+Point3d unit(const Point3d& v) { return v / v.norm(); }
 
 } // namespace
 
-const std::array<Vec3d, 3>& RayWindingCounter::directions()
+const std::array<Point3d, 3>& RayWindingCounter::directions()
 {
     // Components of no simple ratio: no lattice row of a marching-cubes mesh runs along them.
-    static const std::array<Vec3d, 3> dirs{unit(Vec3d(0.8017, 0.4612, 0.3803)), unit(Vec3d(-0.3319, 0.8791, 0.3421)),
-                                           unit(Vec3d(0.2903, -0.3779, 0.8793))};
+    static const std::array<Point3d, 3> dirs{unit(Point3d(0.8017, 0.4612, 0.3803)), unit(Point3d(-0.3319, 0.8791, 0.3421)),
+                                           unit(Point3d(0.2903, -0.3779, 0.8793))};
     return dirs;
 }
 
@@ -34,7 +34,7 @@ RayWindingCounter::Triangle RayWindingCounter::triangle(std::size_t i) const
     Triangle t;
     int k = 0;
     for (const auto v : mMesh.fv_range(mFaces[i]))
-        t[std::size_t(k++)] = OpenMesh::vector_cast<Vec3d>(mMesh.point(v));
+        t[std::size_t(k++)] = OpenMesh::vector_cast<Point3d>(mMesh.point(v));
     return t;
 }
 
@@ -47,12 +47,12 @@ bool RayWindingCounter::cellOf(double s, double t, int64_t& cell) const
 }
 
 RayWindingCounter::RayWindingCounter(const TriMesh& mesh, const std::vector<TriMesh::FaceHandle>& faces,
-                                     const std::vector<Triangle>& caps, const Vec3d& direction)
+                                     const std::vector<Triangle>& caps, const Point3d& direction)
     : mMesh(mesh), mFaces(faces), mCaps(caps)
 {
     mDir = unit(direction);
     // Two axes across the ray.
-    const Vec3d helper = std::fabs(mDir[0]) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0);
+    const Point3d helper = std::fabs(mDir[0]) < 0.9 ? Point3d(1, 0, 0) : Point3d(0, 1, 0);
     mE1 = unit(OpenMesh::cross(mDir, helper));
     mE2 = OpenMesh::cross(mDir, mE1);
 
@@ -62,8 +62,8 @@ RayWindingCounter::RayWindingCounter(const TriMesh& mesh, const std::vector<TriM
     // Bounds across the ray (s, t) and the surface's size (for the tolerance).
     double loS = std::numeric_limits<double>::max(), loT = loS, hiS = -loS, hiT = -loS, loH = loS, hiH = -loS;
     for (std::size_t i = 0; i < n; ++i)
-        for (const Vec3d& p : triangle(i)) {
-            const Vec3d q = project(p);
+        for (const Point3d& p : triangle(i)) {
+            const Point3d q = project(p);
             loS = std::min(loS, q[0]), hiS = std::max(hiS, q[0]);
             loT = std::min(loT, q[1]), hiT = std::max(hiT, q[1]);
             loH = std::min(loH, q[2]), hiH = std::max(hiH, q[2]);
@@ -85,8 +85,8 @@ RayWindingCounter::RayWindingCounter(const TriMesh& mesh, const std::vector<TriM
     const std::size_t nCells = std::size_t(mNs * mNt);
     auto cellRange = [&](std::size_t i, int64_t& s0, int64_t& s1, int64_t& t0, int64_t& t1) {
         double a0 = std::numeric_limits<double>::max(), b0 = a0, a1 = -a0, b1 = -a0;
-        for (const Vec3d& p : triangle(i)) {
-            const Vec3d q = project(p);
+        for (const Point3d& p : triangle(i)) {
+            const Point3d q = project(p);
             a0 = std::min(a0, q[0]), a1 = std::max(a1, q[0]);
             b0 = std::min(b0, q[1]), b1 = std::max(b1, q[1]);
         }
@@ -121,24 +121,24 @@ RayWindingCounter::RayWindingCounter(const TriMesh& mesh, const std::vector<TriM
     });
 }
 
-std::optional<int> RayWindingCounter::winding(const Vec3d& p) const
+std::optional<int> RayWindingCounter::winding(const Point3d& p) const
 {
-    const Vec3d q = project(p);
+    const Point3d q = project(p);
     int64_t cell;
     // The grid reaches 2 tolerances beyond every face's shadow: outside it, no crossing.
     if (!cellOf(q[0], q[1], cell)) return 0;
     int wn = 0;
     for (uint64_t k = mStart[std::size_t(cell)]; k < mStart[std::size_t(cell) + 1]; ++k) {
         const Triangle tri = triangle(mItems[std::size_t(k)]);
-        std::array<Vec3d, 3> a;
+        std::array<Point3d, 3> a;
         for (int i = 0; i < 3; ++i) a[std::size_t(i)] = project(tri[std::size_t(i)]) - q;
         // Edge functions at the point (the origin now): twice the signed areas of (origin, a_i,
         // a_i+1); their sum is twice the face's signed area across the ray, whose sign tells
         // the face's side along the ray.
         std::array<double, 3> e{}, len{};
         for (int i = 0; i < 3; ++i) {
-            const Vec3d& u = a[std::size_t(i)];
-            const Vec3d& v = a[std::size_t((i + 1) % 3)];
+            const Point3d& u = a[std::size_t(i)];
+            const Point3d& v = a[std::size_t((i + 1) % 3)];
             e[std::size_t(i)] = u[0] * v[1] - u[1] * v[0];
             len[std::size_t(i)] = std::hypot(v[0] - u[0], v[1] - u[1]);
         }

@@ -20,7 +20,7 @@ namespace flyover {
 
 namespace {
 
-using Vec3d = OpenMesh::Vec3d;
+using Point3d = OpenMesh::Vec3d;
 
 /// Vertex adjacency in compressed rows: the neighbours of v are
 /// neighbours[offsets[v] .. offsets[v + 1]); fixed vertices have none.
@@ -65,12 +65,12 @@ Adjacency buildAdjacency(const TriMesh& mesh, int64_t& fixedVertices)
 
 /// The umbrella update of vertex v (local indices into `in`): in + weight * (mean of the
 /// neighbours - in), the neighbours summed in their row's order; a vertex without a row stays.
-inline Vec3d umbrellaUpdate(const uint32_t* offsets, const int* neighbours, const Vec3d* in, std::size_t v,
+inline Point3d umbrellaUpdate(const uint32_t* offsets, const int* neighbours, const Point3d* in, std::size_t v,
                             double weight)
 {
     const std::size_t b = offsets[v], e = offsets[v + 1];
     if (b == e) return in[v];
-    Vec3d mean(0.0);
+    Point3d mean(0.0);
     for (std::size_t k = b; k != e; ++k) mean += in[std::size_t(neighbours[k])];
     mean /= double(e - b);
     return in[v] + weight * (mean - in[v]);
@@ -138,10 +138,10 @@ public:
     }
 
     /// `steps` (<= DEPTH) Jacobi steps from `in` into `out`, step i with weights[i].
-    void run(const std::vector<Vec3d>& in, std::vector<Vec3d>& out, const double* weights, int steps) const
+    void run(const std::vector<Point3d>& in, std::vector<Point3d>& out, const double* weights, int steps) const
     {
         struct Scratch {
-            std::vector<Vec3d> current, next;
+            std::vector<Point3d> current, next;
         };
         tbb::enumerable_thread_specific<Scratch> scratch;
         tbb::parallel_for(std::size_t(0), mBlocks.size(), [&](std::size_t bi) {
@@ -189,9 +189,9 @@ void smoothMeshTaubin(TriMesh& mesh, const TaubinParams& params, SmoothReport* r
     SmoothReport rep;
     const Adjacency adjacency = buildAdjacency(mesh, rep.fixedVertices);
     // Positions in double: hundreds of small steps in float would drift by rounding.
-    std::vector<Vec3d> original(mesh.n_vertices());
-    for (const auto v : mesh.vertices()) original[std::size_t(v.idx())] = OpenMesh::vector_cast<Vec3d>(mesh.point(v));
-    std::vector<Vec3d> p = original, tmp(p.size());
+    std::vector<Point3d> original(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) original[std::size_t(v.idx())] = OpenMesh::vector_cast<Point3d>(mesh.point(v));
+    std::vector<Point3d> p = original, tmp(p.size());
     const double mu = params.mu();
     // 2 * iterations steps, lambda then mu, TiledSweeps::DEPTH at a time.
     const int steps = 2 * params.iterations;

@@ -1,4 +1,5 @@
 #include "view/view_study.h"
+#include "volume/vec3.h"
 
 #include "pipeline/artifact_io.h"
 #include "colon/render_settings.h"
@@ -25,8 +26,6 @@ using nlohmann::json;
 namespace flyover {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 json vec3(const Vec3d& v) { return json::array({v.x, v.y, v.z}); }
 

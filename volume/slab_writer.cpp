@@ -3,6 +3,7 @@
 #include "volume/slab_writer.h"
 
 #include "volume/error.h"
+#include "volume/io/io_util.h"
 
 #include <nifti/nifti1.h>
 #include <unistd.h>
@@ -20,16 +21,14 @@ namespace fs = std::filesystem;
 
 namespace flyover {
 
-namespace {
-
 static_assert(sizeof(nifti_1_header) == 348, "NIfTI-1 header must be 348 bytes");
 
-enum class Format { Nii, NiiGz, Nrrd };
+/// The slab writer's output formats (outside the anonymous namespace: SlabWriter::Impl holds one).
+enum class SlabFormat { Nii, NiiGz, Nrrd };
 
-bool endsWith(const std::string& s, const std::string& suffix)
-{
-    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
+namespace {
+
+using imageio::endsWith;
 
 bool hostIsLittleEndian()
 {
@@ -102,7 +101,7 @@ struct SlabWriter::Impl {
     std::string path;
     fs::path tmp;
     ImageGeometry geometry;
-    Format format = Format::Nii;
+    SlabFormat format = SlabFormat::Nii;
     std::FILE* file = nullptr;
     gzFile gz = nullptr;
     int64_t slicesWritten = 0;
@@ -148,15 +147,15 @@ SlabWriter::SlabWriter(const std::string& path, const ImageGeometry& geometry) :
     Impl& m = *mImpl;
     m.path = path;
     m.geometry = geometry;
-    if (endsWith(path, ".nii.gz")) m.format = Format::NiiGz;
-    else if (endsWith(path, ".nii")) m.format = Format::Nii;
-    else if (endsWith(path, ".nrrd")) m.format = Format::Nrrd;
+    if (endsWith(path, ".nii.gz")) m.format = SlabFormat::NiiGz;
+    else if (endsWith(path, ".nii")) m.format = SlabFormat::Nii;
+    else if (endsWith(path, ".nrrd")) m.format = SlabFormat::Nrrd;
     else throw ParameterError(path + ": unknown volume format (expected .nii, .nii.gz or .nrrd)");
     if (geometry.direction != identityMat3())
         throw ParameterError(path + ": the slab writer writes axis-aligned (identity direction) volumes only");
     for (int a = 0; a < 3; ++a) {
         if (!(geometry.size[a] > 0)) throw ParameterError(path + ": empty volume size");
-        if (m.format != Format::Nrrd && geometry.size[a] > 32767)
+        if (m.format != SlabFormat::Nrrd && geometry.size[a] > 32767)
             throw ParameterError(path + ": NIfTI-1 holds at most 32767 voxels along an axis");
         if (!(geometry.spacingMm[a] > 0) || !std::isfinite(geometry.spacingMm[a]))
             throw ParameterError(path + ": voxel size must be > 0 and finite");
@@ -165,14 +164,14 @@ SlabWriter::SlabWriter(const std::string& path, const ImageGeometry& geometry) :
 
     const fs::path target(path);
     m.tmp = target.parent_path() / (".tmp-" + std::to_string(::getpid()) + "-" + target.filename().string());
-    if (m.format == Format::NiiGz) {
+    if (m.format == SlabFormat::NiiGz) {
         m.gz = ::gzopen(m.tmp.c_str(), "wb1");
         if (!m.gz) throw InputError(path + ": cannot create (" + std::string(std::strerror(errno)) + ")");
     } else {
         m.file = std::fopen(m.tmp.c_str(), "wb");
         if (!m.file) throw InputError(path + ": cannot create (" + std::string(std::strerror(errno)) + ")");
     }
-    if (m.format == Format::Nrrd) {
+    if (m.format == SlabFormat::Nrrd) {
         const std::string h = nrrdHeader(geometry);
         m.write(h.data(), h.size());
     } else {

@@ -8,6 +8,9 @@
 
 namespace flyover {
 
+/// pi, for every module (one definition, so files can share a unity-build batch).
+inline constexpr double PI = 3.14159265358979323846;
+
 struct Vec3d {
     double x = 0.0, y = 0.0, z = 0.0;
 

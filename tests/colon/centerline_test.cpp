@@ -1,6 +1,7 @@
 // Centerline extraction against tubes with a known axis (style.md §12): distance to the true
 // curve, length, endpoints, uniform step, frames.
 #include "colon/centerline.h"
+#include "volume/vec3.h"
 #include "colon/centerline_far_end.h"
 
 #include "tests/shapes/test_shapes.h"
@@ -29,8 +30,6 @@ namespace {
 
 using test::Axis;
 using test::Frame;
-
-constexpr double PI = 3.14159265358979323846;
 
 struct TubeCase {
     std::string name;

@@ -3,6 +3,7 @@
 // the tube's own axis (no shortcut), starts at the lower end; narrow places that close no
 // cycle (a collapsed stretch, beads) are never cut.
 #include "colon/contacts.h"
+#include "volume/vec3.h"
 
 #include "tests/shapes/test_shapes.h"
 #include "colon/centerline.h"
@@ -23,8 +24,6 @@ namespace {
 
 using test::Axis;
 using test::Frame;
-
-constexpr double PI = 3.14159265358979323846;
 
 /// a = min(a, b) on b's active voxels (a union of two sdfs on the same frame that keeps every
 /// interior voxel active, as the centerline expects; openvdb's csgUnion prunes the interior).

@@ -3,6 +3,7 @@
 // mask, separations). Only the small size is generated; the anatomy alone is built for
 // many seeds where the voxels are not needed.
 #include "colon/phantom.h"
+#include "volume/vec3.h"
 #include "tests/colon/truth_arc.h"
 #include "colon/phantom_anatomy.h"
 #include "volume/error.h"
@@ -26,7 +27,6 @@ namespace ph = flyover::phantom;
 
 constexpr uint64_t SEED = 1;
 constexpr double NOISE_HU = 15.0;
-constexpr double PI = 3.14159265358979323846;
 
 std::string describe(PhantomSize size, uint64_t seed)
 {

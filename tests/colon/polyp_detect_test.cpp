@@ -102,7 +102,7 @@ TEST(PolypDetect, CapOnTheWallFoundWithItsSize)
             EXPECT_LE(distance(c.centroidMm, flyover::Vec3d{TUBE_RADIUS_MM, 0, 0}), radius + 0.5) << what;
             EXPECT_NEAR(c.sizeMm, 2 * radius, std::max(1.5, 0.2 * 2 * radius)) << what;
             EXPECT_NEAR(c.heightMm, radius, std::max(1.0, 0.25 * radius)) << what;
-            const double hemisphereMm3 = 2.0 / 3.0 * test::PI * radius * radius * radius;
+            const double hemisphereMm3 = 2.0 / 3.0 * PI * radius * radius * radius;
             EXPECT_NEAR(c.volumeMm3, hemisphereMm3, 0.5 * hemisphereMm3 + 10 * h * h * h) << what;
             EXPECT_EQ(c.morphology, "sessile") << what;
             EXPECT_LT(c.upDir.x, -0.9) << "up points into the lumen, -x: " << what;
@@ -122,7 +122,7 @@ TEST(PolypDetect, PlainWallGivesNoCandidate)
 
 TEST(PolypDetect, FoldLikeRidgeGivesNoCandidate)
 {
-    for (const double halfAngle : {test::PI, 0.6 * test::PI, 0.3 * test::PI}) {
+    for (const double halfAngle : {PI, 0.6 * PI, 0.3 * PI}) {
         const auto sdf = grid([&](const Vec3d& p) { return withFold(p, 2.5, halfAngle); }, 0.75);
         const PolypDetection d = detectPolyps(*sdf, PolypParams{});
         EXPECT_TRUE(d.candidates.empty()) << "fold over +-" << halfAngle << " rad: " << describe(d);
@@ -153,7 +153,7 @@ TEST(PolypDetect, CapBesideAFoldStillFound)
     const double radius = 4.0, half = 2.5;
     const Vec3d capCentre(TUBE_RADIUS_MM, 0, half + 1.0 + radius);
     const auto sdf = grid(
-        [&](const Vec3d& p) { return std::max(withFold(p, half, test::PI), radius - (p - capCentre).length()); }, 0.75);
+        [&](const Vec3d& p) { return std::max(withFold(p, half, PI), radius - (p - capCentre).length()); }, 0.75);
     const PolypDetection d = detectPolyps(*sdf, PolypParams{});
     ASSERT_EQ(d.candidates.size(), 1u) << describe(d);
     const PolypRegion& c = d.candidates[0];

@@ -1,5 +1,6 @@
 // Lumen segmentation against noisy HU phantoms with analytic ground truth (style.md §12).
 #include "colon/segment.h"
+#include "volume/vec3.h"
 
 #include "tests/shapes/test_shapes.h"
 #include "colon/centerline.h"
@@ -28,8 +29,6 @@ namespace {
 using test::Axis;
 using test::HuFeature;
 using test::HuPhantom;
-
-constexpr double PI = 3.14159265358979323846;
 
 /// Body of 100 x 100 x 180 voxels at 1 mm in a rotated, translated frame.
 HuPhantom basePhantom(std::uint64_t seed)

@@ -130,7 +130,9 @@ TEST_F(InspectTest, VoidsCsvJsonCacheAndVisibility)
     EXPECT_TRUE(fs::exists(study + "/overview.png"));
     const json manifest = readJson(study + "/manifest.json");
     EXPECT_EQ(manifest.at("pipeline"), "inspect");
-    if (haveFfmpeg()) EXPECT_GT(fs::file_size(study + "/turntable/turntable.mp4"), 1000u);
+    if (haveFfmpeg()) {
+        EXPECT_GT(fs::file_size(study + "/turntable/turntable.mp4"), 1000u);
+    }
     // The turntable is a real H.264 video with one frame per pose (ffprobe decodes it).
     if (haveFfmpeg() && std::system("command -v ffprobe >/dev/null 2>&1") == 0) {
         const std::string probe = path("probe.txt");

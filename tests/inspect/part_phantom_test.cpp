@@ -1,6 +1,7 @@
 // The industrial part phantom (inspect/part_phantom.h) and the void analysis (inspect/voids.h)
 // against its truth: every void found, volumes, kinds, porosity.
 #include "inspect/part_phantom.h"
+#include "volume/vec3.h"
 #include "pipeline/artifact_io.h"
 #include "inspect/part_phantom_io.h"
 #include "volume/error.h"
@@ -20,8 +21,6 @@ namespace fs = std::filesystem;
 using namespace flyover;
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 struct Generated {
     PartTruth truth;

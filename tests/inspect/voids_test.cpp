@@ -1,6 +1,7 @@
 // Internal voids of a solid part (inspect/voids.h) on analytic shapes with closed-form volumes.
 #include "volume/error.h"
 #include "inspect/voids.h"
+#include "volume/vec3.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
@@ -16,8 +17,6 @@
 using namespace flyover;
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 struct Scene {
     int n = 64;

@@ -1,4 +1,5 @@
 #include "render/camera.h"
+#include "volume/vec3.h"
 
 #include "volume/error.h"
 
@@ -11,7 +12,6 @@
 namespace flyover {
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 constexpr double EPS = 1e-9;  // double-precision frame arithmetic on mm-sized numbers
 
 double degrees(double rad) { return rad * 180.0 / PI; }

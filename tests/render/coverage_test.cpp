@@ -22,7 +22,6 @@ namespace flyover {
 namespace {
 
 using test::FoldedTube;
-using test::PI;
 
 /// The folded tube's mesh, its ray scene and its centerline.
 struct FoldedTubeScene {

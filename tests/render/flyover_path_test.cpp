@@ -17,7 +17,6 @@
 namespace flyover {
 namespace {
 
-using test::PI;
 
 /// An elliptic lumen along z (0..100 mm): semi-axis 10 mm along x and `lateral` mm along y.
 TriMesh ellipticTube(double lateral)

@@ -45,9 +45,9 @@ Hairpin hairpin()
         h.radius.push_back(RADIUS_A + (RADIUS_B - RADIUS_A) * f);
     }
     const double rb = 0.5 * AXIS_GAP;
-    const int turn = int(std::ceil(test::PI * rb / step));
+    const int turn = int(std::ceil(PI * rb / step));
     for (int k = 0; k < turn; ++k) {
-        const double a = test::PI * double(k) / double(turn);
+        const double a = PI * double(k) / double(turn);
         h.path.push_back({rb - rb * std::cos(a), 0, LIMB + rb * std::sin(a)});
         h.radius.push_back(RADIUS_B);
     }

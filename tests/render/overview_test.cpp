@@ -37,7 +37,7 @@ TEST(OverviewCamera, FramesTheBoxTightly)
 {
     // Axis-aligned view of a cube: the nearest face's edges reach the 4% margin exactly.
     const Camera c = overviewCamera({0, 0, 0}, {100, 100, 100}, {0, 1, 0}, {0, 0, 1}, 30.0);
-    const double tanHalf = std::tan(15.0 * test::PI / 180.0);
+    const double tanHalf = std::tan(15.0 * PI / 180.0);
     const Vec3d nearCorner{100, 0, 100};
     const Vec3d d = nearCorner - c.position;
     EXPECT_NEAR(dot(d, c.right) / (dot(d, c.forward) * tanHalf), 0.96, 1e-9);

@@ -117,7 +117,7 @@ TEST_F(InwardSphere, FromOutsideOstHitsOnlyTheFarSide)
     }
     // Off-axis rays through the sphere: OST never returns the near intersection.
     std::mt19937 rng(42);
-    std::uniform_real_distribution<double> radial(0.0, 0.8 * R), angle(0.0, 2.0 * test::PI);
+    std::uniform_real_distribution<double> radial(0.0, 0.8 * R), angle(0.0, 2.0 * PI);
     for (int i = 0; i < 2000; ++i) {
         const Vec3d eye = centre + Vec3d{0, 0, 40.0};
         const double rho = radial(rng), phi = angle(rng);

@@ -16,7 +16,6 @@
 namespace flyover {
 namespace {
 
-using test::PI;
 using test::circleCenterline;
 
 /// `extra`'s vertices and faces appended to `mesh`.

@@ -4,8 +4,8 @@
 #pragma once
 
 #include "surface/mesh_types.h"
-#include "volume/centerline_types.h"
 #include "volume/vec3.h"
+#include "volume/centerline_types.h"
 
 #include <array>
 #include <cmath>
@@ -18,8 +18,6 @@
 #include <vector>
 
 namespace flyover::test {
-
-constexpr double PI = 3.14159265358979323846;
 
 /// Circle of radius R in the xy plane, 1 mm steps, radius r: the centerline of a torus lumen.
 inline Centerline circleCenterline(double R, double r)

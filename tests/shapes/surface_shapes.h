@@ -5,6 +5,7 @@
 #pragma once
 
 #include "surface/mesh_types.h"
+#include "volume/vec3.h"
 
 #include <openvdb/openvdb.h>
 
@@ -12,8 +13,6 @@
 #include <string>
 
 namespace flyover::test {
-
-constexpr double PI = 3.14159265358979323846;
 
 using DistanceFn = std::function<double(const openvdb::Vec3d& pMm)>;
 

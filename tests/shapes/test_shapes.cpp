@@ -1,4 +1,5 @@
 #include "tests/shapes/test_shapes.h"
+#include "volume/vec3.h"
 
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
@@ -12,8 +13,6 @@
 namespace flyover::test {
 
 namespace {
-
-constexpr double PI = 3.14159265358979323846;
 
 openvdb::Vec3d toVdb(const Vec3d& v) { return {v.x, v.y, v.z}; }
 Vec3d fromVdb(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }

@@ -33,7 +33,6 @@
 namespace flyover {
 namespace {
 
-using test::PI;
 using test::sampleSdf;
 
 std::string describe(const MeshStats& s)

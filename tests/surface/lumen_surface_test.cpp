@@ -21,7 +21,6 @@
 namespace flyover {
 namespace {
 
-using test::PI;
 
 std::string describe(const LumenSurfaceReport& r)
 {

@@ -18,7 +18,6 @@
 namespace flyover {
 namespace {
 
-using test::PI;
 
 /// An axis-aligned box [lo, hi] as 12 triangles. inward = true winds every face so that its
 /// normal points into the box (a lumen seen from inside); false points them out (an island).

@@ -34,7 +34,7 @@ double solidAngleWinding(const TriMesh& mesh, const Vec3d& p)
                            OpenMesh::dot(v[1], v[2]) * la;
         sum += 2.0 * std::atan2(num, den);
     }
-    return sum / (4.0 * test::PI);
+    return sum / (4.0 * PI);
 }
 
 std::vector<TriMesh::FaceHandle> allFaces(const TriMesh& mesh)

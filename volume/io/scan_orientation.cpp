@@ -1,6 +1,7 @@
 #include "volume/scan_orientation.h"
 
 #include "volume/io/gzip_stream.h"
+#include "volume/io/io_util.h"
 
 #include <algorithm>
 #include <cctype>
@@ -13,16 +14,8 @@ namespace flyover {
 
 namespace {
 
-std::string lower(std::string s)
-{
-    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    return s;
-}
-
-bool endsWith(const std::string& s, const std::string& tail)
-{
-    return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
-}
+using imageio::endsWith;
+using imageio::lowerCase;
 
 /// The first `n` decompressed bytes (fewer at the end or on a problem).
 std::string headBytes(const std::string& path, std::size_t n)
@@ -68,7 +61,7 @@ std::string textHeader(const std::string& path)
     std::string h = headBytes(path, 64 * 1024);
     const std::size_t blank = h.find("\n\n");
     if (blank != std::string::npos) h.resize(blank);
-    return lower(h);
+    return lowerCase(h);
 }
 
 bool hasKey(const std::string& header, const char* key)
@@ -84,7 +77,7 @@ bool scanStatesOrientation(const std::string& path)
 {
     std::error_code ec;
     if (std::filesystem::is_directory(path, ec)) return true;  // a DICOM series
-    const std::string name = lower(path);
+    const std::string name = lowerCase(path);
     if (endsWith(name, ".nii") || endsWith(name, ".nii.gz") || endsWith(name, ".hdr") || endsWith(name, ".hdr.gz"))
         return niftiStatesOrientation(path);
     if (endsWith(name, ".nrrd") || endsWith(name, ".nhdr")) {
