@@ -36,6 +36,7 @@
 #include "volume/ingest.h"
 #include "colon/lumen_mask.h"
 #include "colon/segment.h"
+#include "volume/mask_components.h"
 #include "volume/segment_tools.h"
 
 #include <openvdb/openvdb.h>
@@ -83,7 +84,7 @@ std::size_t thresholdAndComponents(const openvdb::FloatGrid& hu)
             if (!(*it < -800.0f)) leaf.setValueOff(it.pos(), false);
     });
     detail::pruneInactive(*air);
-    return detail::connectedComponents(*air).size();
+    return connectedComponents(*air).size();
 }
 
 /// Wall and CPU time (user + system, all threads: steadier on a shared machine) of each step

@@ -3,6 +3,7 @@
 // depend on the thread count.
 #include "colon/cleanse.h"
 
+#include "volume/mask_components.h"
 #include "volume/segment_tools.h"
 
 #include <openvdb/tree/LeafManager.h>

@@ -3,6 +3,7 @@
 #include "colon/rectal_tube.h"
 #include "volume/vec3.h"
 
+#include "volume/mask_components.h"
 #include "volume/segment_tools.h"
 
 #include <algorithm>

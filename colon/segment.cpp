@@ -11,6 +11,7 @@
 
 #include "colon/cleanse.h"
 #include "volume/error.h"
+#include "volume/mask_components.h"
 #include "volume/segment_tools.h"
 
 #include <openvdb/tree/LeafManager.h>
@@ -211,7 +212,7 @@ void cutRectalTube(std::vector<BoolTree::Ptr>& segments, std::vector<ComponentSt
         BoolTree rest(*segments[i]);
         rest.topologyDifference(*cut);
         detail::pruneInactive(rest);
-        std::vector<BoolTree::Ptr> pieces = detail::connectedComponents(rest);
+        std::vector<BoolTree::Ptr> pieces = connectedComponents(rest);
         std::vector<ComponentStats> pieceStats;
         bool colonLeft = false;
         for (const BoolTree::Ptr& p : pieces) {
@@ -677,7 +678,7 @@ LumenSegmentation segmentLumen(const openvdb::FloatGrid& hu, const SegmentParams
     // leak through two voxels that merely touch at an edge or corner and merge colon with
     // small-bowel gas or lung. Under 6-connectivity a one-voxel wall separates; a truly open
     // lumen is many voxels wide and stays one component either way.
-    std::vector<BoolTree::Ptr> segments = detail::connectedComponents(*air);
+    std::vector<BoolTree::Ptr> segments = connectedComponents(*air);
     reportProgress(progress, 0.2, "classify air components");
 
     // 3. Classify: border, small, lung, then fraction of the reference component (the largest

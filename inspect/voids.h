@@ -7,7 +7,7 @@
 ///        Sparse OpenVDB grids throughout, so that 1024^3 parts fit in memory.
 #pragma once
 
-#include "inspect/mask_components.h"
+#include "volume/mask_components.h"
 #include "volume/progress.h"
 #include "volume/vec3.h"
 

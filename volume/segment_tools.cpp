@@ -4,7 +4,6 @@
 #include "volume/segment_tools.h"
 
 #include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tree/LeafManager.h>
@@ -201,17 +200,6 @@ void erodeVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours)
                                           : openvdb::tools::NN_FACE_EDGE_VERTEX,
                                       openvdb::tools::IGNORE_TILES);
     openvdb::tools::pruneInactive(tree);
-}
-
-std::vector<openvdb::BoolTree::Ptr> connectedComponents(const openvdb::BoolTree& tree)
-{
-    // segmentActiveVoxels joins face neighbours only (6-connectivity).
-    std::vector<openvdb::BoolTree::Ptr> segments;
-    openvdb::tools::segmentActiveVoxels(tree, segments);  // sorted by voxel count, descending
-    segments.erase(std::remove_if(segments.begin(), segments.end(),
-                                  [](const openvdb::BoolTree::Ptr& t) { return !t || t->activeVoxelCount() == 0; }),
-                   segments.end());
-    return segments;
 }
 
 openvdb::BoolTree::Ptr reachableWithin(const openvdb::BoolTree& seed,

@@ -30,10 +30,6 @@ void dilateVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours
 /// every voxel within `iterations` steps (face or all neighbours) is active.
 void erodeVoxels(openvdb::BoolTree& tree, int iterations, Neighbours neighbours);
 
-/// Connected components of the active voxels under face (6-) connectivity, sorted by voxel
-/// count, largest first; never returns a tree without active voxels.
-std::vector<openvdb::BoolTree::Ptr> connectedComponents(const openvdb::BoolTree& tree);
-
 /// The voxels of `seed` plus those of `allowed` reachable from it by face steps, grown one
 /// voxel per iteration (meant for thin shells: the cost is iterations x shell size).
 openvdb::BoolTree::Ptr reachableWithin(const openvdb::BoolTree& seed,

@@ -1,17 +1,14 @@
 // Internal voids of a solid part (inspect/voids.h) on analytic shapes with closed-form volumes.
 #include "volume/error.h"
-#include "inspect/voids.h"
 #include "volume/vec3.h"
+#include "inspect/voids.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
-#include <openvdb/tools/LevelSetUtil.h>
 
 #include <cmath>
 #include <functional>
 #include <random>
-#include <set>
-#include <sstream>
 #include <vector>
 
 using namespace flyover;
@@ -274,89 +271,3 @@ TEST(Voids, MaxVoxelDistance)
     EXPECT_NEAR(equivalentDiameter(4.0 / 3.0 * PI * 27.0), 6.0, 1e-12);
 }
 
-namespace {
-
-std::vector<openvdb::Coord> activeCoords(const openvdb::BoolTree& t)
-{
-    std::vector<openvdb::Coord> v;
-    for (auto it = t.cbeginValueOn(); it; ++it) {
-        if (it.isVoxelValue()) { v.push_back(it.getCoord()); continue; }
-        openvdb::CoordBBox b;
-        it.getBoundingBox(b);
-        for (auto c = b.begin(); c; ++c) v.push_back(*c);
-    }
-    std::sort(v.begin(), v.end());
-    return v;
-}
-
-/// A mask over `box`: a whole 128^3 tile ([0,127]^3, touching the box), random sparse voxels
-/// in a column above it (`sparseP`, near the percolation threshold of 6-connectivity: many components,
-/// some large and winding), a block of 8^3 tiles and leaves enclosed by a one-voxel shell of
-/// inactive voxels, and voxels switched off at random (`holeP`) beside it.
-openvdb::BoolTree::Ptr randomMask(const openvdb::CoordBBox& box, uint32_t seed, double holeP, double sparseP)
-{
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(0, 1);
-    openvdb::BoolTree::Ptr m(new openvdb::BoolTree(false));
-    m->fill(box, true, true);  // tiles wherever a node fits, leaves at the box's ragged edge
-    const openvdb::CoordBBox shell(openvdb::Coord(131, 19, 19), openvdb::Coord(149, 61, 61));
-    for (auto c = box.begin(); c; ++c) {
-        const openvdb::Coord p = *c;
-        if (p.z() > 128) {  // (a BoolTree per component costs ~0.6 MB: a few hundred of them)
-            if (p.x() > 24 || p.y() > 24 || u(rng) >= sparseP) m->setValueOff(p);
-        } else if (p.x() >= 128 || p.x() < 0) {
-            const bool onShell = shell.isInside(p) && (p.x() == shell.min().x() || p.x() == shell.max().x() ||
-                                                       p.y() == shell.min().y() || p.y() == shell.max().y() ||
-                                                       p.z() == shell.min().z() || p.z() == shell.max().z());
-            if (onShell || (p.y() > 80 && u(rng) < holeP)) m->setValueOff(p);
-        }
-    }
-    openvdb::tools::pruneInactive(*m);
-    return m;
-}
-
-} // namespace
-
-TEST(Voids, FaceConnectedComponentsEqualOpenVdbSegmentation)
-{
-    const openvdb::CoordBBox box(openvdb::Coord(-3, 0, 0), openvdb::Coord(152, 155, 150));
-    for (const auto& [seed, holeP, sparseP] : {std::tuple{1u, 0.3, 0.30}, std::tuple{2u, 0.45, 0.25},
-                                              std::tuple{3u, 0.55, 0.32}}) {
-        SCOPED_TRACE("seed " + std::to_string(seed));
-        const openvdb::BoolTree::Ptr mask = randomMask(box, seed, holeP, sparseP);
-        ASSERT_EQ(mask->getValueDepth(openvdb::Coord(5, 5, 5)), 1) << "the test mask must hold a 128^3 tile";
-        ASSERT_EQ(mask->getValueDepth(openvdb::Coord(140, 40, 40)), 2) << "and an enclosed 8^3 tile";
-        std::vector<openvdb::BoolTree::Ptr> reference;
-        openvdb::tools::extractActiveVoxelSegmentMasks(*mask, reference);
-        std::set<std::vector<openvdb::Coord>> refEnclosed;
-        std::vector<openvdb::Coord> refTouching;
-        for (const auto& comp : reference) {
-            openvdb::CoordBBox cb;
-            comp->evalActiveVoxelBoundingBox(cb);
-            bool touches = false;
-            for (int a = 0; a < 3; ++a) touches = touches || cb.min()[a] <= box.min()[a] || cb.max()[a] >= box.max()[a];
-            std::vector<openvdb::Coord> v = activeCoords(*comp);
-            if (touches) refTouching.insert(refTouching.end(), v.begin(), v.end());
-            else refEnclosed.insert(std::move(v));
-        }
-        std::sort(refTouching.begin(), refTouching.end());
-        ASSERT_GT(refEnclosed.size(), 100u) << "the test mask must have many enclosed components";
-
-        const MaskComponents got = faceConnectedComponents(*mask, box);
-        std::set<std::vector<openvdb::Coord>> gotEnclosed;
-        for (const auto& comp : got.enclosed) gotEnclosed.insert(activeCoords(*comp));
-        EXPECT_EQ(got.enclosed.size(), refEnclosed.size()) << "enclosed components: expected " << refEnclosed.size()
-                                                           << " as OpenVDB's segmentation, got " << got.enclosed.size();
-        EXPECT_TRUE(gotEnclosed == refEnclosed) << "the enclosed components differ from OpenVDB's segmentation";
-        int shown = 0;
-        for (const auto& comp : refEnclosed)
-            if (!gotEnclosed.count(comp) && shown++ < 3) {
-                std::ostringstream o;
-                for (const auto& c : comp) o << " " << c;
-                ADD_FAILURE() << "OpenVDB's enclosed component (" << comp.size() << " voxels) not found:" << o.str().substr(0, 300);
-            }
-        const std::vector<openvdb::Coord> touching = activeCoords(*got.touching);
-        EXPECT_EQ(touching.size(), refTouching.size()) << "voxels of the components touching the box";
-        EXPECT_TRUE(touching == refTouching) << "the touching components differ from OpenVDB's segmentation";
-    }
-}

@@ -1,5 +1,5 @@
 // The face-connected components of a mask (mask_components.h).
-#include "inspect/mask_components.h"
+#include "volume/mask_components.h"
 
 #include "volume/error.h"
 #include "volume/union_find.h"
@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <vector>
 
 namespace flyover {
@@ -45,7 +46,8 @@ struct LeafUnits {
     uint32_t base = 0;
     uint16_t count = 0;
     std::unique_ptr<uint16_t[]> local;  // per offset: local unit, NONE if inactive (only when count > 1)
-    std::vector<uint8_t> touches;       // per local unit
+    std::vector<uint8_t> touches;       // per local unit: touches a face of the box
+    std::vector<uint32_t> voxels;       // per local unit: its voxel count
 };
 
 /// The units of a mask: the components within each leaf, then the active tiles (each connected
@@ -105,7 +107,7 @@ void collectNodes(const BoolTree& mask, MaskUnits& m)
 }
 
 /// The face-connected components within one leaf (a union-find over its offsets), numbered in
-/// the order of their first voxel, and which of them touch a face of box.
+/// the order of their first voxel, their voxel counts, and which of them touch a face of box.
 void findLeafUnits(const Leaf& leaf, const CoordBBox& box, LeafUnits& u)
 {
     std::array<uint16_t, N> parent;
@@ -134,9 +136,11 @@ void findLeafUnits(const Leaf& leaf, const CoordBBox& box, LeafUnits& u)
         if (label[root] == NONE) {
             label[root] = count++;
             u.touches.push_back(0);
+            u.voxels.push_back(0);
         }
         const uint16_t l = label[root];
         label[off] = l;
+        ++u.voxels[l];
         const Coord c = leaf.offsetToGlobalCoord(static_cast<openvdb::Index>(off));
         if (onBorder(CoordBBox(c, c), box)) u.touches[l] = 1;
     }
@@ -320,7 +324,62 @@ void assembleEnclosed(const MaskUnits& m, const std::vector<int32_t>& componentO
         if (comp->hasActiveTiles()) comp->voxelizeActiveTiles();  // voxel iterators visit every voxel
 }
 
+/// Per unit: its component's index, components numbered by voxel count (largest first; equal
+/// counts by their root, the smallest unit: deterministic); also the count of components.
+std::vector<uint32_t> numberBySize(const MaskUnits& m, UnionFind<uint32_t>& joined, std::size_t& nComponents)
+{
+    std::vector<uint64_t> voxels(m.nUnits, 0);
+    for (std::size_t n = 0; n < m.leaves.size(); ++n)
+        for (uint16_t l = 0; l < m.units[n].count; ++l) voxels[joined.find(m.units[n].base + l)] += m.units[n].voxels[l];
+    for (std::size_t t = 0; t < m.tiles.size(); ++t)
+        voxels[joined.find(m.tileBase + static_cast<uint32_t>(t))] += m.tiles[t].volume();
+    std::vector<uint32_t> roots;
+    for (uint32_t i = 0; i < m.nUnits; ++i)
+        if (joined.find(i) == i) roots.push_back(i);
+    std::stable_sort(roots.begin(), roots.end(), [&](uint32_t a, uint32_t b) { return voxels[a] > voxels[b]; });
+    std::vector<uint32_t> indexOfRoot(m.nUnits, 0), componentOf(m.nUnits);
+    for (std::size_t k = 0; k < roots.size(); ++k) indexOfRoot[roots[k]] = static_cast<uint32_t>(k);
+    for (uint32_t i = 0; i < m.nUnits; ++i) componentOf[i] = indexOfRoot[joined.find(i)];
+    nComponents = roots.size();
+    return componentOf;
+}
+
 } // namespace
+
+std::vector<BoolTree::Ptr> connectedComponents(const BoolTree& tree)
+{
+    const CoordBBox everywhere(Coord(std::numeric_limits<int>::min()), Coord(std::numeric_limits<int>::max()));
+    const MaskUnits units = findUnits(tree, everywhere);
+    UnionFind<uint32_t> joined = joinUnits(tree, units);
+    std::size_t nComponents = 0;
+    const std::vector<uint32_t> componentOf = numberBySize(units, joined, nComponents);
+    std::vector<BoolTree::Ptr> components(nComponents);
+    for (auto& c : components) c.reset(new BoolTree(tree.background()));
+    // Each component's leaves hold the input's values on its voxels (the background elsewhere);
+    // tiles become voxels, so leaf iterators see every voxel.
+    std::vector<openvdb::tree::ValueAccessor<BoolTree>> acc;
+    acc.reserve(nComponents);
+    for (auto& c : components) acc.emplace_back(*c);
+    for (std::size_t n = 0; n < units.leaves.size(); ++n) {
+        const Leaf& leaf = *units.leaves[n];
+        const LeafUnits& u = units.units[n];
+        if (u.count == 1) {
+            auto* copy = new Leaf(leaf.origin(), tree.background());
+            for (auto it = leaf.cbeginValueOn(); it; ++it) copy->setValueOn(it.pos(), *it);
+            acc[componentOf[u.base]].addLeaf(copy);
+            continue;
+        }
+        for (auto it = leaf.cbeginValueOn(); it; ++it)
+            acc[componentOf[units.unitOf(n, static_cast<int>(it.pos()))]].setValueOn(it.getCoord(), *it);
+    }
+    openvdb::tree::ValueAccessor<const BoolTree> in(tree);
+    for (std::size_t t = 0; t < units.tiles.size(); ++t)
+        components[componentOf[units.tileBase + static_cast<uint32_t>(t)]]->fill(
+            units.tiles[t], in.getValue(units.tiles[t].min()), true);
+    for (auto& c : components)
+        if (c->hasActiveTiles()) c->voxelizeActiveTiles();
+    return components;
+}
 
 MaskComponents faceConnectedComponents(const BoolTree& mask, const CoordBBox& box)
 {
