@@ -75,7 +75,7 @@ struct PhantomParams {
     bool wideRectum = false; ///< the rectum the widest lumen (radius 30 mm 20-60 mm above the anal end)
     /// The polyps' diameters (mm, each 2-30); unset: the default 6-10 polyps of 6-24 mm;
     /// empty: none.
-    std::optional<std::vector<double>> polypDiametersMm;
+    std::optional<std::vector<double>> polypDiametersMm{};
     /// Voxel size (mm) along i, j, k; all zero: the size's own spacing. The field of view
     /// stays 400 x 400 x 375 mm centred on the origin (sizes rounded to whole voxels).
     Vec3d spacingMm{0, 0, 0};

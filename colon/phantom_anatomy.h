@@ -129,7 +129,7 @@ struct AnatomyOptions {
     bool wideRectum = false;
     /// The polyps' diameters (mm), placed by the default rules but none required between
     /// folds; unset: the default 6-10 of 6-24 mm. Empty: no polyps.
-    std::optional<std::vector<double>> polypDiametersMm;
+    std::optional<std::vector<double>> polypDiametersMm{};
 };
 
 /// With all options off this is buildPhantomAnatomy(seed), bit for bit. Contacts are drawn

@@ -35,6 +35,11 @@ namespace {
 
 using Tri = TriangleSoup::value_type;
 
+} // namespace
+
+/// Named, not anonymous: LumenSideTest::Impl holds one.
+namespace extract_surface_detail {
+
 /// GridSampler<FloatGrid::ConstAccessor, BoxSampler>::wsSample, the same arithmetic (the
 /// transform's worldToIndex, BoxSampler's floor and fraction, its trilinearInterpolation), but
 /// the eight corners are read from their leaf when they share one (7^3 / 8^3 of the samples)
@@ -193,6 +198,12 @@ private:
     bool mScaleTranslate = false;
     openvdb::Vec3d mTranslation, mInverseScale;
 };
+
+} // namespace extract_surface_detail
+
+namespace {
+
+using extract_surface_detail::Sampler;
 
 /// Which way triangle p points relative to the level set: its normal (p1 - p0) x (p2 - p0)
 /// against -grad(sdf) at its centroid. The gradient is a central difference over one voxel

@@ -6,7 +6,14 @@
 /// one-sided transparency work.
 #pragma once
 
+// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back, whose
+// VectorT default constructor leaves components uninitialised on purpose. Pragma scope is by
+// source location: ignoring it around OpenMesh's headers silences only third-party code, for
+// every file that takes OpenMesh through this header (include it before any other OpenMesh one).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#pragma GCC diagnostic pop
 
 namespace flyover {
 

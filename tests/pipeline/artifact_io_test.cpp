@@ -500,7 +500,7 @@ TEST(ArtifactIo, VdbFilesHaveTheBytesOfOpenVdbsFileWriterButTheirUuid)
         writeGrids((d / "ours.vdb").string(), grids, values);
         openvdb::io::File file((d / "openvdb.vdb").string());
         file.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK |
-                            (values == VdbValues::Raw ? 0u : openvdb::io::COMPRESS_BLOSC));
+                            (values == VdbValues::Raw ? 0u : uint32_t(openvdb::io::COMPRESS_BLOSC)));
         file.write(grids);
         file.close();
         std::string ours = fileBytes(d / "ours.vdb"), reference = fileBytes(d / "openvdb.vdb");
