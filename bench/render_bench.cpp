@@ -40,6 +40,7 @@
 #include "volume/seconds_since.h"
 #include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
+#include "pipeline/stage_command.h"
 #include "colon/phantom_io.h"
 #include "colon/render_settings.h"
 #include "colon/colon_study.h"
@@ -332,7 +333,8 @@ void benchFirstPair(const Args& a)
     } removeCopy{copy};
     const nlohmann::json manifest = readJson((copy / "manifest.json").string());
     RunOptions o;
-    o.ctPath = manifest.at("input").get<std::string>();
+    o.ctPath = recordedInput(manifest, "input");  // "" for a mask-only study
+    o.maskPath = recordedInput(manifest, "mask");
     o.studyDir = copy.string();
     // The study's own parameters for the stages before the frames, so that they are reused.
     for (const auto& st : manifest.at("stages")) {

@@ -18,13 +18,6 @@ namespace flyover {
 
 namespace {
 
-/// A path recorded in the study's manifest ("" when there is none).
-std::string recordedInput(const json& manifest, const char* key)
-{
-    return manifest.is_object() && manifest.contains(key) && manifest[key].is_string() ? manifest[key].get<std::string>()
-                                                                                         : std::string();
-}
-
 json readIfPresent(const fs::path& p)
 {
     std::error_code ec;
@@ -124,6 +117,12 @@ void resolveStagePipeline(StageCommandOptions& o)
     }
     o.pipeline = chosen;
     o.params = chosen->defaultParams();
+}
+
+std::string recordedInput(const json& manifest, const char* key)
+{
+    return manifest.is_object() && manifest.contains(key) && manifest[key].is_string() ? manifest[key].get<std::string>()
+                                                                                         : std::string();
 }
 
 std::string receiptPath(const std::string& studyDir, const std::string& stage)

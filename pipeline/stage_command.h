@@ -89,4 +89,8 @@ int exitCodeFor(const std::exception_ptr& error);
 /// Path of a stage's receipt in a study: DIR/stages/NAME.json.
 std::string receiptPath(const std::string& studyDir, const std::string& stage);
 
+/// A path the study's manifest records under `key` ("input": the CT, "mask": the lumen mask);
+/// "" when it records none (a mask-only study's "input" is null).
+std::string recordedInput(const nlohmann::json& manifest, const char* key);
+
 } // namespace flyover
