@@ -401,6 +401,26 @@ json firstPairSceneJson(const FirstPairFromSubset& first)
                 {"frame_radius_mm", first.frameRadiusMm}};
 }
 
+/// The frames report's loop-local part: the rule and, with owners, the share of wall pixels
+/// passed through (all pairs together, the mean and the largest per pose).
+json framesLoopReport(const RenderInputs& in, const RenderParams& rp, const std::vector<LoopCounts>& loopCounts)
+{
+    json report = loopJson(in, rp, true);
+    if (in.ownerArcMm.empty()) return report;
+    double sum = 0, worst = 0;
+    LoopCounts all;
+    for (const LoopCounts& c : loopCounts) {
+        sum += c.passedShare();
+        worst = std::max(worst, c.passedShare());
+        all.wallPixels += c.wallPixels;
+        all.passedPixels += c.passedPixels;
+    }
+    report["foreign_wall_share"] = all.passedShare();
+    report["foreign_wall_share_mean_per_pose"] = sum / double(loopCounts.size());
+    report["foreign_wall_share_max_per_pose"] = worst;
+    return report;
+}
+
 } // namespace
 
 json runFrames(StudyRun& run, Progress* progress)
@@ -521,20 +541,7 @@ json runFrames(StudyRun& run, Progress* progress)
                    {"loop_local", loopJson(in, rp)},
                    {"frames", poses}});
     frames.commit();
-    json loopReport = loopJson(in, rp, true);
-    if (!in.ownerArcMm.empty()) {
-        double sum = 0, worst = 0;
-        LoopCounts all;
-        for (const LoopCounts& c : loopCounts) {
-            sum += c.passedShare();
-            worst = std::max(worst, c.passedShare());
-            all.wallPixels += c.wallPixels;
-            all.passedPixels += c.passedPixels;
-        }
-        loopReport["foreign_wall_share"] = all.passedShare();
-        loopReport["foreign_wall_share_mean_per_pose"] = sum / double(loopCounts.size());
-        loopReport["foreign_wall_share_max_per_pose"] = worst;
-    }
+    const json loopReport = framesLoopReport(in, rp, loopCounts);
     RenderedPairs shared;
     for (std::size_t f = 0; f < indices.size(); ++f) {
         shared.centerlineIndices.push_back(indices[f]);
