@@ -114,6 +114,14 @@ if [ "$GCA" = 1 ]; then
   row "$G" "whole run" "real colon: whole \`flyover run\` (cold)" >> "$TABLE"
   row "$G" "peak RSS" "real colon: peak RSS of the run" >> "$TABLE"
   row "$G" "unchanged re-run" "real colon: unchanged re-run" >> "$TABLE"
+  # The real colon against the phantom, medians of this sitting (targets: whole run <= 2x, first pair <= 3x).
+  med() { grep -m1 -F -- "$2" "$1" | awk '{ for (i = 1; i < NF; i++) if ($i == "median") { print $(i + 1); exit } }'; }
+  for pair in "first pair|mask -> first fly-over pair|CT -> first fly-over pair" "whole run|whole run|whole run"; do
+    IFS='|' read -r what gl pl <<< "$pair"
+    g=$(med "$G" "$gl") p=$(med "$FP" "$pl")
+    [ -n "$g" ] && [ -n "$p" ] &&
+      awk -v w="$what" -v g="$g" -v p="$p" -v s="$SIZE" 'BEGIN { printf "| real colon / %s phantom: %s (%.3f / %.3f s) | %.2f | | | |\n", s, w, g, p, g / p }' >> "$TABLE"
+  done
 fi
 if [ "$VIEW" = 1 ]; then
   bench first-view bench/first_view.sh "$SIZE" "$RUNS"
