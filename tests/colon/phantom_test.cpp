@@ -5,6 +5,7 @@
 #include "colon/phantom.h"
 #include "volume/vec3.h"
 #include "tests/colon/truth_arc.h"
+#include "tests/shapes/test_shapes.h"
 #include "colon/phantom_anatomy.h"
 #include "volume/error.h"
 
@@ -47,15 +48,7 @@ const ph::PhantomAnatomy& smallAnatomy()
     return anatomy;
 }
 
-/// Index of the voxel whose centre is nearest to a world point (clamped to the image).
-std::array<int64_t, 3> nearestVoxel(const ImageGeometry& g, const Vec3d& worldMm)
-{
-    const Vec3d ijk = g.indexFromWorld(worldMm);
-    std::array<int64_t, 3> v{};
-    for (int c = 0; c < 3; ++c)
-        v[std::size_t(c)] = std::clamp<int64_t>(std::llround(ijk[c]), 0, g.size[std::size_t(c)] - 1);
-    return v;
-}
+using test::nearestVoxel;
 
 template <typename T>
 T sampleNearest(const Image3<T>& image, const Vec3d& worldMm)

@@ -5,6 +5,7 @@
 #include "colon/phantom_anatomy.h"
 #include "colon/phantom_io.h"
 #include "tests/colon/truth_arc.h"
+#include "tests/shapes/test_shapes.h"
 #include "volume/error.h"
 
 #include <gtest/gtest.h>
@@ -27,7 +28,7 @@ using namespace flyover;
 namespace ph = flyover::phantom;
 using test::nearestArcMm;
 
-constexpr double NOISE_HU = 15.0;
+constexpr double VARIANT_NOISE_HU = 15.0;
 
 std::string describe(const PhantomParams& p)
 {
@@ -41,14 +42,7 @@ std::string describe(const PhantomParams& p)
 
 using Index = std::array<int64_t, 3>;
 
-Index nearestVoxel(const ImageGeometry& g, const Vec3d& worldMm)
-{
-    const Vec3d ijk = g.indexFromWorld(worldMm);
-    Index v{};
-    for (int c = 0; c < 3; ++c)
-        v[std::size_t(c)] = std::clamp<int64_t>(std::llround(ijk[c]), 0, g.size[std::size_t(c)] - 1);
-    return v;
-}
+using test::nearestVoxel;
 
 bool inside(const ImageGeometry& g, const Index& v)
 {
@@ -244,7 +238,7 @@ TEST(PhantomContacts, DefaultColonTouchesAtTwoPlacesForTwoSeeds)
 {
     for (uint64_t seed : {1u, 2u}) {
         for (int n : {1, 2}) {
-            PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+            PhantomParams p{PhantomSize::Small, seed, VARIANT_NOISE_HU};
             p.touching = n;
             const Phantom phantom = makePhantom(p);
             ASSERT_EQ(int(phantom.truth.contacts.size()), n) << describe(p);
@@ -256,7 +250,7 @@ TEST(PhantomContacts, DefaultColonTouchesAtTwoPlacesForTwoSeeds)
 
 TEST(PhantomContacts, RefusesMoreThanTheColonHasRoomFor)
 {
-    PhantomParams p{PhantomSize::Small, 1, NOISE_HU};
+    PhantomParams p{PhantomSize::Small, 1, VARIANT_NOISE_HU};
     p.touching = 3;
     try {
         makePhantom(p);
@@ -272,10 +266,10 @@ TEST(PhantomContacts, RefusesMoreThanTheColonHasRoomFor)
 
 TEST(PhantomRedundant, LongerColonClearOfItselfWithAndWithoutContacts)
 {
-    PhantomParams plain{PhantomSize::Small, 1, NOISE_HU};
+    PhantomParams plain{PhantomSize::Small, 1, VARIANT_NOISE_HU};
     const double defaultLength = truthLengthMm(makePhantom(plain).truth);
     for (uint64_t seed : {1u, 2u}) {
-        PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+        PhantomParams p{PhantomSize::Small, seed, VARIANT_NOISE_HU};
         p.redundant = true;
         const Phantom phantom = makePhantom(p);
         SCOPED_TRACE(describe(p));
@@ -314,7 +308,7 @@ bool airConnectedToOutside(const Phantom& phantom, const Vec3d& goalMm)
 TEST(PhantomRectalTube, JoinsTheRectumToOutsideAirAndStartsBelowTheColon)
 {
     for (uint64_t seed : {1u, 3u}) {
-        PhantomParams p{PhantomSize::Small, seed, NOISE_HU};
+        PhantomParams p{PhantomSize::Small, seed, VARIANT_NOISE_HU};
         p.rectalTube = true;
         const Phantom phantom = makePhantom(p);
         SCOPED_TRACE(describe(p));
@@ -370,7 +364,7 @@ TEST(PhantomRectalTube, JoinsTheRectumToOutsideAirAndStartsBelowTheColon)
 // never found and the path ran 14 mm beside it the whole length of the rectum).
 TEST(PhantomRectalTube, OpenTipJoinsTheTubesAirToTheRectumsAirAtTheAirThreshold)
 {
-    PhantomParams p{PhantomSize::Small, 1, NOISE_HU};
+    PhantomParams p{PhantomSize::Small, 1, VARIANT_NOISE_HU};
     p.rectalTube = true;
     p.spacingMm = {2.5, 2.5, 1.5};  // the medium size's slices: a slice centre 0.16 mm below the tip
     const Phantom phantom = makePhantom(p);
@@ -404,7 +398,7 @@ TEST(PhantomRectalTube, OpenTipJoinsTheTubesAirToTheRectumsAirAtTheAirThreshold)
 
 TEST(PhantomSpacing, AnisotropicVoxelsKeepTheWorldGeometry)
 {
-    PhantomParams iso{PhantomSize::Small, 1, NOISE_HU};
+    PhantomParams iso{PhantomSize::Small, 1, VARIANT_NOISE_HU};
     PhantomParams aniso = iso;
     aniso.spacingMm = {2.0, 2.0, 3.0};
     const Phantom a = makePhantom(iso), b = makePhantom(aniso);
@@ -612,7 +606,7 @@ TEST(PhantomTruth, CenterlineRunsInsideTheLumen)
 
 TEST(PhantomOrientation, StoresTheSameWorldAnatomyInAnotherVoxelOrder)
 {
-    PhantomParams lps{PhantomSize::Small, 2, NOISE_HU};
+    PhantomParams lps{PhantomSize::Small, 2, VARIANT_NOISE_HU};
     lps.fluid = lps.rectalTube = true;
     lps.spacingMm = {2.0, 2.5, 3.0};  // three sizes: a permuted axis shows in the spacing
     const Phantom ref = makePhantom(lps);
@@ -662,7 +656,7 @@ TEST(PhantomOrientation, StoresTheSameWorldAnatomyInAnotherVoxelOrder)
 TEST(PhantomIleum, GasJoinsTheCecumAndStaysOutOfTheMask)
 {
     for (const bool redundant : {false, true}) {
-        PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
+        PhantomParams p{PhantomSize::Small, 2, VARIANT_NOISE_HU};
         p.ilealReflux = true;
         p.redundant = redundant;
         p.touching = redundant ? 3 : 2;
@@ -703,7 +697,7 @@ TEST(PhantomIleum, GasJoinsTheCecumAndStaysOutOfTheMask)
 
 TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
 {
-    PhantomParams p{PhantomSize::Small, 2, NOISE_HU};
+    PhantomParams p{PhantomSize::Small, 2, VARIANT_NOISE_HU};
     p.redundant = true;
     p.touching = 3;
     p.rectalTube = true;
@@ -754,7 +748,7 @@ TEST(PhantomAllVariants, TogetherOnAnisotropicVoxelsAndThroughTheTruthJson)
     EXPECT_EQ(back.colonLumenVolumeMl, phantom.truth.colonLumenVolumeMl);
 
     // The default truth JSON has none of the variant keys (unchanged for existing readers).
-    PhantomParams plain{PhantomSize::Small, 2, NOISE_HU};
+    PhantomParams plain{PhantomSize::Small, 2, VARIANT_NOISE_HU};
     const nlohmann::json d = phantomTruthToJson(makePhantom(plain), plain);
     for (const char* key : {"contacts", "rectal_tube", "variants", "colon_lumen_volume_ml"})
         EXPECT_FALSE(d.contains(key)) << key;

@@ -23,7 +23,7 @@ namespace {
 using namespace flyover;
 namespace ph = flyover::phantom;
 
-std::string describe(const PhantomParams& p)
+std::string describeSegmentPhantom(const PhantomParams& p)
 {
     std::ostringstream s;
     s << "phantom size=" << phantomSizeName(p.size) << " seed=" << p.seed << (p.fluid ? " fluid" : "")
@@ -135,7 +135,7 @@ Case makeCase(const PhantomParams& p)
 TEST(SegmentPhantom, CleanPhantomDiceAndNoLungOrSmallBowel)
 {
     const Case c = makeCase(variant(1, false, false));
-    SCOPED_TRACE(describe(c.params));
+    SCOPED_TRACE(describeSegmentPhantom(c.params));
     const LumenSegmentation seg = segmentLumen(*c.hu, SegmentParams{});
     SCOPED_TRACE(report(seg));
     const Overlap o = overlap(c.phantom, c.anatomy, *seg.sdf);
@@ -165,7 +165,7 @@ TEST(SegmentPhantom, CleanPhantomDiceAndNoLungOrSmallBowel)
 TEST(SegmentPhantom, BoneFarFromTheColonIsNoFluidPool)
 {
     const Case c = makeCase(variant(1, false, false));
-    SCOPED_TRACE(describe(c.params));
+    SCOPED_TRACE(describeSegmentPhantom(c.params));
     const SegmentParams params;
     openvdb::Index64 above = 0;
     for (auto it = c.hu->tree().cbeginValueOn(); it; ++it) above += *it > params.fluidThresholdHu;
@@ -182,7 +182,7 @@ TEST(SegmentPhantom, BoneFarFromTheColonIsNoFluidPool)
 void expectFluidJoinsTheLumen(const PhantomParams& params)
 {
     const Case c = makeCase(params);
-    SCOPED_TRACE(describe(c.params) + (params.prone ? " prone" : "") + " stored " + params.orientation);
+    SCOPED_TRACE(describeSegmentPhantom(c.params) + (params.prone ? " prone" : "") + " stored " + params.orientation);
     ASSERT_FALSE(c.phantom.truth.fluidPools.empty());
     const double downY = c.phantom.truth.fluidPools.front().downY;
     const LumenSegmentation seg = segmentLumen(*c.hu, SegmentParams{});
@@ -272,7 +272,7 @@ TEST(SegmentPhantom, CollapsedColonKeepsEveryPieceInOrder)
 {
     // Seed 2 collapses two stretches of the sigmoid: three pieces, the middle one about 60 mL.
     const Case c = makeCase(variant(2, false, true));
-    SCOPED_TRACE(describe(c.params));
+    SCOPED_TRACE(describeSegmentPhantom(c.params));
     ASSERT_EQ(c.phantom.truth.collapsed.size(), 2u);
     const LumenSegmentation seg = segmentLumen(*c.hu, SegmentParams{});
     SCOPED_TRACE(report(seg));
@@ -297,7 +297,7 @@ TEST(SegmentPhantom, FluidAndCollapseTogether)
 {
     for (uint64_t seed : {3u, 6u}) {
         const Case c = makeCase(variant(seed, true, true));
-        SCOPED_TRACE(describe(c.params));
+        SCOPED_TRACE(describeSegmentPhantom(c.params));
         const LumenSegmentation seg = segmentLumen(*c.hu, SegmentParams{});
         SCOPED_TRACE(report(seg));
         const Overlap o = overlap(c.phantom, c.anatomy, *seg.sdf);
@@ -312,7 +312,7 @@ TEST(SegmentPhantom, FluidAndCollapseTogether)
 TEST(SegmentPhantom, SeedKeepsEveryLargePiece)
 {
     const Case c = makeCase(variant(2, false, true));
-    SCOPED_TRACE(describe(c.params));
+    SCOPED_TRACE(describeSegmentPhantom(c.params));
     SegmentParams p;
     p.seedMm = c.phantom.truth.centerlineMm[30];  // in the rectum
     const LumenSegmentation seg = segmentLumen(*c.hu, p);
@@ -342,7 +342,7 @@ TEST(SegmentPhantom, NoColonGivesOneLineListingWhatWasFound)
     PhantomParams p = variant(1, false, false);
     p.colon = false;
     const Case c = makeCase(p);
-    SCOPED_TRACE(describe(c.params));
+    SCOPED_TRACE(describeSegmentPhantom(c.params));
     try {
         segmentLumen(*c.hu, SegmentParams{});
         FAIL() << "expected InputError";

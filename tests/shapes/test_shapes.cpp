@@ -337,6 +337,15 @@ double featureDistanceMm(const HuFeature& feature, const Vec3d& localMm)
     return feature.axis.distanceMm(localMm) - feature.radiusMm;
 }
 
+std::array<int64_t, 3> nearestVoxel(const ImageGeometry& g, const Vec3d& worldMm)
+{
+    const Vec3d ijk = g.indexFromWorld(worldMm);
+    std::array<int64_t, 3> v{};
+    for (int c = 0; c < 3; ++c)
+        v[std::size_t(c)] = std::clamp<int64_t>(std::llround(ijk[c]), 0, g.size[std::size_t(c)] - 1);
+    return v;
+}
+
 std::string HuPhantom::describe() const
 {
     std::ostringstream s;

@@ -9,11 +9,13 @@
 /// through grid.transform() fails. Tests compare in local mm via Frame::localFromWorld.
 #pragma once
 
+#include "volume/image.h"
 #include "volume/progress.h"
 #include "volume/vec3.h"
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <iostream>
@@ -123,6 +125,9 @@ openvdb::FloatGrid::Ptr makeHuGrid(const HuPhantom& phantom);
 
 /// Signed distance (mm) from `localMm` to the feature's tube surface (negative inside).
 double featureDistanceMm(const HuFeature& feature, const Vec3d& localMm);
+
+/// Index of the voxel whose centre is nearest to a world point (clamped to the image).
+std::array<int64_t, 3> nearestVoxel(const ImageGeometry& g, const Vec3d& worldMm);
 
 /// Prints the wall time spent in each reported step (for the timing tests).
 struct TimingProgress : Progress {

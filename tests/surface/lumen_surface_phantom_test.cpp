@@ -50,7 +50,7 @@ test::PolypSite polypSite(const PhantomTruth& truth, const PhantomPolyp& polyp)
     return s;
 }
 
-void expectSound(const LumenSurfaceReport& r)
+void expectSoundPhantomSurface(const LumenSurfaceReport& r)
 {
     EXPECT_EQ(r.orientation.inward, r.check.faces) << "100% of faces inward";
     EXPECT_EQ(r.orientation.outward, 0);
@@ -97,7 +97,7 @@ TEST(LumenSurfacePhantom, FullSizeIsInwardManifoldFaithfulAndDecimatable)
 
     for (const LumenSurfaceReport* r : {&rawRep, &rep, &halfRep}) {
         SCOPED_TRACE(r == &rawRep ? "raw" : r == &rep ? "default (smoothed)" : "decimated to half");
-        expectSound(*r);
+        expectSoundPhantomSurface(*r);
         EXPECT_EQ(r->check.components, 1);
         EXPECT_EQ(r->check.genus, 0);
         EXPECT_TRUE(r->check.isClosed()) << "the phantom's colon lies inside the scan";

@@ -54,7 +54,7 @@ void expectSound(const LumenSurfaceReport& r)
 // surface by about h^2 / (8 r) (a relative area/volume deficit of order (h / r)^2: 0.1% at
 // 10 voxels per radius); Taubin's pass band keeps shapes of 10+ voxels (measured change below
 // 0.1%). 1% is a wide, resolution-justified bound from 10 voxels per radius of curvature on.
-constexpr double REL_TOL = 0.01;
+constexpr double LUMEN_REL_TOL = 0.01;
 
 TEST(LumenSurface, SphereMeetsItsClosedForms)
 {
@@ -68,8 +68,8 @@ TEST(LumenSurface, SphereMeetsItsClosedForms)
     EXPECT_EQ(rep.check.components, 1);
     EXPECT_EQ(rep.check.genus, 0);
     EXPECT_EQ(rep.check.boundaryLoops, 0);
-    EXPECT_NEAR(rep.check.areaMm2 / (4 * PI * r * r), 1.0, REL_TOL);
-    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (4.0 / 3.0 * PI * r * r * r), 1.0, REL_TOL);
+    EXPECT_NEAR(rep.check.areaMm2 / (4 * PI * r * r), 1.0, LUMEN_REL_TOL);
+    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (4.0 / 3.0 * PI * r * r * r), 1.0, LUMEN_REL_TOL);
     EXPECT_LT(std::fabs(rep.smoothingVolumeChange), 0.01);
 }
 
@@ -86,8 +86,8 @@ TEST(LumenSurface, TorusMeetsItsClosedForms)
     EXPECT_EQ(rep.check.components, 1);
     EXPECT_EQ(rep.check.genus, 1);
     EXPECT_EQ(rep.check.boundaryLoops, 0);
-    EXPECT_NEAR(rep.check.areaMm2 / (4 * PI * PI * bigR * r), 1.0, REL_TOL);
-    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (2 * PI * PI * bigR * r * r), 1.0, REL_TOL);
+    EXPECT_NEAR(rep.check.areaMm2 / (4 * PI * PI * bigR * r), 1.0, LUMEN_REL_TOL);
+    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (2 * PI * PI * bigR * r * r), 1.0, LUMEN_REL_TOL);
 }
 
 TEST(LumenSurface, CapsuleTubeMeetsItsClosedForms)
@@ -108,8 +108,8 @@ TEST(LumenSurface, CapsuleTubeMeetsItsClosedForms)
     EXPECT_EQ(rep.check.genus, 0);
     EXPECT_EQ(rep.check.closedComponents, 1);
     const double L = 2 * halfL;
-    EXPECT_NEAR(rep.check.areaMm2 / (2 * PI * r * L + 4 * PI * r * r), 1.0, REL_TOL);
-    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (PI * r * r * L + 4.0 / 3.0 * PI * r * r * r), 1.0, REL_TOL);
+    EXPECT_NEAR(rep.check.areaMm2 / (2 * PI * r * L + 4 * PI * r * r), 1.0, LUMEN_REL_TOL);
+    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (PI * r * r * L + 4.0 / 3.0 * PI * r * r * r), 1.0, LUMEN_REL_TOL);
 }
 
 TEST(LumenSurface, OpenTubeReportsTwoLoopsAndItsCappedVolume)
@@ -136,7 +136,7 @@ TEST(LumenSurface, OpenTubeReportsTwoLoopsAndItsCappedVolume)
         if (std::fabs(mesh.calc_face_centroid(f)[2]) > 10.0) continue;
         middleArea += mesh.calc_face_area(f);
     }
-    EXPECT_NEAR(middleArea / (2 * PI * r * 20.0), 1.0, REL_TOL);
+    EXPECT_NEAR(middleArea / (2 * PI * r * 20.0), 1.0, LUMEN_REL_TOL);
     // The capped volume: the cylinder between the loops, whose last voxel at each end is cut
     // irregularly by the edge of the samples (the loops wander by about a voxel in z and r):
     // allowed 2 voxels of length at each end beyond the usual tolerance.
@@ -148,7 +148,7 @@ TEST(LumenSurface, OpenTubeReportsTwoLoopsAndItsCappedVolume)
     }
     const double L = zHi - zLo;
     EXPECT_GT(L, 2 * halfL - 4 * voxel);
-    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (PI * r * r * L), 1.0, REL_TOL + 4 * voxel / L);
+    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (PI * r * r * L), 1.0, LUMEN_REL_TOL + 4 * voxel / L);
 }
 
 TEST(LumenSurface, StaircaseIsSmoothedAwayWithoutShrinking)
@@ -176,7 +176,7 @@ TEST(LumenSurface, StaircaseIsSmoothedAwayWithoutShrinking)
     EXPECT_LT(after.meanDeg, 0.4 * before.meanDeg);  // ...and mostly gone
     EXPECT_LT(after.maxDeg, before.maxDeg);
     EXPECT_LT(std::fabs(rep.smoothingVolumeChange), 0.01);
-    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (4.0 / 3.0 * PI * r * r * r), 1.0, 2 * REL_TOL);
+    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (4.0 / 3.0 * PI * r * r * r), 1.0, 2 * LUMEN_REL_TOL);
     EXPECT_LT(rep.smoothedRoughnessDeg, rep.rawRoughnessDeg);
 }
 
@@ -255,7 +255,7 @@ TEST(LumenSurface, DecimationToHalfKeepsEverythingElse)
     EXPECT_EQ(rep.check.components, 1);
     EXPECT_GT(rep.decimationHausdorffMm, 0.0);
     EXPECT_LT(rep.decimationHausdorffMm, 0.5 * voxel);
-    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (2 * PI * PI * bigR * r * r), 1.0, REL_TOL);
+    EXPECT_NEAR(rep.check.enclosedVolumeMm3 / (2 * PI * PI * bigR * r * r), 1.0, LUMEN_REL_TOL);
 
     // A budget below what the fraction asks wins.
     params.decimateTargetFaces = int(rep.decimation.facesBefore / 4);
