@@ -625,6 +625,31 @@ QuadPairing pairTriangles(const std::vector<float>& xyz, const std::vector<uint3
     return out;
 }
 
+/// The quad scene is the same surface: the robust scenes' depths (benchQuads' trace variants 1
+/// and 2) agree ray for ray, on the first camera of every position, untimed.
+template <typename Path, typename Trace>
+void compareQuadDepths(const Path& path, int px, const Trace& trace)
+{
+    std::size_t compared = 0, differing = 0;
+    double maxRel = 0;
+    std::vector<float> depthTri(std::size_t(px) * std::size_t(px)), depthQuad(depthTri.size());
+    for (const auto& pair : path) {
+        uint64_t h = 0;
+        trace(1, pair[0], h, &depthTri);
+        trace(2, pair[0], h, &depthQuad);
+        for (std::size_t i = 0; i < depthTri.size(); ++i) {
+            ++compared;
+            const float x = depthTri[i], y = depthQuad[i];
+            const double rel = (x < 0) != (y < 0) ? 1.0 : std::fabs(double(x) - double(y)) / std::max(1.0, double(x));
+            maxRel = std::max(maxRel, rel);
+            differing += rel > 1e-4 ? 1 : 0;
+        }
+    }
+    std::printf("depths, robust triangles vs quads: %zu of %zu rays differ by more than 1e-4 (relative; hit vs miss "
+                "counts as 1), max %.2g\n",
+                differing, compared, maxRel);
+}
+
 void benchQuads(const Args& a, const Subject& s)
 {
     std::vector<float> xyz;
@@ -741,26 +766,7 @@ void benchQuads(const Args& a, const Subject& s)
             cpu[v].push_back(cp[v]);
         }
     }
-    // The quad scene is the same surface: the robust scenes' depths agree ray for ray (first
-    // camera of every position, untimed).
-    std::size_t compared = 0, differing = 0;
-    double maxRel = 0;
-    std::vector<float> depthTri(std::size_t(a.px) * std::size_t(a.px)), depthQuad(depthTri.size());
-    for (const auto& pair : path) {
-        uint64_t h = 0;
-        trace(1, pair[0], h, &depthTri);
-        trace(2, pair[0], h, &depthQuad);
-        for (std::size_t i = 0; i < depthTri.size(); ++i) {
-            ++compared;
-            const float x = depthTri[i], y = depthQuad[i];
-            const double rel = (x < 0) != (y < 0) ? 1.0 : std::fabs(double(x) - double(y)) / std::max(1.0, double(x));
-            maxRel = std::max(maxRel, rel);
-            differing += rel > 1e-4 ? 1 : 0;
-        }
-    }
-    std::printf("depths, robust triangles vs quads: %zu of %zu rays differ by more than 1e-4 (relative; hit vs miss "
-                "counts as 1), max %.2g\n",
-                differing, compared, maxRel);
+    compareQuadDepths(path, a.px, trace);
     std::printf("hits: triangles %llu, quads %llu, not robust %llu / %llu (of %.0f rays)\n",
                 static_cast<unsigned long long>(hitCount[1]), static_cast<unsigned long long>(hitCount[2]),
                 static_cast<unsigned long long>(hitCount[3]), static_cast<unsigned long long>(hitCount[4]), rays);

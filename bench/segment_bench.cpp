@@ -306,6 +306,29 @@ Measure runChild(const std::string& self, const std::string& grid, const std::st
     return m;
 }
 
+/// --mask: the phantom's true lumen written as a mask file, segmentFromMask on it in a child.
+int benchPhantomMask(const PhantomParams& pp, const std::string& variant, int runs)
+{
+    const auto t0 = std::chrono::steady_clock::now();
+    const fs::path maskPath = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + "_mask.nii.gz");
+    {
+        Phantom ph = makePhantom(pp);
+        writeImage(ph.truthLumen, maskPath.string());
+        const auto& g = ph.truthLumen.geometry;
+        std::printf("phantom %s true lumen mask: %lld x %lld x %lld at %.3g x %.3g x %.3g mm, truth lumen "
+                    "%.1f mL (built in %.1f s)\n",
+                    variant.c_str(), (long long)g.size[0], (long long)g.size[1], (long long)g.size[2], g.spacingMm.x,
+                    g.spacingMm.y, g.spacingMm.z, ph.truth.lumenVolumeMl,
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    const std::string self = fs::read_symlink("/proc/self/exe").string();
+    const Measure m = runChild(self, maskPath.string(), "mask", runs);
+    fs::remove(maskPath);
+    std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS peak %.0f MB;%s\n",
+                "segmentFromMask (file)", m.median, m.min, m.max, runs, m.cpuMedian, m.peakMb, m.what.c_str());
+    return 0;
+}
+
 } // namespace
 
 int main(int argc, char** argv)
@@ -387,26 +410,7 @@ int main(int argc, char** argv)
         if (pp.redundant) variant << " --redundant";
         if (pp.rectalTube) variant << " --rectal-tube";
         if (!spacingText.empty()) variant << " --spacing " << spacingText;
-        if (mask) {
-            const fs::path maskPath = fs::temp_directory_path() / ("segment_bench_" + std::to_string(::getpid()) + "_mask.nii.gz");
-            {
-                Phantom ph = makePhantom(pp);
-                writeImage(ph.truthLumen, maskPath.string());
-                const auto& g = ph.truthLumen.geometry;
-                std::printf("phantom %s true lumen mask: %lld x %lld x %lld at %.3g x %.3g x %.3g mm, truth lumen "
-                            "%.1f mL (built in %.1f s)\n",
-                            variant.str().c_str(), (long long)g.size[0],
-                            (long long)g.size[1], (long long)g.size[2], g.spacingMm.x, g.spacingMm.y, g.spacingMm.z,
-                            ph.truth.lumenVolumeMl,
-                            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-            }
-            const std::string self = fs::read_symlink("/proc/self/exe").string();
-            const Measure m = runChild(self, maskPath.string(), "mask", runs);
-            fs::remove(maskPath);
-            std::printf("%-24s: wall median %.3f s (%.3f..%.3f, %d runs), CPU median %.3f s; RSS peak %.0f MB;%s\n",
-                        "segmentFromMask (file)", m.median, m.min, m.max, runs, m.cpuMedian, m.peakMb, m.what.c_str());
-            return 0;
-        }
+        if (mask) return benchPhantomMask(pp, variant.str(), runs);
         {
             IngestReport rep;
             openvdb::FloatGrid::Ptr hu;
