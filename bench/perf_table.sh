@@ -40,6 +40,7 @@ while [ $# -gt 0 ]; do
 done
 case $SIZE in small|medium|full) ;; *) echo "perf_table.sh: --size is small, medium or full, not '$SIZE'"; exit 2 ;; esac
 [[ $RUNS =~ ^[1-9][0-9]*$ ]] || { echo "perf_table.sh: --runs must be a positive integer, not '$RUNS'"; exit 2; }
+BUILD=$(realpath -m "$BUILD")  # relative to the repository root
 FLYOVER=$(realpath -e "$BUILD/bin/flyover" 2> /dev/null) ||
   { echo "perf_table.sh: no $BUILD/bin/flyover: build first (bash scripts/build.sh)"; exit 1; }
 BEGIN_MARK='<!-- perf_table:begin -->'
@@ -58,7 +59,7 @@ LOAD=$(cut -d' ' -f1 /proc/loadavg 2> /dev/null || echo "?")
 bench() {
   local name=$1; shift
   echo "== $* ($name)" >&2
-  FLYOVER_BIN=$FLYOVER ITK_REFERENCE_BIN="$ROOT/$BUILD/bench/itk_reference" FLYOVER_BENCH_DIR="$WORK/$name" \
+  FLYOVER_BIN=$FLYOVER ITK_REFERENCE_BIN="$BUILD/bench/itk_reference" FLYOVER_BENCH_DIR="$WORK/$name" \
     bash "$@" | tee "$WORK/$name.txt" >&2
 }
 # row FILE LABEL TEXT: the table row of the line of FILE that starts with LABEL, as the bench
@@ -84,7 +85,8 @@ ratio() {
   local line
   line=$(grep -m1 -F -- "$2" "$1" || true)
   [ -n "$line" ] || return 0
-  sed -E 's/.*: +([0-9.]+) +\/ +([0-9.]+) += +([0-9.]+).*/| '"$3"' (reference \2 s) | \3 | | | |/' <<< "$line"
+  # '#' delimits: the row's text holds '/' and '|'.
+  sed -E 's#.*: +([0-9.]+) +/ +([0-9.]+) += +([0-9.]+).*#| '"$3"' (reference \2 s) | \3 | | | |#' <<< "$line"
 }
 
 bench first-pair bench/first_pair.sh "$SIZE" "$RUNS"
