@@ -32,11 +32,6 @@
 // every variant alike; "CPU-normalised" figures divide the work by the process CPU time per
 // thread, which is what the figures would be on otherwise idle cores.
 
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back (its
-// VectorT default constructor leaves components uninitialised on purpose); silence it for the
-// third-party headers only.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "volume/seconds_since.h"
 #include "colon/phantom.h"
 #include "pipeline/artifact_io.h"
@@ -77,7 +72,6 @@
 #include <limits>
 #include <cmath>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace fs = std::filesystem;
 using namespace flyover;

@@ -1,7 +1,3 @@
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back; silence
-// it for the third-party headers only.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/coverage.h"
 
 #include "reference_marker.h"
@@ -16,7 +12,6 @@
 #include <cmath>
 #include <limits>
 #include <random>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

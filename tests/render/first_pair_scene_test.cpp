@@ -3,8 +3,6 @@
 // same double as flyoverFrameRadii), its pair from the two cameras' frustum cull
 // (frustumTriangles, the same pixels as the scene of the whole surface), on phantoms where
 // other loops show behind.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "colon/phantom.h"
 #include "colon/render_settings.h"
 #include "render/flyover_path.h"
@@ -23,7 +21,6 @@
 #include <limits>
 #include <memory>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,8 +1,6 @@
 // The fly-over elevation from the framed half-width R(p) (render/flyover_path.h): a wall that
 // bulges beyond the inscribed radius D(p) near the cutting line is framed by R and missed by
 // h = D (the failure that left 1.5% of the full phantom unseen), R is smooth along the path.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/coverage.h"
 #include "render/flyover_path.h"
 
@@ -12,7 +10,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,5 +1,3 @@
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/overview.h"
 
 #include "test_meshes.h"
@@ -10,7 +8,6 @@
 #include <cmath>
 #include <set>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,8 +1,6 @@
 // The renderer on the small phantom (2.5 mm voxels), taken through ingest, segment, centerline
 // and mesh in memory once for the whole suite: fly-over coverage, every truth polyp seen, and a
 // polyp where the two views meet.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "colon/phantom.h"
 #include "colon/params.h"
 #include "colon/render_settings.h"
@@ -22,7 +20,6 @@
 #include <cmath>
 #include <memory>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

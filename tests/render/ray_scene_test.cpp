@@ -1,8 +1,3 @@
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back, whose
-// VectorT default constructor leaves components uninitialised on purpose. Pragma scope is by
-// source location, so ignoring it around the includes silences only third-party code.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/ray_scene.h"
 
 #include "test_meshes.h"
@@ -14,7 +9,6 @@
 #include <cmath>
 #include <limits>
 #include <random>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -5,8 +5,6 @@
 //
 // Regenerate after an intended change of the images (and look at them):
 //   FLYOVER_UPDATE_REFERENCE=1 ./render_tests --gtest_filter='ReferenceImage.*'
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "pipeline/artifact_io.h"
 #include "render/overview.h"
 #include "render/render_view.h"
@@ -18,7 +16,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace fs = std::filesystem;
 

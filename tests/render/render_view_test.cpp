@@ -1,8 +1,3 @@
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back, whose
-// VectorT default constructor leaves components uninitialised on purpose. Pragma scope is by
-// source location, so ignoring it around the includes silences only third-party code.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/headlight_shade.h"
 #include "render/render_view.h"
 
@@ -18,7 +13,6 @@
 #include <cstdlib>
 #include <limits>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,7 +1,5 @@
 // Review views (render/review.h) on synthetic lumens: a wall patch under a shelf that the
 // default fly-over pair cannot see but a rolled pair can; a closed-off pocket no view reaches.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/review.h"
 
 #include "render/flyover_path.h"
@@ -11,7 +9,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,8 +1,3 @@
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back, whose
-// VectorT default constructor leaves components uninitialised on purpose. Pragma scope is by
-// source location, so ignoring it around the includes silences only third-party code.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "tests/shapes/surface_shapes.h"
 
 #include <openvdb/tools/SignedFloodFill.h>
@@ -12,7 +7,6 @@
 #include <algorithm>
 #include <cmath>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace flyover::test {
 

@@ -1,6 +1,4 @@
 // Decimation on its own: budget, bound, guards, topology.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/decimate_mesh.h"
 
 #include "surface/extract_surface.h"
@@ -14,7 +12,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,8 +1,3 @@
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's PropertyT<Vec3f>::push_back, whose
-// VectorT default constructor leaves components uninitialised on purpose. Pragma scope is by
-// source location, so ignoring it around the includes silences only third-party code.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/extract_surface.h"
 
 #include "colon/phantom.h"
@@ -28,7 +23,6 @@
 #include <vector>
 #include <sstream>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

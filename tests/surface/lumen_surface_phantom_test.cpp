@@ -2,8 +2,6 @@
 // else runs on analytic shapes): the full-size phantom through ingest and segmentation, then
 // the mesh stage's sequence three ways (raw, default smoothing, decimated to half), measured
 // against the phantom's truth.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/lumen_surface.h"
 
 #include "colon/phantom.h"
@@ -19,7 +17,6 @@
 #include <limits>
 #include <string>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

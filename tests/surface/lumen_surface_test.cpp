@@ -1,6 +1,4 @@
 // The mesh stage's whole sequence (extract, smooth, decimate, check) on analytic shapes.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/lumen_surface.h"
 
 #include "surface/mesh_distance.h"
@@ -16,7 +14,6 @@
 #include <limits>
 #include <sstream>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,6 +1,3 @@
-// GCC 12 warns (-Wmaybe-uninitialized) inside OpenMesh's property code; see extract_surface_test.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/mesh_build.h"
 
 #include "surface/openmesh_log.h"
@@ -17,7 +14,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

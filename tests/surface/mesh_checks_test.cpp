@@ -1,6 +1,4 @@
 // Topology and measures on hand-built meshes with exact answers, and on extracted shapes.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/mesh_checks.h"
 
 #include "surface/extract_surface.h"
@@ -13,7 +11,6 @@
 #include <array>
 #include <cmath>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,6 +1,4 @@
 // Surface distances against closed forms and against brute force.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/mesh_distance.h"
 
 #include "surface/extract_surface.h"
@@ -15,7 +13,6 @@
 #include <array>
 #include <cmath>
 #include <limits>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,6 +1,4 @@
 // Export through OpenMesh's writers and back through its readers, in every format.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/mesh_export.h"
 
 #include "surface/extract_surface.h"
@@ -17,7 +15,6 @@
 #include <fstream>
 #include <iterator>
 #include <string>
-#pragma GCC diagnostic pop
 
 namespace fs = std::filesystem;
 

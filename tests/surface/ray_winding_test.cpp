@@ -1,7 +1,5 @@
 // The ray-crossing winding number (surface/ray_winding.h) against the solid-angle sum, and
 // checkMesh's nesting of many voids in one outer surface, which takes the ray path.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/ray_winding.h"
 
 #include "surface/extract_surface.h"
@@ -13,7 +11,6 @@
 #include <algorithm>
 #include <cmath>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {

@@ -1,6 +1,4 @@
 // Taubin smoothing on its own: what it removes, what it keeps, what it refuses.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "surface/smooth_mesh.h"
 
 #include "surface/extract_surface.h"
@@ -15,7 +13,6 @@
 #include <cmath>
 #include <random>
 #include <vector>
-#pragma GCC diagnostic pop
 
 namespace flyover {
 namespace {
