@@ -35,14 +35,11 @@ STUDY="$WORK/study-$SIZE"
 TIME=()
 [ -x /usr/bin/time ] && TIME=(/usr/bin/time -f "%M" -o "$WORK/rss")
 
-now() { date +%s%N; }
-secs() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", (b - a) / 1e9 }'; }
+. bench/run_log.sh
 stats() {  # label unit values...
-  local label=$1 unit=$2; shift 2
-  printf '%s\n' "$@" | sort -g | awk -v label="$label" -v unit="$unit" '
-    { t[NR] = $1 }
-    END { printf "%-34s median %9.3f %s   min %9.3f   max %9.3f   (%d runs)\n", label,
-          (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2), unit, t[1], t[NR], NR }'
+  local label=$1 unit=$2 med min max n; shift 2
+  read -r med min max n <<< "$(printf '%s\n' "$@" | median_min_max)"
+  printf "%-34s median %9.3f %s   min %9.3f   max %9.3f   (%d runs)\n" "$label" "$med" "$unit" "$min" "$max" "$n"
 }
 
 first=() whole=() rss=() cpufirst=() cpuwhole=()
@@ -54,11 +51,11 @@ for _ in $(seq "$RUNS"); do
     echo "flyover run failed:"; tail -5 "$WORK/log.jsonl"; exit 1; }
   t1=$(now)
   whole+=("$(secs "$t0" "$t1")")
-  fp=$(sed -n 's/.*"event":"first_pair".*"seconds_since_start":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | head -1)
+  fp=$(first_pair_seconds "$WORK/log.jsonl")
   [ -n "$fp" ] || { echo "no first_pair event in the log"; exit 1; }
   first+=("$fp")
-  cpufirst+=("$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\),"event":"first_pair".*/\1/p' "$WORK/log.jsonl" | head -1)")
-  cpuwhole+=("$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | tail -1)")
+  cpufirst+=("$(first_pair_cpu "$WORK/log.jsonl")")
+  cpuwhole+=("$(last_cpu "$WORK/log.jsonl")")
   [ -f "$WORK/rss" ] && rss+=("$(awk '/^[0-9]+$/ { printf "%.1f", $1 / 1024 }' "$WORK/rss" | tail -1)")
 done
 echo "flyover run, $SIZE $KIND, cold (fresh study each run), extra arguments: ${*:-none}"

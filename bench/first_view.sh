@@ -27,14 +27,11 @@ else
 fi
 STUDY="$WORK/study-$SIZE"
 
-now() { date +%s%N; }
-secs() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", (b - a) / 1e9 }'; }
+. bench/run_log.sh
 stats() {  # label values...
-  local label=$1; shift
-  printf '%s\n' "$@" | sort -g | awk -v label="$label" '
-    { t[NR] = $1 }
-    END { printf "%-40s median %8.3f s   min %8.3f   max %8.3f   (%d runs)\n", label,
-          (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2), t[1], t[NR], NR }'
+  local label=$1 med min max n; shift
+  read -r med min max n <<< "$(printf '%s\n' "$@" | median_min_max)"
+  printf "%-40s median %8.3f s   min %8.3f   max %8.3f   (%d runs)\n" "$label" "$med" "$min" "$max" "$n"
 }
 
 firstPair=() ready=() image=() whole=() revs=()

@@ -12,8 +12,7 @@ mkdir -p "$WORK"
 CT="$WORK/phantom-$SIZE.nii.gz"
 [ -f "$CT" ] || "$FLYOVER" -q phantom "$CT" --truth "$WORK/phantom-$SIZE.json" --size "$SIZE"
 rm -rf "$WORK/study-$SIZE"
-now() { date +%s%N; }
-secs() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.3f", (b - a) / 1e9 }'; }
+. bench/run_log.sh
 t0=$(now); "$FLYOVER" -q run "$CT" --study "$WORK/study-$SIZE"; t1=$(now)
 echo "first run (all stages computed), $SIZE phantom: $(secs "$t0" "$t1") s"
 times=()
@@ -21,7 +20,5 @@ for _ in $(seq "$RUNS"); do
   t0=$(now); "$FLYOVER" -q run "$CT" --study "$WORK/study-$SIZE"; t1=$(now)
   times+=("$(secs "$t0" "$t1")")
 done
-printf '%s\n' "${times[@]}" | sort -n | awk -v n="$RUNS" -v size="$SIZE" '
-  { t[NR] = $1 }
-  END { printf "unchanged re-run, %s phantom, %d runs: median %.3f s, min %.3f s, max %.3f s\n",
-        size, n, (n % 2 ? t[(n + 1) / 2] : (t[n / 2] + t[n / 2 + 1]) / 2), t[1], t[n] }'
+read -r med min max n <<< "$(printf '%s\n' "${times[@]}" | median_min_max)"
+printf "unchanged re-run, %s phantom, %d runs: median %.3f s, min %.3f s, max %.3f s\n" "$SIZE" "$n" "$med" "$min" "$max"

@@ -3,7 +3,8 @@
 # so that the machine's load hits both alike. Prints per build the median / min / max of the
 # first fly-over pair (the "first_pair" event), the whole run and the process CPU, and new / old.
 #   bench/side_by_side.sh OLD_FLYOVER NEW_FLYOVER [small|medium|full|gca] [runs] [run arguments...]
-# Run arguments go to both builds' `flyover run` (e.g. --until frames: the first pair alone). gca: the real colon mask of the shared data (gca-colon-00020, --mask). Works only in its own
+# Run arguments go to both builds' `flyover run` (e.g. --until frames: the first pair alone).
+# gca: the real colon mask of the shared data (gca-colon-00020, --mask). Works only in its own
 # folder (FLYOVER_BENCH_DIR, default a fresh temporary one, removed at the end): never in a
 # user's study. scripts/compare_builds.sh checks that the two give the same bytes.
 set -euo pipefail
@@ -28,7 +29,7 @@ case $SIZE in
   *) echo "side_by_side.sh: the input is small, medium, full or gca, not '$SIZE'" >&2; exit 2 ;;
 esac
 
-now() { date +%s%N; }
+. bench/run_log.sh
 # run WHICH BIN: one cold run; appends "first whole cpu" to $WORK/WHICH.txt.
 run() {
   local which=$1 bin=$2 t0 t1 fp cpu
@@ -38,9 +39,9 @@ run() {
   "$bin" run "${INPUT[@]}" --study "$WORK/study" --log-json "${EXTRA[@]}" 2> "$WORK/log.jsonl" ||
     { echo "side_by_side.sh: the $which build's run failed:" >&2; tail -3 "$WORK/log.jsonl" >&2; exit 1; }
   t1=$(now)
-  fp=$(sed -n 's/.*"event":"first_pair".*"seconds_since_start":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | head -1)
-  cpu=$(sed -n 's/.*"cpu_seconds":\([0-9.eE+-]*\).*/\1/p' "$WORK/log.jsonl" | tail -1)
-  echo "${fp:-nan} $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.3f", (b - a) / 1e9 }') ${cpu:-nan}" >> "$WORK/$which.txt"
+  fp=$(first_pair_seconds "$WORK/log.jsonl")
+  cpu=$(last_cpu "$WORK/log.jsonl")
+  echo "${fp:-nan} $(secs "$t0" "$t1") ${cpu:-nan}" >> "$WORK/$which.txt"
 }
 rm -f "$WORK/old.txt" "$WORK/new.txt"
 for _ in $(seq "$RUNS"); do
@@ -48,15 +49,14 @@ for _ in $(seq "$RUNS"); do
   run new "$NEW"
 done
 # column FILE N: median min max of column N.
-column() { awk -v c="$2" '{ print $c }' "$1" | sort -g | awk '{ t[NR] = $1 } END {
-  printf "%.3f %.3f %.3f", (NR % 2 ? t[(NR + 1) / 2] : (t[NR / 2] + t[NR / 2 + 1]) / 2), t[1], t[NR] }'; }
+column() { awk -v c="$2" '{ print $c }' "$1" | median_min_max; }
 echo "side by side, $SIZE (${INPUT[*]##*/}), $RUNS cold runs each, alternated, run arguments: ${EXTRA[*]:-none}; old $OLD, new $NEW"
 printf '%-22s %28s %28s %9s\n' "" "old: median (min max)" "new: median (min max)" "new/old"
 n=0
 for what in "first fly-over pair" "whole run" "process CPU"; do
   n=$((n + 1))
-  read -r om omin omax <<< "$(column "$WORK/old.txt" $n)"
-  read -r nm nmin nmax <<< "$(column "$WORK/new.txt" $n)"
+  read -r om omin omax _ <<< "$(column "$WORK/old.txt" $n)"
+  read -r nm nmin nmax _ <<< "$(column "$WORK/new.txt" $n)"
   printf '%-22s %9.3f s (%7.3f %7.3f) %9.3f s (%7.3f %7.3f) %9.3f\n' "$what" "$om" "$omin" "$omax" "$nm" "$nmin" "$nmax" \
     "$(awk -v a="$nm" -v b="$om" 'BEGIN { printf "%.3f", a / b }')"
 done
