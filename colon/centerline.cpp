@@ -1,6 +1,6 @@
 // Centerline on the sparse lumen grid (see centerline.h for the method in brief):
 //  1. flat leaf-blocked index of the lumen voxels (sdf < 0), D = -sdf;
-//  2. 26-connected pieces by breadth-first search; the last voxel a search reaches is
+//  2. 26-connected pieces by breadth-first search (lumen_waves.h); the last voxels a search reaches are
 //     farthest from its seed in steps, so the labelling pass also yields one geodesic
 //     farthest end per piece, and a second search from it yields the other end;
 //  3. per piece, a minimal path under the cost D^-p per unit length (route_search.h: bucket
@@ -19,6 +19,7 @@
 #include "colon/centerline_far_end.h"
 #include "volume/error.h"
 #include "colon/lumen_index.h"
+#include "colon/lumen_waves.h"
 #include "colon/route_search.h"
 
 #include <openvdb/tools/Interpolation.h>
@@ -45,9 +46,9 @@ using route_search::RouteWorkspace;
 using route_search::shortestRoute;
 using namespace centerline_path;
 
-/// 26-connected lumen pieces: a label per slot, and per piece its voxel count and the voxel
-/// its breadth-first labelling search reached last (farthest in steps from the seed: for a
-/// tube, one of its two ends).
+/// 26-connected lumen pieces: a label per slot, and per piece its voxel count and a voxel its
+/// breadth-first labelling search reached last (the lowest slot of those farthest in steps from
+/// the seed: for a tube, at one of its two ends).
 struct Pieces {
     std::vector<std::int32_t> label;  ///< per slot, -1 for non-lumen
     std::vector<std::size_t> size;    ///< per label
@@ -59,25 +60,23 @@ Pieces labelPieces(const LumenIndex& index, const SlotBits& holes, Progress* pro
     Pieces c;
     c.label.assign(index.slotCount(), -1);
     SlotBits labelled = holes;  // and the lumen voxels labelled
-    std::vector<Slot> queue;
-    for (Slot s = 0; s < index.slotCount(); ++s) {
-        if (labelled.test(s)) continue;
-        const std::int32_t id = static_cast<std::int32_t>(c.size.size());
-        queue.clear();
-        queue.push_back(s);
-        labelled.set(s);
-        c.label[s] = id;
-        for (std::size_t head = 0; head < queue.size(); ++head) {
-            if ((head & 0xfffff) == 0xfffff) checkCancelled(progress);
-            forEachClearNeighbour(index, labelled, queue[head], [&](Slot t) {
-                labelled.set(t);
-                c.label[t] = id;
-                queue.push_back(t);
-            });
-        }
-        c.size.push_back(queue.size());
-        c.lastReached.push_back(queue.back());
-    }
+    LumenWaves waves(index);
+    std::vector<Slot> seed(1);
+    for (std::size_t b = 0; b < index.blockOrigin.size(); ++b)
+        for (int x = 0; x < LEAF_VOXELS / 64; ++x)
+            for (std::uint64_t clear; (clear = ~labelled.blockWords(b)[x]) != 0;) {
+                seed[0] = static_cast<Slot>(b * LEAF_VOXELS) + static_cast<Slot>(x * 64 + __builtin_ctzll(clear));
+                const std::int32_t id = static_cast<std::int32_t>(c.size.size());
+                std::size_t count = 0;
+                const WaveEnd end = waves.run(labelled, seed, [&](std::int32_t, std::uint32_t block, const BlockWords& w) {
+                    forEachSlot(block, w, [&](Slot s) {
+                        c.label[s] = id;
+                        ++count;
+                    });
+                }, progress);
+                c.size.push_back(count);
+                c.lastReached.push_back(end.lowestInLast);
+            }
     return c;
 }
 
@@ -113,14 +112,16 @@ void breadthFirst(const LumenIndex& index, const SlotBits& holes, std::vector<Sl
 
 /// Breadth-first search from `source` over its piece: steps[s] = number of 26-neighbour steps
 /// from the source (slots of this piece only; others untouched). `holes`: holeBits(index).
-/// Returns the slot reached last, the farthest in steps (ties: the first found).
+/// Returns the lowest slot of those farthest in steps.
 Slot stepsFrom(const LumenIndex& index, const SlotBits& holes, Slot source, std::vector<std::int32_t>& steps,
                Progress* progress)
 {
-    std::vector<Slot> queue{source};
-    breadthFirst(index, holes, queue, std::numeric_limits<std::int32_t>::max(),
-                 [&](Slot s, std::int32_t n) { steps[s] = n; }, progress);
-    return queue.back();
+    SlotBits reached = holes;
+    LumenWaves waves(index);
+    const WaveEnd end = waves.run(reached, {source}, [&](std::int32_t layer, std::uint32_t block, const BlockWords& w) {
+        forEachSlot(block, w, [&](Slot s) { steps[s] = layer; });
+    }, progress);
+    return end.lowestInLast;
 }
 
 void validate(const openvdb::FloatGrid& sdf, const CenterlineParams& p)

@@ -147,6 +147,7 @@ public:
 
     /// The 8 words of a block's bits: word x holds the voxels (x, y, z) at bit y * 8 + z.
     const std::uint64_t* blockWords(std::size_t block) const { return lines_[block].words; }
+    std::uint64_t* blockWords(std::size_t block) { return lines_[block].words; }
 
 private:
     struct alignas(64) Line {
